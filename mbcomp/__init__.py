@@ -1,0 +1,27 @@
+"""mbcomp: compose multibody mechanisms, compile their equations of motion, simulate them."""
+
+# Composing a model
+from .model import Model
+from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
+                         Slider, Spherical, Spring, TorsionSpring)
+
+# The compiled system and its results
+from .system import BodyState, Energy, System
+from .result import Event, Result
+
+# Errors
+from .errors import CompileError, ModelError, SimulationError
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
+    "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
+    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load",
+]
+
+
+def load(path):
+    """Read a declarative TOML model file into a ``Model`` (see docs/files.md)."""
+    from .io import load as _load
+    return _load(path)

@@ -1,0 +1,95 @@
+"""Numeric backends for the generated program: plain Python, or C compiled and loaded with ctypes."""
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import subprocess
+import sysconfig
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import codegen
+
+FUNCTIONS = {
+    "dynamics": ["mass_matrix", "forces"],
+    "energy": ["energy"],
+    "kinematics": ["kinematics"],
+}
+
+
+class PythonFunctions:
+    """Generated Python functions ``f(q, qd, p, u) -> ndarray``."""
+
+    name = "python"
+
+    def __init__(self, source: str, key: str):
+        self.source = source
+        ns = codegen.load_python(source, key)
+        self._fns = {name: ns[name] for name in FUNCTIONS}
+
+    def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
+        return np.array(self._fns[name](q.tolist(), qd.tolist(), p.tolist(), u.tolist()), dtype=float)
+
+
+def c_compiler() -> str | None:
+    """Path of a working C compiler (``$CC``, cc, gcc, clang) or None."""
+    for candidate in (os.environ.get("CC"), sysconfig.get_config_var("CC"), "cc", "gcc", "clang"):
+        if not candidate:
+            continue
+        exe = shutil.which(candidate.split()[0])
+        if exe:
+            return exe
+    return None
+
+
+class CFunctions:
+    """The same functions compiled from generated C, called through ctypes."""
+
+    name = "c"
+
+    def __init__(self, library_path: Path, sizes: dict):
+        self.lib = ctypes.CDLL(str(library_path))
+        self.sizes = sizes
+        ptr = ctypes.POINTER(ctypes.c_double)
+        self._fns = {}
+        for name in FUNCTIONS:
+            fn = getattr(self.lib, name)
+            fn.argtypes = [ptr, ptr, ptr, ptr, ptr]
+            fn.restype = None
+            self._fns[name] = fn
+
+    def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
+        out = np.empty(self.sizes[name])
+        as_ptr = lambda a: np.ascontiguousarray(a, dtype=float).ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        self._fns[name](as_ptr(q), as_ptr(qd), as_ptr(p), as_ptr(u if len(u) else np.zeros(1)), as_ptr(out))
+        return out
+
+
+def build_c_library(source: str, key: str) -> Path | None:
+    """Compile C source into the cache (atomically); None when no compiler works."""
+    target = codegen.cache_dir() / f"{key}.so"
+    if target.exists():
+        return target
+    compiler = c_compiler()
+    if compiler is None:
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "model.c"
+        src.write_text(source)
+        out = Path(tmp) / "model.so"
+        cmd = [compiler, "-O2", "-shared", "-fPIC", "-fno-math-errno", str(src), "-o", str(out), "-lm"]
+        try:
+            subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        try:
+            codegen.write_atomic(target, out.read_bytes())
+        except OSError:
+            # Unwritable cache: load from a private copy instead.
+            private = Path(tempfile.mkdtemp(prefix="mbcomp-")) / "model.so"
+            shutil.copy(out, private)
+            return private
+    return target

@@ -1,0 +1,175 @@
+"""sympy straight-line programs -> numeric functions (Python or C), cached by model structure."""
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+import sympy as sp
+
+CODEGEN_VERSION = "1"
+
+
+# -- printing ---------------------------------------------------------------------------
+class Printer:
+    """Prints the small expressions of a program as Python or C source.
+
+    Only what the equation builder produces is supported: +, *, integer and half
+    powers, sin, cos, numbers and symbols.
+    """
+
+    def __init__(self, names: dict, language: str = "python"):
+        self.names = names
+        self.c = language == "c"
+
+    def number(self, e) -> str:
+        text = repr(float(e))
+        return f"({text})" if text.startswith("-") else text
+
+    def __call__(self, e) -> str:
+        if e.is_Symbol:
+            return self.names[e]
+        if e.is_Number:
+            return self.number(e)
+        if e.is_Add:
+            terms = [self(arg) for arg in e.args]
+            out = terms[0]
+            for term in terms[1:]:
+                out += f" - {term[1:]}" if term.startswith("-") else f" + {term}"
+            return f"({out})"
+        if e.is_Mul:
+            coeff, factors = e.as_coeff_mul()
+            parts = [self(f) for f in factors]
+            body = "*".join(parts) if parts else "1.0"
+            if coeff == 1:
+                return body
+            if coeff == -1:
+                return f"-{body}"
+            return f"{self.number(coeff)}*{body}"
+        if e.is_Pow:
+            base, exponent = e.args
+            b = self(base)
+            if exponent == 2:
+                return f"({b}*{b})"
+            if exponent == -1:
+                return f"(1.0/{b})"
+            if exponent == -2:
+                return f"(1.0/({b}*{b}))"
+            if exponent == sp.Rational(1, 2):
+                return f"sqrt({b})"
+            if exponent == sp.Rational(-1, 2):
+                return f"(1.0/sqrt({b}))"
+            return f"pow({b}, {self(exponent)})"
+        if isinstance(e, sp.sin):
+            return f"sin({self(e.args[0])})"
+        if isinstance(e, sp.cos):
+            return f"cos({self(e.args[0])})"
+        raise TypeError(f"cannot print {type(e).__name__}: {e}")
+
+
+def _names(prog, language: str) -> dict:
+    names = {}
+    for vec, label in ((prog.q, "q"), (prog.qd, "qd"), (prog.u, "u")):
+        for i, s in enumerate(vec):
+            names[s] = f"{label}[{i}]"
+    for i, s in enumerate(prog.p):
+        names[s] = f"p[{i}]"
+    for s, _ in prog.assignments:
+        names[s] = s.name
+    return names
+
+
+def python_source(prog, functions: dict) -> str:
+    """Python module source: one function per entry of ``functions``
+    (``{name: [output names]}``), each ``f(q, qd, p, u) -> list of floats``."""
+    names = _names(prog, "python")
+    printer = Printer(names, "python")
+    lines = ["from math import sin, cos, sqrt", ""]
+    for fname, outputs in functions.items():
+        lines.append(f"def {fname}(q, qd, p, u):")
+        for symbol, expr in prog.needed(outputs):
+            lines.append(f"    {symbol.name} = {printer(expr)}")
+        values = [printer(sp.sympify(e)) for name in outputs for e in prog.outputs[name]]
+        lines.append("    return [" + ", ".join(values) + "]")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def c_source(prog, functions: dict) -> str:
+    """C source: ``void name(const double *q, const double *qd, const double *p,
+    const double *u, double *out)`` per function."""
+    names = _names(prog, "c")
+    printer = Printer(names, "c")
+    lines = ["#include <math.h>", ""]
+    for fname, outputs in functions.items():
+        lines.append(f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{")
+        for symbol, expr in prog.needed(outputs):
+            lines.append(f"    const double {symbol.name} = {printer(expr)};")
+        k = 0
+        for name in outputs:
+            for e in prog.outputs[name]:
+                lines.append(f"    out[{k}] = {printer(sp.sympify(e))};")
+                k += 1
+        lines.append("}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+# -- cache --------------------------------------------------------------------------------
+def cache_dir() -> Path:
+    """``$MBCOMP_CACHE_DIR``, else the user cache directory (``~/.cache/mbcomp``)."""
+    env = os.environ.get("MBCOMP_CACHE_DIR")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")
+    if sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    return Path(base) / "mbcomp"
+
+
+def structure_key(description: str) -> str:
+    """Cache key: hash of the model structure, the code generator version and Python's."""
+    text = f"{CODEGEN_VERSION}|{sys.version_info[:2]}|{description}"
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def read_cached(key: str, suffix: str) -> str | None:
+    path = cache_dir() / f"{key}{suffix}"
+    try:
+        return path.read_text()
+    except OSError:
+        return None
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write via a temporary file and rename, so concurrent runs never see half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def write_cached(key: str, suffix: str, text: str) -> None:
+    try:
+        write_atomic(cache_dir() / f"{key}{suffix}", text.encode())
+    except OSError:
+        pass  # an unwritable cache only costs a recompile next time
+
+
+def load_python(source: str, key: str) -> dict[str, Callable]:
+    """Compile generated Python source (our own output, never user text) into functions."""
+    namespace: dict = {}
+    code = compile(source, f"<mbcomp generated {key}>", "exec")
+    exec(code, namespace)  # noqa: S102 - generated by codegen from the model structure
+    return namespace

@@ -1,0 +1,251 @@
+"""Force elements: Spring, Damper, Force, JointTorque, TorsionSpring.
+
+Each states its loads through the symbolic kinematics accessor ``kin`` (world-frame
+point positions and velocities, joint coordinates, parameter symbols) and, when
+conservative, its potential energy.  Sign convention: a load is what the element
+applies to the body it names.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from ..errors import ModelError
+from .base import ForceElement
+from ._values import scalar, vector3
+
+
+def _attachment(value: Any, owner: Any, role: str) -> tuple[Any, tuple[float, float, float]]:
+    """``(body, point)`` from ``(body, point)`` or a bare body (point = origin)."""
+    if isinstance(value, (tuple, list)) and len(value) == 2 and not isinstance(value[0], (int, float)):
+        return value[0], vector3(value[1], owner, f"{role} point")
+    if isinstance(value, (tuple, list)):
+        raise ModelError(owner, f"{role} must be (body, point), got {value!r}")
+    return value, (0.0, 0.0, 0.0)
+
+
+def _dot(a, b):
+    return sum(x * y for x, y in zip(a, b))
+
+
+class _TwoPointElement(ForceElement):
+    """Shared geometry of elements acting along the line between two body points."""
+
+    def __init__(self, name: str, a: Any, b: Any):
+        super().__init__(name)
+        self.body_a, self.point_a = _attachment(a, self, "a")
+        self.body_b, self.point_b = _attachment(b, self, "b")
+
+    @property
+    def a(self):
+        return (self.body_a, self.point_a)
+
+    @property
+    def b(self):
+        return (self.body_b, self.point_b)
+
+    def references(self):
+        return {"a": self.body_a, "b": self.body_b}
+
+    def _line(self, kin):
+        """World positions, separation ``d = p_b - p_a``, its rate, and the length."""
+        pa = kin.position(self.body_a, kin.param(self, "point_a"))
+        pb = kin.position(self.body_b, kin.param(self, "point_b"))
+        va = kin.velocity(self.body_a, kin.param(self, "point_a"))
+        vb = kin.velocity(self.body_b, kin.param(self, "point_b"))
+        d = [kin.let(x - y) for x, y in zip(pb, pa)]
+        dd = [kin.let(x - y) for x, y in zip(vb, va)]
+        length = kin.let(sp.sqrt(_dot(d, d)))
+        return pa, pb, d, dd, length
+
+    def _pair(self, pa, pb, force_on_b):
+        return [("point", self.body_b, pb, force_on_b),
+                ("point", self.body_a, pa, [-f for f in force_on_b])]
+
+
+class Spring(_TwoPointElement):
+    """Linear spring between two body points, with optional parallel damping.
+
+    Tension ``k (l - rest_length) + damping * dl/dt`` (N) pulls the points together.
+
+    Parameters
+    ----------
+    a, b : (body, point) with point in that body's frame (m)
+    stiffness : N/m, >= 0;  rest_length : m, >= 0;  damping : N s/m, >= 0
+    """
+
+    parameters = ("point_a", "point_b", "stiffness", "rest_length", "damping")
+
+    def __init__(self, name: str, a: Any, b: Any, stiffness: float, rest_length: float = 0.0, damping: float = 0.0):
+        super().__init__(name, a, b)
+        self.stiffness = scalar(stiffness, self, "stiffness", nonnegative=True)
+        self.rest_length = scalar(rest_length, self, "rest_length", nonnegative=True)
+        self.damping = scalar(damping, self, "damping", nonnegative=True)
+
+    def _loads(self, kin):
+        pa, pb, d, dd, length = self._line(kin)
+        k, l0, c = (kin.param(self, n) for n in ("stiffness", "rest_length", "damping"))
+        inv = kin.let(1 / length)
+        rate = kin.let(_dot(d, dd) * inv)
+        tension = kin.let(k * (length - l0) + c * rate)
+        return self._pair(pa, pb, [kin.let(-tension * x * inv) for x in d])
+
+    def _potential(self, kin):
+        _, _, d, _, length = self._line(kin)
+        k, l0 = kin.param(self, "stiffness"), kin.param(self, "rest_length")
+        return k * (length - l0) ** 2 / 2
+
+
+class Damper(_TwoPointElement):
+    """Linear damper between two body points: tension ``damping * dl/dt`` (N)."""
+
+    parameters = ("point_a", "point_b", "damping")
+
+    def __init__(self, name: str, a: Any, b: Any, damping: float):
+        super().__init__(name, a, b)
+        self.damping = scalar(damping, self, "damping", nonnegative=True)
+
+    def _loads(self, kin):
+        pa, pb, d, dd, length = self._line(kin)
+        c = kin.param(self, "damping")
+        inv2 = kin.let(1 / (length * length))
+        tension = kin.let(c * _dot(d, dd) * inv2)
+        return self._pair(pa, pb, [kin.let(-tension * x) for x in d])
+
+
+class Force(ForceElement):
+    """A force (N, world frame) at a body point (m, body frame).
+
+    ``force`` is a constant 3-vector (a parameter) or a callable ``(t, q, qd) -> (3,)``
+    evaluated at run time (``q``, ``qd`` arrays in ``System.coords`` order).
+    """
+
+    parameters = ("point", "force")
+
+    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), force: Any = (0.0, 0.0, 0.0)):
+        super().__init__(name)
+        self.body = body
+        self.point = vector3(point, self, "point")
+        self.is_callable = callable(force)
+        self.force = force if self.is_callable else vector3(force, self, "force")
+        if self.is_callable:
+            self.parameters = ("point",)
+
+    def references(self):
+        return {"body": self.body}
+
+    def structure(self):
+        return ("callable" if self.is_callable else "constant",)
+
+    def input_size(self) -> int:
+        """Number of run-time input values (the callable's vector), 0 when constant."""
+        return 3 if self.is_callable else 0
+
+    def evaluate_input(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """The callable's value, checked to be a finite 3-vector."""
+        return checked_output(self, self.force(t, q, qd), 3)
+
+    def _loads(self, kin):
+        point = kin.position(self.body, kin.param(self, "point"))
+        force = kin.input(self) if self.is_callable else kin.param(self, "force")
+        return [("point", self.body, point, list(force))]
+
+
+class JointTorque(ForceElement):
+    """Generalised force(s) on a joint's coordinates (N m for angles, N for slides).
+
+    ``value``: a number / array of the joint's size (a parameter) or a callable
+    ``(t, q, qd)`` returning it.
+    """
+
+    parameters = ("value",)
+
+    def __init__(self, name: str, joint: Any, value: Any = 0.0):
+        super().__init__(name)
+        self.joint = joint
+        self.is_callable = callable(value)
+        if self.is_callable:
+            self.value = value
+            self.parameters = ()
+        else:
+            try:
+                arr = np.atleast_1d(np.asarray(value, dtype=float))
+            except (TypeError, ValueError):
+                raise ModelError(self, f"value must be a number, an array or a callable, got {value!r}") from None
+            if arr.ndim != 1 or not np.all(np.isfinite(arr)):
+                raise ModelError(self, f"value must be a finite number or 1-D array, got {value!r}")
+            self.value = float(arr[0]) if arr.size == 1 else tuple(float(v) for v in arr)
+
+    def references(self):
+        return {"joint": self.joint}
+
+    def structure(self):
+        return ("callable" if self.is_callable else "constant",)
+
+    def input_size(self) -> int:
+        return self._size if self.is_callable else 0
+
+    def bind_joint(self, joint) -> None:
+        """Check the value's size against the resolved joint (called by the compiler)."""
+        self._size = joint.n_coords
+        if not self.is_callable:
+            size = 1 if isinstance(self.value, float) else len(self.value)
+            if size != joint.n_coords:
+                raise ModelError(self, f"value has {size} entries, joint {joint.name!r} has {joint.n_coords} coordinate(s)")
+
+    def evaluate_input(self, t, q, qd):
+        return checked_output(self, self.value(t, q, qd), self._size)
+
+    def _loads(self, kin):
+        values = kin.input(self) if self.is_callable else kin.param(self, "value")
+        values = values if isinstance(values, (list, tuple)) else [values]
+        return [("generalized", self.joint, list(values))]
+
+
+class TorsionSpring(ForceElement):
+    """Spring (and damper) on a 1-DOF joint: ``tau = -stiffness (q - rest) - damping qd``.
+
+    Units: N m/rad and N m s/rad for a revolute (N/m, N s/m for a prismatic joint).
+    """
+
+    parameters = ("stiffness", "rest", "damping")
+
+    def __init__(self, name: str, joint: Any, stiffness: float, rest: float = 0.0, damping: float = 0.0):
+        super().__init__(name)
+        self.joint = joint
+        self.stiffness = scalar(stiffness, self, "stiffness", nonnegative=True)
+        self.rest = scalar(rest, self, "rest")
+        self.damping = scalar(damping, self, "damping", nonnegative=True)
+
+    def references(self):
+        return {"joint": self.joint}
+
+    def bind_joint(self, joint) -> None:
+        if joint.n_coords != 1:
+            raise ModelError(self, f"needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}")
+
+    def _loads(self, kin):
+        (q,), (qd,) = kin.q(self.joint), kin.qd(self.joint)
+        k, rest, c = (kin.param(self, n) for n in ("stiffness", "rest", "damping"))
+        return [("generalized", self.joint, [-k * (q - rest) - c * qd])]
+
+    def _potential(self, kin):
+        (q,) = kin.q(self.joint)
+        k, rest = kin.param(self, "stiffness"), kin.param(self, "rest")
+        return k * (q - rest) ** 2 / 2
+
+
+def checked_output(owner: Any, value: Any, size: int) -> np.ndarray:
+    """A user callable's result as a finite float array of ``size``, else ``SimulationError``."""
+    from ..errors import SimulationError
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise SimulationError(f"callable returned {value!r}, not numbers", owner) from None
+    if arr.size != size:
+        raise SimulationError(f"callable returned {arr.size} values, expected {size}", owner)
+    if not np.all(np.isfinite(arr)):
+        raise SimulationError(f"callable returned a non-finite value {arr.tolist()}", owner)
+    return arr

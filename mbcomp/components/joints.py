@@ -1,0 +1,161 @@
+"""Joints: Revolute, Prismatic, Spherical (Euler angles) and Fixed.
+
+A joint is a sequence of elementary motions ("screws"), each a rotation about
+or a translation along a unit axis resolved in the frame left by the previous
+ones; the compiler derives poses, velocities and Jacobians from that sequence.
+"""
+from __future__ import annotations
+
+from typing import Any, ClassVar, Sequence
+
+import numpy as np
+
+from ..errors import ModelError
+from ..rotations import AXIS_NAMES, axis_angle, parse_sequence, unit_axis
+from .base import Component
+from ._values import vector3
+
+
+class Joint(Component):
+    """Connects ``parent`` to ``child``; at zero coordinates the child frame is parallel
+    to the parent frame.
+
+    Parameters
+    ----------
+    parent, child : Body or str
+    parent_point : (3,) m, joint location in the parent body frame
+    child_point : (3,) m, joint location in the child body frame
+    coords : str or sequence of str, names of the joint coordinates (default from the
+        joint name)
+
+    Subclasses provide ``n_coords``, ``coord_suffixes`` and ``_screws()``.
+    """
+
+    n_coords: ClassVar[int] = 0
+    parameters = ("parent_point", "child_point")
+
+    def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = (0.0, 0.0, 0.0),
+                 child_point: Any = (0.0, 0.0, 0.0), coords: Any = None):
+        super().__init__(name)
+        self.parent = parent
+        self.child = child
+        self.parent_point = vector3(parent_point, self, "parent_point")
+        self.child_point = vector3(child_point, self, "child_point")
+        self.coords = self._coord_names(coords)
+
+    # -- contract -----------------------------------------------------------
+    @property
+    def coord_suffixes(self) -> tuple[str, ...]:
+        """Suffixes for the default coordinate names ``f"{name}_{suffix}"`` (``""`` = the name)."""
+        return ("",) * self.n_coords
+
+    def _screws(self) -> list[tuple[str, tuple[float, float, float]]]:
+        """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
+        previous ones; coordinate i drives screw i."""
+        raise NotImplementedError
+
+    # -- derived ------------------------------------------------------------
+    def references(self) -> dict[str, Any]:
+        return {"parent": self.parent, "child": self.child}
+
+    def structure(self) -> tuple:
+        return tuple(self._screws())
+
+    def relative_pose(self, q: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """``(R_PC, p_PC)``: child frame rotation and origin in the parent frame at ``q``.
+
+        ``p_PC = parent_point + translation(q) - R_PC child_point`` (m, parent frame).
+        """
+        q = np.asarray(q, dtype=float).reshape(-1)
+        if q.shape != (self.n_coords,):
+            raise ModelError(self, f"needs {self.n_coords} coordinate(s), got {q.size}")
+        rotation = np.eye(3)
+        translation = np.zeros(3)
+        for (kind, axis), value in zip(self._screws(), q):
+            if kind == "R":
+                rotation = rotation @ axis_angle(axis, value)
+            else:
+                translation = translation + rotation @ (np.asarray(axis) * value)
+        origin = np.asarray(self.parent_point) + translation - rotation @ np.asarray(self.child_point)
+        return rotation, origin
+
+    def _coord_names(self, coords: Any) -> tuple[str, ...]:
+        if coords is None:
+            return tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
+        names = (coords,) if isinstance(coords, str) else tuple(coords)
+        if len(names) != self.n_coords or not all(isinstance(n, str) and n.strip() for n in names):
+            raise ModelError(self, f"coords must be {self.n_coords} non-empty name(s), got {coords!r}")
+        if len(set(names)) != len(names):
+            raise ModelError(self, f"coords {names} repeat a name")
+        return names
+
+
+class Revolute(Joint):
+    """Rotation of the child about ``axis`` (parent frame) through ``parent_point``.
+
+    Coordinate: the angle in rad, positive right-handed about ``axis``.
+    """
+
+    n_coords = 1
+
+    def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
+        self.axis = unit_axis(axis, owner=f"Revolute {name!r}")
+        super().__init__(name, parent, child, **options)
+
+    def _screws(self):
+        return [("R", self.axis)]
+
+
+class Prismatic(Joint):
+    """Translation of the child by ``q`` (m) along ``axis`` (parent frame)."""
+
+    n_coords = 1
+
+    def __init__(self, name: str, parent: Any, child: Any, axis: Any = "x", **options: Any):
+        self.axis = unit_axis(axis, owner=f"Prismatic {name!r}")
+        super().__init__(name, parent, child, **options)
+
+    def _screws(self):
+        return [("P", self.axis)]
+
+
+class Spherical(Joint):
+    """Euler-angle joint: intrinsic rotations ``R = R_a1(q1) R_a2(q2) R_a3(q3)``.
+
+    ``sequence`` holds 1 to 3 axes from x, y, z (``"xy"``, ``"xyz"``, ``"zxz"``); the
+    coordinates are the angles in rad.  The mass matrix is singular where the first
+    and last axes of a 3-axis sequence align (gimbal lock).
+    """
+
+    def __init__(self, name: str, parent: Any, child: Any, sequence: str = "xyz", **options: Any):
+        self.sequence = parse_sequence(sequence, owner=f"Spherical {name!r}")
+        super().__init__(name, parent, child, **options)
+
+    @property
+    def n_coords(self) -> int:  # type: ignore[override]
+        return len(self.sequence)
+
+    @property
+    def coord_suffixes(self) -> tuple[str, ...]:
+        letters = tuple(self.sequence)
+        if len(set(letters)) == len(letters):
+            return letters
+        return tuple(f"{ch}{i + 1}" for i, ch in enumerate(letters))
+
+    def _screws(self):
+        return [("R", AXIS_NAMES[ch]) for ch in self.sequence]
+
+
+class Fixed(Joint):
+    """Rigid connection: the child frame keeps the parent frame's orientation."""
+
+    n_coords = 0
+
+    def _screws(self):
+        return []
+
+
+def check_joint_is_one_dof(joint: Any, owner: Any) -> None:
+    """``ModelError`` naming ``owner`` unless ``joint`` has exactly one coordinate."""
+    if isinstance(joint, Joint) and joint.n_coords != 1:
+        raise ModelError(owner, f"needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}")

@@ -1,0 +1,386 @@
+"""Equations of motion by the virtual-power (TMT) route, built as a straight-line program.
+
+The kinematics are propagated along the tree in world-frame spatial (Plücker)
+coordinates referred to the world origin: a body's spatial velocity is
+``V = (w, v0)`` with ``v0`` the velocity of the body point at the origin, so the
+velocity of a point at world position ``p`` is ``v0 + w x p``.  Each coordinate
+``k`` has a motion column ``S_k`` (a column of ``T``); the reduced mass matrix
+``M_bar = T^T M T`` is accumulated with composite inertias (every world-frame
+spatial inertia adds without transformation), and ``f_bar = T^T (f - M g)`` is
+the backward sum of body wrenches projected on the columns.  Every intermediate
+is materialised into its own symbol, so expressions stay small (no ``simplify``)
+and shared work is shared by construction; sympy prunes zero and one terms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import sympy as sp
+
+from .components import Body, Force, Joint, JointTorque
+from .components._values import name_of
+from .errors import ModelError, describe
+
+
+def exact(value: float) -> sp.Expr:
+    """A sympy number, exact for integers so that 0 and 1 prune."""
+    value = float(value)
+    return sp.Integer(int(value)) if value.is_integer() else sp.Float(value)
+
+
+def cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def dot(a, b):
+    return sum((x * y for x, y in zip(a, b)), sp.Integer(0))
+
+
+def matvec(R, v):
+    return [dot(row, v) for row in R]
+
+
+# -- parameters ------------------------------------------------------------------
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Where each parameter lives in the flat parameter vector ``p``.
+
+    ``entries[key] = (start, shape)`` with key ``"component.attribute"`` (``"gravity"``
+    for the model's gravity); ``shape`` is ``()`` for a scalar or ``(k,)``.
+    """
+
+    entries: dict
+    size: int
+
+    def pack(self, values: dict) -> np.ndarray:
+        """Flat ``p`` from ``{key: value}`` (every key of the layout)."""
+        p = np.empty(self.size)
+        for key, (start, shape) in self.entries.items():
+            width = shape[0] if shape else 1
+            p[start:start + width] = np.asarray(values[key], dtype=float).reshape(-1)
+        return p
+
+    def symbols(self, key: str):
+        start, shape = self.entries[key]
+        if not shape:
+            return sp.Symbol(_symbol_name(key))
+        return [sp.Symbol(_symbol_name(f"{key}[{i}]")) for i in range(shape[0])]
+
+
+def _symbol_name(key: str) -> str:
+    return key
+
+
+def parameter_values(model) -> dict[str, Any]:
+    """``{"component.attribute": value}`` for every numeric parameter of the model."""
+    values: dict[str, Any] = {"gravity": tuple(model.gravity)}
+    for comp in model.components.values():
+        for attr, value in comp.parameter_values().items():
+            values[f"{comp.name}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
+    return values
+
+
+def parameter_layout(values: dict[str, Any]) -> ParameterLayout:
+    entries, size = {}, 0
+    for key, value in values.items():
+        shape = () if np.ndim(value) == 0 else (len(value),)
+        entries[key] = (size, shape)
+        size += shape[0] if shape else 1
+    return ParameterLayout(entries=entries, size=size)
+
+
+def input_layout(topology) -> dict[str, tuple[int, int]]:
+    """Run-time inputs (callable forces and torques): ``{component name: (start, size)}``."""
+    layout, size = {}, 0
+    for comp in topology.forces:
+        width = comp.input_size() if hasattr(comp, "input_size") else 0
+        if width:
+            layout[comp.name] = (size, width)
+            size += width
+    return layout
+
+
+# -- the straight-line program --------------------------------------------------------
+@dataclass
+class Program:
+    """Assignments ``(symbol, expression)`` in order, and named output lists."""
+
+    q: list
+    qd: list
+    p: list
+    u: list
+    assignments: list = field(default_factory=list)
+    outputs: dict = field(default_factory=dict)
+    _memo: dict = field(default_factory=dict)
+
+    def let(self, expr: Any) -> sp.Expr:
+        """Materialise ``expr`` into a fresh symbol (atoms and repeats are reused)."""
+        expr = sp.sympify(expr)
+        if expr.is_Atom or (expr.is_Mul and len(expr.args) == 2 and expr.args[0] == -1 and expr.args[1].is_Atom):
+            return expr
+        found = self._memo.get(expr)
+        if found is not None:
+            return found
+        symbol = sp.Symbol(f"t{len(self.assignments)}")
+        self.assignments.append((symbol, expr))
+        self._memo[expr] = symbol
+        return symbol
+
+    def lets(self, exprs) -> list:
+        return [self.let(e) for e in exprs]
+
+    def needed(self, names) -> list:
+        """The assignments the given outputs depend on (dead code removed), in order."""
+        wanted = set()
+        for name in names:
+            for expr in self.outputs[name]:
+                wanted |= sp.sympify(expr).free_symbols
+        keep = []
+        for symbol, expr in reversed(self.assignments):
+            if symbol in wanted:
+                keep.append((symbol, expr))
+                wanted |= expr.free_symbols
+        keep.reverse()
+        return keep
+
+    def expand(self, expr: Any) -> sp.Expr:
+        """``expr`` with every intermediate substituted back (small models only)."""
+        expr = sp.sympify(expr)
+        for symbol, value in reversed(self.assignments):
+            if symbol in expr.free_symbols:
+                expr = expr.xreplace({symbol: value})
+        return expr
+
+
+class SpatialInertia:
+    """World-frame spatial inertia about the origin: mass, ``h = m c``, ``Ibar`` (3x3)."""
+
+    def __init__(self, mass, h, Ibar):
+        self.mass, self.h, self.Ibar = mass, h, Ibar
+
+    def apply(self, V):
+        """Momentum ``I V = (Ibar w + h x v, m v - h x w)`` of spatial velocity ``V = (w, v)``."""
+        w, v = V[:3], V[3:]
+        n = [a + b for a, b in zip(matvec(self.Ibar, w), cross(self.h, v))]
+        f = [self.mass * a - b for a, b in zip(v, cross(self.h, w))]
+        return n + f
+
+    def __add__(self, other):
+        return SpatialInertia(self.mass + other.mass, [a + b for a, b in zip(self.h, other.h)],
+                              [[a + b for a, b in zip(r1, r2)] for r1, r2 in zip(self.Ibar, other.Ibar)])
+
+    def materialise(self, prog: Program):
+        Ibar = [[None] * 3 for _ in range(3)]
+        for i in range(3):
+            for j in range(i, 3):
+                Ibar[i][j] = Ibar[j][i] = prog.let(self.Ibar[i][j])
+        return SpatialInertia(prog.let(self.mass), prog.lets(self.h), Ibar)
+
+
+def motion_cross(V, S):
+    """``V x_m S``: rate of change of a motion column ``S`` carried by a frame moving with ``V``."""
+    w, v = V[:3], V[3:]
+    w2, v2 = S[:3], S[3:]
+    return cross(w, w2) + [a + b for a, b in zip(cross(w, v2), cross(v, w2))]
+
+
+def force_cross(V, F):
+    """``V x_f F``: rate of change of a spatial force/momentum carried with ``V``."""
+    w, v = V[:3], V[3:]
+    n, f = F[:3], F[3:]
+    return [a + b for a, b in zip(cross(w, n), cross(v, f))] + cross(w, f)
+
+
+def rotation_about(axis, c, s):
+    """Rodrigues' rotation with exact axis entries and cos/sin symbols ``c``, ``s``."""
+    x, y, z = axis
+    k = 1 - c
+    return [[c + x * x * k, x * y * k - z * s, x * z * k + y * s],
+            [y * x * k + z * s, c + y * y * k, y * z * k - x * s],
+            [z * x * k - y * s, z * y * k + x * s, c + z * z * k]]
+
+
+class Kinematics:
+    """Symbolic kinematics accessor handed to components (world frame, SI units)."""
+
+    def __init__(self, topology, layout: ParameterLayout, inputs: dict, prog: Program):
+        self.topology, self.layout, self.inputs, self.prog = topology, layout, inputs, prog
+        self.R, self.origin, self.V, self.A = {}, {}, {}, {}
+        self.S: list = [None] * topology.nq
+        self.let = prog.let
+
+    def param(self, comp, attr: str):
+        return self.layout.symbols(f"{comp.name}.{attr}")
+
+    def input(self, comp) -> list:
+        start, size = self.inputs[comp.name]
+        return self.prog.u[start:start + size]
+
+    def q(self, joint) -> list:
+        sl = self.topology.q_slice[name_of(joint)]
+        return self.prog.q[sl]
+
+    def qd(self, joint) -> list:
+        sl = self.topology.q_slice[name_of(joint)]
+        return self.prog.qd[sl]
+
+    def rotation(self, body):
+        return self.R[name_of(body)]
+
+    def position(self, body, point) -> list:
+        """World position (m) of a point given in the body frame."""
+        name = name_of(body)
+        if name == self.topology.ground.name:
+            return list(point)
+        return self.prog.lets([o + r for o, r in zip(self.origin[name], matvec(self.R[name], point))])
+
+    def velocity(self, body, point) -> list:
+        """World velocity (m/s) of a body point: ``v0 + w x p``."""
+        name = name_of(body)
+        if name == self.topology.ground.name:
+            return [sp.Integer(0)] * 3
+        V = self.V[name]
+        p = self.position(body, point)
+        return self.prog.lets([a + b for a, b in zip(V[3:], cross(V[:3], p))])
+
+    def angular_velocity(self, body) -> list:
+        name = name_of(body)
+        return [sp.Integer(0)] * 3 if name == self.topology.ground.name else self.V[name][:3]
+
+
+def build_program(topology, layout: ParameterLayout, inputs: dict) -> Program:
+    """The whole model as one straight-line program.
+
+    Outputs: ``"mass_matrix"`` (lower triangle, row-major), ``"forces"`` (f_bar: gravity,
+    force elements, convective and gyroscopic terms; ``M_bar qdd = f_bar + tau``),
+    ``"energy"`` (kinetic, potential), and ``"kinematics"`` (per body R, origin, V, A-bias;
+    per coordinate S).
+    """
+    nq = topology.nq
+    n_inputs = sum(size for _, size in inputs.values())
+    prog = Program(q=[sp.Symbol(f"q{i}") for i in range(nq)], qd=[sp.Symbol(f"qd{i}") for i in range(nq)],
+                   p=[], u=[sp.Symbol(f"u{i}") for i in range(n_inputs)])
+    kin = Kinematics(topology, layout, inputs, prog)
+    zero = [sp.Integer(0)] * 6
+    ground = topology.ground.name
+    kin.R[ground] = [[sp.Integer(int(i == j)) for j in range(3)] for i in range(3)]
+    kin.origin[ground] = [sp.Integer(0)] * 3
+    kin.V[ground], kin.A[ground] = zero, zero
+    gravity = layout.symbols("gravity")
+
+    inertia: dict[str, SpatialInertia] = {}
+    external: dict[str, list] = {}
+    for body, joint in zip(topology.bodies, topology.tree_joints):
+        parent = topology.parent_of[body.name].name
+        R = kin.R[parent]
+        pos = prog.lets([o + r for o, r in zip(kin.origin[parent], matvec(R, kin.param(joint, "parent_point")))])
+        V, A = kin.V[parent], kin.A[parent]
+        sl = topology.q_slice[joint.name]
+        for k, (kind, axis) in enumerate(joint._screws()):
+            i = sl.start + k
+            axis_world = prog.lets(matvec(R, [exact(a) for a in axis]))
+            if kind == "R":
+                S = axis_world + prog.lets(cross(pos, axis_world))
+                c, s = prog.let(sp.cos(prog.q[i])), prog.let(sp.sin(prog.q[i]))
+                local = rotation_about([exact(a) for a in axis], c, s)
+                R = [[prog.let(dot(R[r], [local[m][col] for m in range(3)])) for col in range(3)] for r in range(3)]
+            else:
+                S = [sp.Integer(0)] * 3 + axis_world
+                pos = prog.lets([x + a * prog.q[i] for x, a in zip(pos, axis_world)])
+            kin.S[i] = S
+            A = prog.lets([a + b * prog.qd[i] for a, b in zip(A, motion_cross(V, S))])
+            V = prog.lets([a + b * prog.qd[i] for a, b in zip(V, S)])
+        kin.R[body.name] = R
+        kin.origin[body.name] = prog.lets([x - r for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
+        kin.V[body.name], kin.A[body.name] = V, A
+
+        mass = kin.param(body, "mass")
+        com = kin.position(body, kin.param(body, "com"))
+        cc = dot(com, com)
+        Ibar = [[mass * ((cc if i == j else 0) - com[i] * com[j]) for j in range(3)] for i in range(3)]
+        if not body.is_point_mass:
+            I_B = _body_inertia_symbols(body, kin)
+            RI = [[dot(R[i], [I_B[k][j] for k in range(3)]) for j in range(3)] for i in range(3)]
+            for i in range(3):
+                for j in range(3):
+                    Ibar[i][j] = Ibar[i][j] + dot(RI[i], R[j])
+        inertia[body.name] = SpatialInertia(mass, [mass * c for c in com], Ibar).materialise(prog)
+        weight = [mass * g for g in gravity]
+        external[body.name] = prog.lets(cross(com, weight) + weight)
+
+    generalized = [sp.Integer(0)] * nq
+    potential = sp.Integer(0)
+    for body in topology.bodies:
+        potential -= inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)
+    for element in topology.forces:
+        for load in element._loads(kin):
+            if load[0] == "generalized":
+                sl = topology.q_slice[name_of(load[1])]
+                for k, value in zip(range(sl.start, sl.stop), load[2]):
+                    generalized[k] += value
+                continue
+            target = name_of(load[1])
+            if target == ground:
+                continue
+            wrench = cross(load[2], load[3]) + list(load[3]) if load[0] == "point" else list(load[2]) + [0, 0, 0]
+            external[target] = prog.lets([a + b for a, b in zip(external[target], wrench)])
+        potential += element._potential(kin)
+
+    # Backward pass: composite inertias and wrenches, projected on the motion columns.
+    composite = {b.name: inertia[b.name] for b in topology.bodies}
+    wrench = {}
+    kinetic = sp.Integer(0)
+    for body in topology.bodies:
+        I = inertia[body.name]
+        V = kin.V[body.name]
+        momentum = prog.lets(I.apply(V))
+        kinetic += dot(V, momentum) / 2
+        body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
+        wrench[body.name] = prog.lets(body_force)
+    for body in reversed(topology.bodies):
+        parent = topology.parent_of[body.name].name
+        if parent != ground:
+            composite[parent] = (composite[parent] + composite[body.name]).materialise(prog)
+            wrench[parent] = prog.lets([a + b for a, b in zip(wrench[parent], wrench[body.name])])
+
+    owner = [None] * nq
+    for body, joint in zip(topology.bodies, topology.tree_joints):
+        for i in range(*topology.q_slice[joint.name].indices(nq)):
+            owner[i] = body
+    columns_of_chain = {}
+    for body in topology.bodies:
+        columns_of_chain[body.name] = topology.coord_indices_of_body(body)
+    M = {}
+    forces = []
+    for i in range(nq):
+        body = owner[i]
+        F = prog.lets(composite[body.name].apply(kin.S[i]))
+        for j in columns_of_chain[body.name]:
+            if j <= i:
+                M[i, j] = prog.let(dot(kin.S[j], F))
+        forces.append(prog.let(generalized[i] - dot(kin.S[i], wrench[body.name])))
+    prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nq) for j in range(i + 1)]
+    prog.outputs["forces"] = forces
+    prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
+    kinematics = []
+    for body in topology.bodies:
+        kinematics += [e for row in kin.R[body.name] for e in row] + kin.origin[body.name] + kin.V[body.name] + kin.A[body.name]
+    for S in kin.S:
+        kinematics += S
+    prog.outputs["kinematics"] = kinematics
+    prog.kin = kin
+    return prog
+
+
+KINEMATICS_PER_BODY = 9 + 3 + 6 + 6
+
+
+def _body_inertia_symbols(body: Body, kin: Kinematics):
+    values = kin.param(body, "inertia")
+    if len(values) == 3:
+        z = sp.Integer(0)
+        return [[values[0], z, z], [z, values[1], z], [z, z, values[2]]]
+    xx, yy, zz, xy, xz, yz = values
+    return [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]

@@ -1,0 +1,48 @@
+"""Errors that name the component and what is wrong with it."""
+from __future__ import annotations
+
+from typing import Any
+
+
+def describe(component: Any) -> str:
+    """``"Revolute 'elbow'"`` for a component, the text itself for a string."""
+    if component is None:
+        return ""
+    if isinstance(component, str):
+        return component
+    name = getattr(component, "name", None)
+    return f"{type(component).__name__} {name!r}" if name is not None else type(component).__name__
+
+
+class ModelError(ValueError):
+    """An invalid model: raised by ``Model.add`` or ``Model.compile``.
+
+    ``ModelError(joint, "axis has zero length")`` reads
+    ``"Revolute 'elbow': axis has zero length"``.  Several problems may be
+    collected into one error (``problems`` keeps them as a list).
+    """
+
+    def __init__(self, component: Any = None, message: str = "", problems: list[str] | None = None):
+        if problems:
+            self.problems = list(problems)
+            text = "model has %d problem%s:\n  - " % (len(problems), "s" * (len(problems) > 1))
+            text += "\n  - ".join(problems)
+        else:
+            prefix = describe(component)
+            text = f"{prefix}: {message}" if prefix else message
+            self.problems = [text]
+        self.component = component
+        super().__init__(text)
+
+
+class CompileError(ModelError):
+    """A model whose structure cannot be compiled (collects every problem found)."""
+
+
+class SimulationError(RuntimeError):
+    """Evaluation or simulation failed: the message says which component and why."""
+
+    def __init__(self, message: str, component: Any = None):
+        prefix = describe(component)
+        super().__init__(f"{prefix}: {message}" if prefix else message)
+        self.component = component

@@ -1,0 +1,86 @@
+"""Model: the mutable description users assemble from components."""
+from __future__ import annotations
+
+from typing import Any
+
+from .components import Body, Component, Ground
+from .components._values import vector3
+from .errors import ModelError, describe
+
+
+class Model:
+    """A mechanism description: a ground body, components and a uniform gravity field.
+
+    Parameters
+    ----------
+    name : str
+    gravity : (3,) m/s^2, world frame (any direction; ``(0, 0, -9.81)`` by default)
+    """
+
+    def __init__(self, name: str = "model", gravity: Any = (0.0, 0.0, -9.81)):
+        if not isinstance(name, str) or not name:
+            raise ModelError("Model", f"name must be a non-empty string, got {name!r}")
+        self.name = name
+        self.gravity = vector3(gravity, f"Model {name!r}", "gravity")
+        self.ground = Ground("ground")
+        self._components: dict[str, Component] = {"ground": self.ground}
+
+    # -- composition ----------------------------------------------------------
+    def add(self, *components: Component) -> Component:
+        """Add components (in order) and return the first one.
+
+        Raises ``ModelError`` for a non-component, a duplicate name or a second ground.
+        """
+        if not components:
+            raise ModelError(f"Model {self.name!r}", "add() needs at least one component")
+        for comp in components:
+            if not isinstance(comp, Component):
+                raise ModelError(f"Model {self.name!r}", f"cannot add {comp!r}: not an mbcomp component")
+            if isinstance(comp, Ground):
+                raise ModelError(comp, "a model has exactly one ground (model.ground)")
+            existing = self._components.get(comp.name)
+            if existing is comp:
+                raise ModelError(comp, "was already added to this model")
+            if existing is not None:
+                raise ModelError(comp, f"name {comp.name!r} is already used by {describe(existing)}")
+            self._components[comp.name] = comp
+        return components[0]
+
+    def __getitem__(self, name: str) -> Component:
+        try:
+            return self._components[name]
+        except KeyError:
+            raise KeyError(f"model {self.name!r} has no component {name!r}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._components
+
+    @property
+    def components(self) -> dict[str, Component]:
+        """All components by name, in the order they were added (ground first)."""
+        return dict(self._components)
+
+    @property
+    def bodies(self) -> list[Body]:
+        """The moving bodies, in the order they were added."""
+        return [c for c in self._components.values() if isinstance(c, Body) and c is not self.ground]
+
+    # -- compilation ------------------------------------------------------------
+    def compile(self, formulation: Any = "lagrange", *, cache: bool = True, backend: str = "auto",
+                **options: Any):
+        """Compile to an immutable ``System``.
+
+        Parameters
+        ----------
+        formulation : ``"lagrange"`` (minimal coordinates) or ``"dae"`` (multipliers), or a
+            ``Formulation`` subclass.
+        cache : reuse generated code stored on disk for the same model structure.
+        backend : ``"auto"`` (compiled C when a C compiler works, else Python), ``"c"`` or
+            ``"python"``.
+        options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
+        """
+        from .system import compile_model
+        return compile_model(self, formulation=formulation, cache=cache, backend=backend, **options)
+
+    def __repr__(self) -> str:
+        return f"Model({self.name!r}, {len(self._components) - 1} components)"

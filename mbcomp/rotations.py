@@ -1,0 +1,114 @@
+"""Elementary rotations, axis parsing and Euler sequences (sympy and numpy alike)."""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+import sympy as sp
+
+from .errors import ModelError
+
+AXIS_NAMES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def _math(a):
+    """sympy functions for symbolic angles, numpy for numbers."""
+    return sp if isinstance(a, sp.Basic) else np
+
+
+def unit_axis(spec: Any, owner: Any = None) -> tuple[float, float, float]:
+    """Unit 3-vector from ``"x" | "y" | "z"`` (optionally signed, ``"-z"``) or a 3-vector.
+
+    Raises ``ModelError`` naming ``owner`` for an unknown name, a wrong length,
+    a non-finite entry or a zero vector.
+    """
+    if isinstance(spec, str):
+        key = spec.strip().lower()
+        sign = -1.0 if key.startswith("-") else 1.0
+        key = key.lstrip("+-")
+        if key not in AXIS_NAMES:
+            raise ModelError(owner, f"axis {spec!r} is not 'x', 'y', 'z' or a 3-vector")
+        return tuple(sign * c for c in AXIS_NAMES[key])
+    try:
+        vec = np.asarray(spec, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ModelError(owner, f"axis {spec!r} is not 'x', 'y', 'z' or a 3-vector") from None
+    if vec.shape != (3,):
+        raise ModelError(owner, f"axis must have 3 components, got {vec.size}")
+    if not np.all(np.isfinite(vec)):
+        raise ModelError(owner, f"axis {tuple(vec)} has a non-finite component")
+    norm = float(np.linalg.norm(vec))
+    if norm < 1e-12:
+        raise ModelError(owner, "axis has zero length")
+    vec = vec / norm
+    # Snap exact axis directions so that symbolic code prunes their zeros.
+    vec[np.abs(vec) < 1e-15] = 0.0
+    return tuple(float(c) for c in vec)
+
+
+def skew(v: Sequence) -> Any:
+    """The cross-product matrix ``[v]x`` with ``[v]x @ u = v x u``."""
+    x, y, z = v
+    return [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+
+
+def axis_angle(axis: Sequence[float], angle: Any) -> Any:
+    """Rotation by ``angle`` (rad, right-handed) about the unit ``axis`` (Rodrigues).
+
+    Returns a sympy Matrix for a symbolic angle, a numpy (3, 3) array otherwise.
+    Axis-aligned axes give the plain ``rot_x``-style matrices with no zero terms.
+    """
+    m = _math(angle)
+    c, s = m.cos(angle), m.sin(angle)
+    x, y, z = axis
+    rows = [
+        [c + x * x * (1 - c), x * y * (1 - c) - z * s, x * z * (1 - c) + y * s],
+        [y * x * (1 - c) + z * s, c + y * y * (1 - c), y * z * (1 - c) - x * s],
+        [z * x * (1 - c) - y * s, z * y * (1 - c) + x * s, c + z * z * (1 - c)],
+    ]
+    if m is sp:
+        return sp.Matrix(rows).applyfunc(lambda e: sp.expand(e) if e.has(sp.cos(angle)) else e)
+    return np.array(rows, dtype=float)
+
+
+def rot_x(angle: Any) -> Any:
+    """Right-handed rotation about x."""
+    return axis_angle(AXIS_NAMES["x"], angle)
+
+
+def rot_y(angle: Any) -> Any:
+    """Right-handed rotation about y."""
+    return axis_angle(AXIS_NAMES["y"], angle)
+
+
+def rot_z(angle: Any) -> Any:
+    """Right-handed rotation about z."""
+    return axis_angle(AXIS_NAMES["z"], angle)
+
+
+def parse_sequence(sequence: Any, owner: Any = None) -> str:
+    """Validate an intrinsic Euler sequence of 1 to 3 axes from ``x, y, z``.
+
+    Consecutive repeated axes (``"xx"``) are rejected: they describe one rotation twice.
+    """
+    if not isinstance(sequence, str):
+        raise ModelError(owner, f"sequence must be a string such as 'xyz', got {sequence!r}")
+    seq = sequence.strip().lower()
+    if not 1 <= len(seq) <= 3:
+        raise ModelError(owner, f"sequence {sequence!r} must have 1 to 3 axes")
+    bad = [ch for ch in seq if ch not in AXIS_NAMES]
+    if bad:
+        raise ModelError(owner, f"sequence {sequence!r} has invalid axis {bad[0]!r} (use x, y, z)")
+    for a, b in zip(seq, seq[1:]):
+        if a == b:
+            raise ModelError(owner, f"sequence {sequence!r} repeats axis {a!r} consecutively")
+    return seq
+
+
+def euler_rotation(sequence: str, angles: Sequence[Any]) -> Any:
+    """Intrinsic (body-fixed) rotation ``R_a1(q1) R_a2(q2) ... `` for the given sequence."""
+    result = None
+    for axis_name, angle in zip(sequence, angles):
+        r = axis_angle(AXIS_NAMES[axis_name], angle)
+        result = r if result is None else result @ r
+    return result

@@ -1,0 +1,413 @@
+"""System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from . import codegen
+from .backend import FUNCTIONS, CFunctions, PythonFunctions, build_c_library
+from .components import Spherical
+from .components._values import name_of
+from .equations import (KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout,
+                        parameter_values)
+from .errors import ModelError, SimulationError, describe
+from .topology import build_topology
+
+
+@dataclass(frozen=True)
+class Energy:
+    """Kinetic, potential (gravity + springs) and total energy, J."""
+
+    kinetic: Any
+    potential: Any
+
+    @property
+    def total(self):
+        return self.kinetic + self.potential
+
+
+@dataclass(frozen=True)
+class BodyState:
+    """Pose and motion of a body (at its COM or a given point), all in the world frame.
+
+    position (m), velocity (m/s), acceleration (m/s^2), rotation (3x3, body to world),
+    angular_velocity (rad/s), angular_acceleration (rad/s^2).
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    rotation: np.ndarray
+    angular_velocity: np.ndarray
+    angular_acceleration: np.ndarray
+
+
+def structure_description(model, topology, layout, inputs) -> str:
+    """Everything that decides the generated code, as text (names included)."""
+    parts = [f"gravity|{len(topology.coords)}"]
+    for comp in topology.components.values():
+        refs = sorted((role, name_of(ref)) for role, ref in comp.references().items())
+        parts.append(f"{type(comp).__name__}|{comp.name}|{refs}|{comp.structure()}")
+    parts.append("order|" + ",".join(b.name for b in topology.bodies))
+    parts.append("coords|" + ",".join(topology.coords))
+    parts.append("params|" + ",".join(f"{k}:{v}" for k, v in layout.entries.items()))
+    parts.append("inputs|" + ",".join(f"{k}:{v}" for k, v in inputs.items()))
+    return "\n".join(parts)
+
+
+class CompiledModel:
+    """What compilation produces and every ``System`` of the same structure shares:
+    topology, layouts, generated functions (and, lazily, the symbolic program)."""
+
+    def __init__(self, model, *, cache: bool, backend: str):
+        self.model_name = model.name
+        self.topology = build_topology(model)
+        self.default_parameters = parameter_values(model)
+        self.layout = parameter_layout(self.default_parameters)
+        self.inputs = input_layout(self.topology)
+        self.n_inputs = sum(size for _, size in self.inputs.values())
+        description = structure_description(model, self.topology, self.layout, self.inputs)
+        self.key = codegen.structure_key(description)
+        self._program = None
+        started = time.perf_counter()
+        self.cache_hit = False
+        nq, nb = self.topology.nq, len(self.topology.bodies)
+        self.sizes = {"dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
+                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq}
+        self.functions = self._load(cache, backend)
+        self.compile_time = time.perf_counter() - started
+
+    @property
+    def program(self):
+        """The symbolic straight-line program (built on demand when code came from the cache)."""
+        if self._program is None:
+            self._program = build_program(self.topology, self.layout, self.inputs)
+            self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
+        return self._program
+
+    def _load(self, cache: bool, backend: str):
+        if backend not in ("auto", "c", "python"):
+            raise ModelError(f"Model {self.model_name!r}", f"backend must be 'auto', 'c' or 'python', got {backend!r}")
+        if backend in ("auto", "c"):
+            source = None
+            if cache and (codegen.cache_dir() / f"{self.key}.so").exists():
+                self.cache_hit = True
+                return CFunctions(codegen.cache_dir() / f"{self.key}.so", self.sizes)
+            source = codegen.c_source(self.program, FUNCTIONS)
+            path = build_c_library(source, self.key if cache else self.key + f"-{id(self)}")
+            if path is not None:
+                return CFunctions(path, self.sizes)
+            if backend == "c":
+                raise ModelError(f"Model {self.model_name!r}", "backend 'c' needs a working C compiler (set $CC)")
+        source = codegen.read_cached(self.key, ".py") if cache else None
+        if source is not None:
+            self.cache_hit = True
+        else:
+            source = codegen.python_source(self.program, FUNCTIONS)
+            if cache:
+                codegen.write_cached(self.key, ".py", source)
+        return PythonFunctions(source, self.key)
+
+
+def _as_list(x):
+    return x if isinstance(x, list) else [x]
+
+
+def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
+                  **options: Any) -> "System":
+    """Model -> System (see ``Model.compile``)."""
+    from .formulations import get_formulation
+    formulation_class = get_formulation(formulation)
+    compiled = CompiledModel(model, cache=cache, backend=backend)
+    return System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+
+
+class System:
+    """A compiled model: the numeric API of API.md.  Never modified by any call.
+
+    ``q`` is always every tree coordinate in ``coords`` order (array or ``{name: value}``);
+    ``tau`` adds generalised forces (array of ``len(coords)`` or callable ``(t, q, qd)``).
+    """
+
+    def __init__(self, compiled: CompiledModel, formulation, parameters: dict):
+        object.__setattr__(self, "_compiled", compiled)
+        object.__setattr__(self, "_formulation", formulation)
+        object.__setattr__(self, "_parameters", dict(parameters))
+        object.__setattr__(self, "_p", compiled.layout.pack(parameters))
+
+    def __setattr__(self, name, value):
+        raise AttributeError("System is immutable: use with_parameters() for new parameter values")
+
+    # -- description -----------------------------------------------------------------
+    @property
+    def coords(self) -> tuple[str, ...]:
+        return self._compiled.topology.coords
+
+    @property
+    def nq(self) -> int:
+        return self._compiled.topology.nq
+
+    @property
+    def ndof(self) -> int:
+        """Degrees of freedom left after constraints."""
+        return self._formulation.ndof
+
+    @property
+    def formulation(self) -> str:
+        return self._formulation.name
+
+    @property
+    def topology(self):
+        return self._compiled.topology
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
+        return dict(self._parameters)
+
+    @property
+    def backend(self) -> str:
+        return self._compiled.functions.name
+
+    @property
+    def compile_time(self) -> float:
+        return self._compiled.compile_time
+
+    def with_parameters(self, values: Mapping[str, Any] | None) -> "System":
+        """A new System with some parameter values replaced (shares the compiled code)."""
+        if not values:
+            return self
+        merged = dict(self._parameters)
+        for key, value in values.items():
+            if key not in merged:
+                raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
+            old = np.asarray(merged[key], dtype=float)
+            try:
+                new = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ModelError(f"parameter {key!r}", f"must be numeric, got {value!r}") from None
+            if new.shape != old.shape:
+                raise ModelError(f"parameter {key!r}", f"must have shape {old.shape}, got {new.shape}")
+            if not np.all(np.isfinite(new)):
+                raise ModelError(f"parameter {key!r}", f"must be finite, got {value!r}")
+            if key.endswith(".mass") and float(new) <= 0:
+                raise ModelError(f"parameter {key!r}", f"mass must be positive, got {float(new)}")
+            merged[key] = float(new) if new.ndim == 0 else tuple(new.tolist())
+        return System(self._compiled, self._formulation, merged)
+
+    # -- state handling -------------------------------------------------------------------
+    def state_vector(self, values: Any, what: str = "q") -> np.ndarray:
+        """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq."""
+        coords = self.coords
+        if isinstance(values, Mapping):
+            unknown = [k for k in values if k not in coords]
+            if unknown:
+                raise ModelError(f"{what}", f"unknown coordinate(s) {unknown}; coordinates are {list(coords)}")
+            missing = [c for c in coords if c not in values]
+            if missing:
+                raise ModelError(f"{what}", f"missing coordinate(s) {missing}")
+            values = [values[c] for c in coords]
+        try:
+            arr = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ModelError(f"{what}", f"must be {len(coords)} numbers, got {values!r}") from None
+        if arr.shape != (len(coords),):
+            raise ModelError(f"{what}", f"has length {arr.size}, the model has {len(coords)} coordinates {list(coords)}")
+        if not np.all(np.isfinite(arr)):
+            bad = [coords[i] for i in np.flatnonzero(~np.isfinite(arr))]
+            raise ModelError(f"{what}", f"is not finite for {bad}")
+        return arr
+
+    def _velocity(self, qd: Any) -> np.ndarray:
+        return np.zeros(self.nq) if qd is None else self.state_vector(qd, "qd")
+
+    def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        u = np.zeros(self._compiled.n_inputs)
+        for name, (start, size) in self._compiled.inputs.items():
+            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd)
+        return u
+
+    def _tau(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
+        if tau is None:
+            return None
+        if callable(tau):
+            from .components.forces import checked_output
+            return checked_output("tau", tau(t, q, qd), self.nq)
+        arr = np.asarray(tau, dtype=float).reshape(-1)
+        if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
+            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}")
+        return arr
+
+    # -- tree quantities (raw, unchecked inputs) -------------------------------------------------
+    def _call(self, name: str, q, qd, u=None) -> np.ndarray:
+        if u is None:
+            u = np.zeros(self._compiled.n_inputs)
+        return self._compiled.functions(name, q, qd, self._p, u)
+
+    def _dynamics(self, t, q, qd, tau=None):
+        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f``."""
+        n = self.nq
+        out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
+        M = np.zeros((n, n))
+        M[np.tril_indices(n)] = out[: n * (n + 1) // 2]
+        M = M + np.tril(M, -1).T
+        f = out[n * (n + 1) // 2:]
+        if tau is not None:
+            f = f + tau
+        return M, f
+
+    def _diagnose(self, q: np.ndarray) -> str:
+        """Name the components that can make the tree mass matrix singular at ``q``."""
+        hints = []
+        for joint in self.topology.tree_joints:
+            if isinstance(joint, Spherical) and len(joint.sequence) == 3:
+                middle = q[self.topology.q_slice[joint.name]][1]
+                a1, a3 = joint.sequence[0], joint.sequence[2]
+                value = np.sin(middle) if a1 == a3 else np.cos(middle)
+                if abs(value) < 1e-6:
+                    hints.append(f"{describe(joint)} is at its Euler-angle singularity "
+                                 f"({joint.coords[1]} = {middle:.6g} rad: first and last axes align)")
+        return "; ".join(hints) if hints else "check for massless bodies or bodies without inertia on rotating joints"
+
+    def _check_finite(self, values: np.ndarray, what: str, q: np.ndarray) -> np.ndarray:
+        if not np.all(np.isfinite(values)):
+            springs = []
+            for comp in self.topology.forces:
+                if hasattr(comp, "body_a"):
+                    pa = self.body_state(comp.body_a, q, point=comp.point_a).position
+                    pb = self.body_state(comp.body_b, q, point=comp.point_b).position
+                    if np.linalg.norm(pb - pa) < 1e-12:
+                        springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
+            reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
+            raise SimulationError(f"{what} is not finite at q = {np.round(q, 6).tolist()}: {reason}")
+        return values
+
+    def _solve_tree(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """``M^-1 f`` by Cholesky, or a ``SimulationError`` naming why M is singular."""
+        try:
+            L = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            L = None
+        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
+        if L is None or np.min(np.diag(L)) ** 2 < 1e-13 * scale:
+            raise SimulationError(f"mass matrix is singular at q = {np.round(q, 6).tolist()}: {self._diagnose(q)}")
+        y = np.linalg.solve(L, f)
+        return np.linalg.solve(L.T, y)
+
+    # -- public API -------------------------------------------------------------------------------
+    def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
+        """(nq, nq) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by coordinate type)."""
+        q = self.state_vector(q)
+        M, _ = self._dynamics(t, q, np.zeros(self.nq))
+        return self._check_finite(M, "mass matrix", q)
+
+    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
+        """(nq,) coordinate accelerations, consistent with every constraint."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
+
+    def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> dict[str, np.ndarray]:
+        """``{constraint name: reaction}`` (motor torque/force, slider force, loop forces)."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd))
+
+    def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
+        """(nq,) generalised forces that, applied, hold the system at rest at ``q``
+        (minus the gravity, spring and applied generalised forces at zero speed)."""
+        q = self.state_vector(q)
+        qd = np.zeros(self.nq)
+        _, f = self._dynamics(t, q, qd)
+        return self._check_finite(-f, "holding forces", q)
+
+    def energy(self, q: Any, qd: Any, t: float = 0.0) -> Energy:
+        """Kinetic and potential energy (J); the potential counts gravity and springs."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        kinetic, potential = self._call("energy", q, qd)
+        return Energy(float(kinetic), float(potential))
+
+    def _kinematics(self, q, qd):
+        out = self._call("kinematics", q, qd)
+        nb = len(self.topology.bodies)
+        per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
+        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nq, 6)
+        return per_body, columns
+
+    def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
+                   tau: Any = None) -> BodyState:
+        """Position, velocity, acceleration of the COM (or body ``point``, m, body frame),
+        rotation, angular velocity and acceleration, all in the world frame."""
+        name = name_of(body)
+        if name not in self.topology.components or not hasattr(self.topology.components[name], "mass"):
+            raise ModelError(f"body {name!r}", f"is not a body of this model")
+        q, qd = self.state_vector(q), self._velocity(qd)
+        comp = self.topology.components[name]
+        local = np.asarray(comp.com if point is None else point, dtype=float)
+        if point is None and name in (b.name for b in self.topology.bodies):
+            local = np.asarray(self._parameters[f"{name}.com"], dtype=float)
+        if comp is self.topology.ground:
+            zero = np.zeros(3)
+            return BodyState(local.copy(), zero, zero.copy(), np.eye(3), zero.copy(), zero.copy())
+        per_body, columns = self._kinematics(q, qd)
+        index = self.topology.body_index(comp)
+        row = per_body[index]
+        R, origin, V, A = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
+        qdd = self.accelerations(q, qd, t, tau)
+        idx = self.topology.coord_indices_of_body(comp)
+        A = A + columns[idx].T @ qdd[idx]
+        w, v0, alpha, a0 = V[:3], V[3:], A[:3], A[3:]
+        position = origin + R @ local
+        velocity = v0 + np.cross(w, position)
+        acceleration = a0 + np.cross(alpha, position) + np.cross(w, velocity)
+        return BodyState(position, velocity, acceleration, R, w.copy(), alpha.copy())
+
+    def motion_columns(self, q: Any) -> np.ndarray:
+        """(nq, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` (the columns of T)."""
+        return self._kinematics(self.state_vector(q), np.zeros(self.nq))[1]
+
+    def assemble(self, q: Any, qd: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, qd)`` moved onto the constraints (Newton on positions, projection of speeds)."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        return self._formulation.assemble(self, q, qd)
+
+    def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
+                 rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
+                 parameters: Mapping[str, Any] | None = None, progress: bool = False,
+                 max_step: float = np.inf):
+        """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``."""
+        from .simulate import simulate
+        system = self.with_parameters(parameters)
+        return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
+                        tau=tau, progress=progress, max_step=max_step)
+
+    # -- display ----------------------------------------------------------------------------------
+    def equations(self):
+        """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, qd and parameter symbols."""
+        import sympy as sp
+        prog = self._compiled.program
+        n = self.nq
+        M = sp.zeros(n, n)
+        tri = prog.outputs["mass_matrix"]
+        k = 0
+        for i in range(n):
+            for j in range(i + 1):
+                M[i, j] = M[j, i] = prog.expand(tri[k])
+                k += 1
+        f = sp.Matrix([prog.expand(e) for e in prog.outputs["forces"]])
+        names = {s: sp.Symbol(c) for s, c in zip(prog.q, self.coords)}
+        names.update({s: sp.Symbol(f"\\dot{{{c}}}") for s, c in zip(prog.qd, self.coords)})
+        return M.xreplace(names), f.xreplace(names)
+
+    def _repr_latex_(self) -> str | None:
+        if self.nq > 4:
+            return None
+        import sympy as sp
+        M, f = self.equations()
+        qdd = sp.Matrix([sp.Symbol(f"\\ddot{{{c}}}") for c in self.coords])
+        return "$" + sp.latex(M) + sp.latex(qdd) + " = " + sp.latex(f) + "$"
+
+    def __repr__(self) -> str:
+        return (f"System({self._compiled.model_name!r}, coords={list(self.coords)}, ndof={self.ndof}, "
+                f"formulation={self.formulation!r}, backend={self.backend!r})")

@@ -1,0 +1,168 @@
+"""Graph compiler: bodies as nodes, joints as edges; spanning tree, cut joints, coordinates."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import networkx as nx
+
+from .components import Body, Component, Constraint, ForceElement, Joint
+from .components.contacts import Contact
+from .components._values import name_of
+from .errors import CompileError, describe
+
+# What each reference role must resolve to.
+_ROLE_TYPES = {"parent": Body, "child": Body, "body": Body, "a": Body, "b": Body, "joint": Joint}
+
+
+@dataclass(frozen=True)
+class Topology:
+    """The compiled structure of a model (never modified after construction).
+
+    ``bodies`` are the moving bodies in depth-first order from the ground (parents
+    before children); ``tree_joints[i]`` is the joint into ``bodies[i]``; ``coords``
+    are the tree coordinates in that order and ``q_slice[joint name]`` their slice.
+    """
+
+    ground: Body
+    bodies: tuple
+    tree_joints: tuple
+    cut_joints: tuple
+    parent_of: dict
+    coords: tuple
+    q_slice: dict
+    forces: tuple
+    constraints: tuple
+    contacts: tuple
+    components: dict
+    graph: Any = field(repr=False, compare=False)
+
+    @property
+    def nq(self) -> int:
+        return len(self.coords)
+
+    @property
+    def has_loops(self) -> bool:
+        return bool(self.cut_joints)
+
+    def resolve(self, ref: Any) -> Component:
+        """The component a reference (object or name) stands for."""
+        return self.components[name_of(ref)]
+
+    def body_index(self, ref: Any) -> int:
+        """Index into ``bodies`` (-1 for the ground)."""
+        body = self.resolve(ref)
+        return -1 if body is self.ground else self.bodies.index(body)
+
+    def ancestors(self, ref: Any) -> list:
+        """Bodies from ``ref`` up to (excluding) the ground."""
+        chain, body = [], self.resolve(ref)
+        while body is not self.ground:
+            chain.append(body)
+            body = self.parent_of[body.name]
+        return chain
+
+    def coord_indices_of_body(self, ref: Any) -> list[int]:
+        """Indices of every coordinate that moves ``ref`` (its joint and its ancestors')."""
+        indices = []
+        for body in self.ancestors(ref):
+            joint = self.tree_joints[self.bodies.index(body)]
+            indices.extend(range(*self.q_slice[joint.name].indices(self.nq)))
+        return sorted(indices)
+
+
+def build_topology(model) -> Topology:
+    """Resolve references, find the spanning tree and the cut joints, name coordinates.
+
+    Collects every structural problem and raises one ``CompileError`` listing them.
+    """
+    problems: list[str] = []
+    components = dict(model.components)
+    ground = model.ground
+
+    for comp in components.values():
+        for role, ref in comp.references().items():
+            target = components.get(name_of(ref))
+            wanted = _ROLE_TYPES.get(role, Component)
+            if target is None:
+                problems.append(f"{describe(comp)}: {role} {name_of(ref)!r} is not in the model")
+            elif not isinstance(ref, str) and ref is not target:
+                problems.append(f"{describe(comp)}: {role} refers to {describe(ref)}, which was not added to the model "
+                                f"(the model's {name_of(ref)!r} is another object)")
+            elif not isinstance(target, wanted):
+                problems.append(f"{describe(comp)}: {role} {name_of(ref)!r} is a {type(target).__name__}, "
+                                f"expected a {wanted.__name__}")
+    if problems:
+        raise CompileError(problems=problems)
+
+    joints = [c for c in components.values() if isinstance(c, Joint)]
+    graph = nx.MultiDiGraph()
+    graph.add_nodes_from(c.name for c in components.values() if isinstance(c, Body))
+    tree = nx.DiGraph()
+    tree.add_node(ground.name)
+    tree_joint_of: dict[str, Joint] = {}
+    cut_joints = []
+    for joint in joints:
+        parent, child = name_of(joint.parent), name_of(joint.child)
+        graph.add_edge(parent, child, key=joint.name, joint=joint)
+        if parent == child:
+            problems.append(f"{describe(joint)}: connects body {parent!r} to itself")
+            continue
+        if child == ground.name or child in tree_joint_of or _connected(tree, parent, child):
+            cut_joints.append(joint)
+        else:
+            tree.add_edge(parent, child)
+            tree_joint_of[child] = joint
+
+    reachable = nx.descendants(tree, ground.name) if ground.name in tree else set()
+    for node in graph.nodes:
+        if node != ground.name and node not in reachable:
+            why = "has no joint" if graph.degree(node) == 0 else "is not connected to the ground by a chain of parent->child joints"
+            problems.append(f"{describe(components[node])}: {why}")
+    for joint in cut_joints:
+        if joint.n_coords:
+            problems.append(f"{describe(joint)}: a loop-closing joint must not carry coordinates "
+                            f"(its child {name_of(joint.child)!r} is already connected)")
+
+    order = [n for n in nx.dfs_preorder_nodes(tree, ground.name) if n != ground.name]
+    bodies = tuple(components[n] for n in order)
+    tree_joints = tuple(tree_joint_of[n] for n in order)
+    parent_of = {n: components[name_of(tree_joint_of[n].parent)] for n in order}
+
+    coords, q_slice = [], {}
+    for joint in tree_joints:
+        q_slice[joint.name] = slice(len(coords), len(coords) + joint.n_coords)
+        coords.extend(joint.coords)
+    seen: dict[str, int] = {}
+    for name in coords:
+        seen[name] = seen.get(name, 0) + 1
+    for name, count in seen.items():
+        if count > 1:
+            problems.append(f"coordinate name {name!r} is used {count} times")
+        if name in components and not isinstance(components[name], Joint):
+            problems.append(f"coordinate name {name!r} is also the name of {describe(components[name])}")
+
+    forces = tuple(c for c in components.values() if isinstance(c, ForceElement))
+    for comp in forces:
+        if hasattr(comp, "bind_joint"):
+            joint = components[name_of(comp.joint)]
+            try:
+                comp.bind_joint(joint)
+            except ValueError as exc:
+                problems.append(str(exc))
+            if joint in cut_joints:
+                problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinates")
+    constraints = tuple(c for c in components.values() if isinstance(c, Constraint))
+    contacts = tuple(c for c in components.values() if isinstance(c, Contact))
+    if problems:
+        raise CompileError(problems=problems)
+    return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),
+                    parent_of=parent_of, coords=tuple(coords), q_slice=q_slice, forces=forces,
+                    constraints=constraints, contacts=contacts, components=components, graph=graph)
+
+
+def _connected(tree: nx.DiGraph, a: str, b: str) -> bool:
+    """True when ``a`` and ``b`` are already joined in the (undirected) tree."""
+    if a not in tree or b not in tree:
+        return False
+    return nx.has_path(tree.to_undirected(as_view=True), a, b)
