@@ -80,7 +80,7 @@ def build_c_library(source: str, key: str) -> Path | None:
         src = Path(tmp) / "model.c"
         src.write_text(source)
         out = Path(tmp) / "model.so"
-        cmd = [compiler, "-O2", "-shared", "-fPIC", "-fno-math-errno", str(src), "-o", str(out), "-lm"]
+        cmd = [compiler, "-O1", "-shared", "-fPIC", "-fno-math-errno", str(src), "-o", str(out), "-lm"]
         try:
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
         except (OSError, subprocess.SubprocessError):

@@ -98,21 +98,51 @@ def python_source(prog, functions: dict) -> str:
     return "\n".join(lines)
 
 
-def c_source(prog, functions: dict) -> str:
+def c_source(prog, functions: dict, chunk: int = 300) -> str:
     """C source: ``void name(const double *q, const double *qd, const double *p,
-    const double *u, double *out)`` per function."""
-    names = _names(prog, "c")
-    printer = Printer(names, "c")
+    const double *u, double *out)`` per function.
+
+    Long programs are split into static functions of about ``chunk`` statements that
+    pass only the values crossing a chunk boundary through a workspace array: a
+    compiler's register allocation grows faster than linearly with function size,
+    so this keeps compile time proportional to the program.
+    """
     lines = ["#include <math.h>", ""]
     for fname, outputs in functions.items():
-        lines.append(f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{")
-        for symbol, expr in prog.needed(outputs):
-            lines.append(f"    const double {symbol.name} = {printer(expr)};")
-        k = 0
-        for name in outputs:
-            for e in prog.outputs[name]:
-                lines.append(f"    out[{k}] = {printer(sp.sympify(e))};")
-                k += 1
+        needed = prog.needed(outputs)
+        results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
+        blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
+        block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
+        shared = {}
+        for b, block in enumerate(blocks):
+            for _, expr in block:
+                for s in expr.free_symbols:
+                    if block_of.get(s, b) != b and s not in shared:
+                        shared[s] = len(shared)
+        final = len(blocks)
+        for e in results:
+            for s in e.free_symbols:
+                if s in block_of and s not in shared:
+                    shared[s] = len(shared)
+        names = _names(prog, "c")
+        names.update({s: f"w[{i}]" for s, i in shared.items()})
+        printer = Printer(names, "c")
+        args = "const double *q, const double *qd, const double *p, const double *u"
+        for b, block in enumerate(blocks):
+            lines.append(f"static void {fname}_part{b}({args}, double *w) {{")
+            for symbol, expr in block:
+                if symbol in shared:
+                    lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
+                else:
+                    lines.append(f"    const double {symbol.name} = {printer(expr)};")
+            lines.append("}")
+            lines.append("")
+        lines.append(f"void {fname}({args}, double *out) {{")
+        lines.append(f"    double w[{max(len(shared), 1)}];")
+        for b in range(len(blocks)):
+            lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")
+        for k, e in enumerate(results):
+            lines.append(f"    out[{k}] = {printer(e)};")
         lines.append("}")
         lines.append("")
     return "\n".join(lines)
