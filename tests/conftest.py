@@ -1,0 +1,67 @@
+"""Shared fixtures: a private code cache for the test session, and small models."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import mbcomp as mb
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache(tmp_path_factory):
+    """Generated code goes to a temporary cache, never the user's."""
+    path = tmp_path_factory.mktemp("mbcomp-cache")
+    old = os.environ.get("MBCOMP_CACHE_DIR")
+    os.environ["MBCOMP_CACHE_DIR"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("MBCOMP_CACHE_DIR", None)
+    else:
+        os.environ["MBCOMP_CACHE_DIR"] = old
+
+
+def assert_close(actual, expected, rtol=1e-10, atol=1e-12, name="value"):
+    """``np.testing.assert_allclose`` with the quantity's name in the message."""
+    np.testing.assert_allclose(np.asarray(actual, dtype=float), np.asarray(expected, dtype=float),
+                               rtol=rtol, atol=atol, err_msg=f"{name} differs")
+
+
+def arm_model(inertia: bool = True) -> mb.Model:
+    """The 3D arm of the reference cases (API.md's example)."""
+    m = mb.Model("arm3d", gravity=(0, 0, -9.81))
+    upper = m.add(mb.Body("upper", mass=3.0, com=(0, 0, -0.1), inertia=(0.025, 0.025, 0.004) if inertia else None))
+    lower = m.add(mb.Body("lower", mass=3.0, com=(0, 0.2, 0), inertia=(0.04, 0.002, 0.04) if inertia else None))
+    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy", coords=("alpha", "beta")))
+    m.add(mb.Revolute("elbow", upper, lower, axis="x", parent_point=(0, 0, -0.3), coords="gamma"))
+    return m
+
+
+def pendulum_chain(n: int, *, gravity=(0, 0, -9.81), length: float = 0.5) -> mb.Model:
+    """The benchmark chain: uniform 1 kg rods hanging along -z, axes alternating x, y."""
+    m = mb.Model(f"chain{n}", gravity=gravity)
+    parent = m.ground
+    for i in range(n):
+        body = m.add(mb.Body(f"link{i}", mass=1.0, com=(0, 0, -length / 2),
+                             inertia=(length ** 2 / 12, length ** 2 / 12, 1e-4)))
+        m.add(mb.Revolute(f"joint{i}", parent, body, axis="x" if i % 2 == 0 else "y",
+                          parent_point=(0, 0, -length) if i else (0, 0, 0)))
+        parent = body
+    return m
+
+
+@pytest.fixture
+def arm():
+    return arm_model().compile()
+
+
+@pytest.fixture
+def double_pendulum():
+    """Planar double pendulum in x-y, gravity along -y, two uniform 1 m bars."""
+    m = mb.Model("dpend", gravity=(0, -9.81, 0))
+    b1 = m.add(mb.Body("bar1", mass=1.0, com=(0.5, 0, 0), inertia=(1e-3, 1 / 12, 1 / 12)))
+    b2 = m.add(mb.Body("bar2", mass=1.0, com=(0.5, 0, 0), inertia=(1e-3, 1 / 12, 1 / 12)))
+    m.add(mb.Revolute("j1", m.ground, b1, axis="z"))
+    m.add(mb.Revolute("j2", b1, b2, axis="z", parent_point=(1, 0, 0)))
+    return m
