@@ -1,0 +1,664 @@
+"""Plots and animations of simulation results (matplotlib, headless-safe)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["plot_result", "animate_result", "render_frame", "work_precision_plot"]
+
+PLOT_KINDS = ("q", "qd", "energy", "drift", "reactions")
+
+# Joint types whose coordinates are lengths (m); every other coordinate is an angle (rad).
+_LENGTH_JOINTS = ("Prismatic",)
+
+# Floor for log-scale drift plots: exact zeros (an unconstrained sample) cannot be drawn.
+_DRIFT_FLOOR = 1e-17
+
+
+# ----------------------------------------------------------------------------------------------
+# Figures without global state
+# ----------------------------------------------------------------------------------------------
+def _new_figure(figsize: tuple[float, float] | None = None, **kwargs: Any):
+    """A matplotlib Figure that never needs a display.
+
+    When the user already works with pyplot (it is imported), the figure is made by pyplot so
+    ``plt.show()`` and notebooks display it with the user's backend (which matplotlib itself
+    falls back to Agg without a display).  Otherwise the figure is a bare ``Figure`` on an Agg
+    canvas: no GUI, no global figure registry, nothing to close.
+    """
+    if "matplotlib.pyplot" in sys.modules:
+        import matplotlib.pyplot as plt
+        return plt.figure(figsize=figsize, **kwargs)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=figsize, **kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path: Any, dpi: float | None = None) -> None:
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=dpi if dpi is not None else "figure")
+
+
+# ----------------------------------------------------------------------------------------------
+# Time histories
+# ----------------------------------------------------------------------------------------------
+def _coordinate_kinds(system) -> list[str]:
+    """``"length"`` or ``"angle"`` for every coordinate, in ``system.coords`` order."""
+    topology = system.topology
+    kinds = ["angle"] * len(system.coords)
+    for joint in topology.tree_joints:
+        kind = "length" if type(joint).__name__ in _LENGTH_JOINTS else "angle"
+        for index in range(*topology.q_slice[joint.name].indices(len(kinds))):
+            kinds[index] = kind
+    return kinds
+
+
+def _has_constraints(system) -> bool:
+    topology = system.topology
+    return bool(getattr(topology, "constraints", ())) or bool(getattr(topology, "cut_joints", ()))
+
+
+def _reaction_unit(system, name: str) -> str:
+    """Unit of the reaction of constraint ``name``: motor torque/force, slider force, loop forces."""
+    topology = system.topology
+    comp = topology.components.get(name)
+    kind = type(comp).__name__
+    if kind == "Motor":
+        joint = topology.resolve(comp.joint)
+        return "N" if type(joint).__name__ in _LENGTH_JOINTS else "N m"
+    if kind == "Slider":
+        return "N"
+    return "N, N m"
+
+
+def _parse_what(what: str | Sequence[str]) -> list[str]:
+    kinds = [what] if isinstance(what, str) else list(what)
+    unknown = [k for k in kinds if k not in PLOT_KINDS]
+    if unknown:
+        raise ValueError(f"plot_result: unknown quantity {unknown}; choose from {list(PLOT_KINDS)}")
+    return list(dict.fromkeys(kinds))       # keep the order, drop repeats
+
+
+def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), *, path: Any = None,
+                figsize: tuple[float, float] | None = None):
+    """Time histories of a simulation, one subplot per quantity, sharing the time axis.
+
+    Parameters
+    ----------
+    result : Result
+        What ``System.simulate`` returned.
+    what : str or sequence of str
+        Quantities to plot, in order, from ``"q"`` (coordinates; angles in rad and lengths in m
+        on separate subplots, each line labelled by coordinate name), ``"qd"`` (speeds, rad/s and
+        m/s), ``"energy"`` (kinetic, potential, total, J), ``"drift"`` (constraint violation
+        max |C(q)|, m or rad, log scale) and ``"reactions"`` (constraint reactions: N, N m).
+        The drift subplot is added whenever the system has constraints or loop-closing joints,
+        because drift is what tells whether those results can be trusted.
+    path : str or Path, optional
+        Save the figure there (the format follows the suffix, e.g. PNG).
+    figsize : (width, height), optional
+        Inches; by default 8 wide and 2.3 per subplot.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Impact events, if any, are marked by dotted vertical lines.
+
+    Examples
+    --------
+    >>> fig = res.plot(("q", "energy"), path="pendulum.png")     # doctest: +SKIP
+    """
+    kinds = _parse_what(what)
+    system = result.system
+    if "drift" not in kinds and _has_constraints(system):
+        kinds.append("drift")
+    t = np.asarray(result.t, dtype=float)
+    coords = list(system.coords)
+    coord_kinds = _coordinate_kinds(system)
+
+    # One panel per (quantity, unit): mixing rad and m on one axis hides the smaller one.
+    panels: list[tuple[str, Any]] = []
+    for kind in kinds:
+        if kind in ("q", "qd"):
+            present = [k for k in ("angle", "length") if k in coord_kinds]
+            panels.extend((kind, unit_kind) for unit_kind in present)
+        else:
+            panels.append((kind, None))
+    if not panels:
+        raise ValueError("plot_result: nothing to plot (the system has no coordinates)")
+
+    if figsize is None:
+        figsize = (8.0, max(2.3 * len(panels), 3.0))
+    fig = _new_figure(figsize=figsize)
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (kind, unit_kind) in zip(axes, panels):
+        if kind in ("q", "qd"):
+            values = result.q if kind == "q" else result.qd
+            for i, name in enumerate(coords):
+                if coord_kinds[i] == unit_kind:
+                    ax.plot(t, values[:, i], label=name if kind == "q" else f"d{name}/dt")
+            if kind == "q":
+                ax.set_ylabel("angle (rad)" if unit_kind == "angle" else "position (m)")
+            else:
+                ax.set_ylabel("angular speed (rad/s)" if unit_kind == "angle" else "speed (m/s)")
+        elif kind == "energy":
+            energy = result.energy()
+            ax.plot(t, energy.kinetic, label="kinetic")
+            ax.plot(t, energy.potential, label="potential")
+            ax.plot(t, energy.total, label="total", color="black", linewidth=1.2)
+            ax.set_ylabel("energy (J)")
+        elif kind == "drift":
+            drift = np.asarray(result.constraint_violation(), dtype=float).reshape(-1)
+            ax.semilogy(t, np.maximum(np.abs(drift), _DRIFT_FLOOR), label="max |C(q)|", color="tab:red")
+            if not np.any(drift):
+                ax.text(0.5, 0.5, "no drift: the constraints hold exactly (or there are none)",
+                        transform=ax.transAxes, ha="center", va="center", color="gray")
+            ax.set_ylabel("constraint drift (m, rad)")
+        elif kind == "reactions":
+            reactions = result.reactions
+            units = []
+            for name, series in reactions.items():
+                series = np.asarray(series, dtype=float).reshape(len(t), -1)
+                unit = _reaction_unit(system, name)
+                units.append(unit)
+                for k in range(series.shape[1]):
+                    label = name if series.shape[1] == 1 else f"{name}[{k}]"
+                    ax.plot(t, series[:, k], label=f"{label} ({unit})")
+            if not reactions:
+                ax.text(0.5, 0.5, "no constraints: no reactions", transform=ax.transAxes,
+                        ha="center", va="center", color="gray")
+            unit_text = ", ".join(dict.fromkeys(u for us in units for u in us.split(", "))) or "N, N m"
+            ax.set_ylabel(f"reaction ({unit_text})")
+        for event in getattr(result, "events", None) or ():
+            ax.axvline(float(event.time), color="gray", linestyle=":", linewidth=0.8)
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(ax.get_lines())))
+    axes[-1].set_xlabel("time (s)")
+    model_name = getattr(getattr(system, "_compiled", None), "model_name", None)
+    if model_name:
+        axes[0].set_title(f"{model_name}: {result.stats.get('method', '')}".rstrip(": "))
+    fig.tight_layout()
+    _save(fig, path)
+    return fig
+
+
+# ----------------------------------------------------------------------------------------------
+# 3D stick-and-ball scene
+# ----------------------------------------------------------------------------------------------
+def _local(system, comp, attr: str) -> np.ndarray:
+    """A component's body-frame point as the system's current parameter value (parameters can
+    be rebound without recompiling, so the component's own attribute may be stale)."""
+    value = system.parameters.get(f"{comp.name}.{attr}", getattr(comp, attr))
+    return np.asarray(value, dtype=float).reshape(3)
+
+
+class _Scene:
+    """Everything drawn in the animation, as body-frame points resolved per configuration.
+
+    Each body is a stick figure: segments from its hub (where its tree joint attaches it) to its
+    COM and to every other point of interest on it (outgoing joints, loop-closing joints, spring,
+    slider and contact points).  ``points(q)`` returns the world position of every such point at
+    one configuration.
+    """
+
+    def __init__(self, system):
+        self.system = system
+        topology = system.topology
+        self.ground = topology.ground
+        self.bodies = list(topology.bodies)
+        self.names = [topology.ground.name] + [b.name for b in self.bodies]
+        self.index_of = {name: i for i, name in enumerate(self.names)}
+        self.locals: list[np.ndarray] = []         # body-frame points, one row each
+        self.owner: list[int] = []                 # index into self.names
+        self.sticks: list[tuple[int, int, int]] = []   # (point a, point b, body index)
+        self.links: list[tuple[int, int]] = []     # joint gaps: prismatic travel, loop closures
+        self.springs: list[tuple[int, int]] = []
+        self.ground_marks: list[int] = []
+        self.joint_marks: list[int] = []
+        self.com_points: list[int] = []
+        self.sliders: list[tuple[np.ndarray, np.ndarray]] = []
+
+        def add(body: Any, local: np.ndarray) -> int:
+            self.locals.append(np.asarray(local, dtype=float))
+            self.owner.append(self.index_of[topology.resolve(body).name])
+            return len(self.locals) - 1
+
+        hubs: dict[str, int] = {}
+        extras: dict[str, list[int]] = {b.name: [] for b in self.bodies}
+
+        def attach(body: Any, local: np.ndarray) -> int:
+            index = add(body, local)
+            name = topology.resolve(body).name
+            if name == self.ground.name:
+                self.ground_marks.append(index)
+            else:
+                extras[name].append(index)
+            return index
+
+        for body, joint in zip(self.bodies, topology.tree_joints):
+            on_parent = attach(joint.parent, _local(system, joint, "parent_point"))
+            hub = add(body, _local(system, joint, "child_point"))
+            hubs[body.name] = hub
+            self.joint_marks.append(hub)
+            self.links.append((on_parent, hub))
+        for joint in getattr(topology, "cut_joints", ()):
+            a = attach(joint.parent, _local(system, joint, "parent_point"))
+            b = attach(joint.child, _local(system, joint, "child_point"))
+            self.joint_marks.extend((a, b))
+            self.links.append((a, b))
+        for comp in getattr(topology, "forces", ()):
+            if hasattr(comp, "body_a") and hasattr(comp, "body_b"):
+                a = attach(comp.body_a, _local(system, comp, "point_a"))
+                b = attach(comp.body_b, _local(system, comp, "point_b"))
+                self.springs.append((a, b))
+        for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
+            if hasattr(comp, "body") and hasattr(comp, "point"):
+                attach(comp.body, _local(system, comp, "point"))
+            if type(comp).__name__ == "Slider":
+                self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
+        for k, body in enumerate(self.bodies):
+            com = add(body, _local(system, body, "com"))
+            self.com_points.append(com)
+            hub = hubs[body.name]
+            for other in [com] + extras[body.name]:
+                self.sticks.append((hub, other, k))
+        if not self.ground_marks:
+            self.ground_marks.append(add(self.ground, np.zeros(3)))
+        self.locals_array = np.array(self.locals).reshape(-1, 3)
+        self.owner_array = np.array(self.owner, dtype=int)
+        masses = np.array([float(system.parameters.get(f"{b.name}.mass", b.mass)) for b in self.bodies])
+        # Ball area grows with mass^(2/3) (volume ~ mass), within readable bounds.
+        scale = (masses / masses.max()) ** (2.0 / 3.0) if masses.size else masses
+        self.ball_sizes = np.clip(40.0 + 200.0 * scale, 30.0, 260.0)
+        self._fast: bool | None = None
+
+    # -- kinematics -----------------------------------------------------------------------------
+    def _poses_public(self, q: np.ndarray):
+        """(R_WB, p_WB) of every body through the public ``body_state`` (ground first)."""
+        rotations, origins = [np.eye(3)], [np.zeros(3)]
+        for body in self.bodies:
+            state = self.system.body_state(body, q, point=(0.0, 0.0, 0.0))
+            rotations.append(state.rotation)
+            origins.append(state.position)
+        return np.array(rotations), np.array(origins)
+
+    def _poses_fast(self, q: np.ndarray):
+        """The same from one evaluation of the generated kinematics (no accelerations)."""
+        per_body = self.system._kinematics(q, np.zeros_like(q))[0]
+        rotations = np.concatenate([np.eye(3)[None], per_body[:, :9].reshape(-1, 3, 3)])
+        origins = np.concatenate([np.zeros((1, 3)), per_body[:, 9:12]])
+        return rotations, origins
+
+    def poses(self, q: np.ndarray):
+        if self._fast is None:
+            # Use the fast path only once it agrees with the public API at this configuration.
+            reference = self._poses_public(q)
+            try:
+                fast = self._poses_fast(q)
+                self._fast = all(np.allclose(a, b, rtol=1e-9, atol=1e-9) for a, b in zip(fast, reference))
+            except Exception:            # noqa: BLE001 - any failure means: use the public API
+                self._fast = False
+            return reference
+        return self._poses_fast(q) if self._fast else self._poses_public(q)
+
+    def points(self, q: np.ndarray) -> np.ndarray:
+        """(npoints, 3) world positions (m) of every scene point at configuration ``q``."""
+        rotations, origins = self.poses(np.asarray(q, dtype=float))
+        R = rotations[self.owner_array]
+        return origins[self.owner_array] + np.einsum("nij,nj->ni", R, self.locals_array)
+
+    def all_points(self, qs: np.ndarray) -> np.ndarray:
+        """(nframes, npoints, 3) world positions for a sequence of configurations."""
+        return np.array([self.points(q) for q in qs])
+
+
+def _limits(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and half-width (m) of one cube that holds every point of the whole motion."""
+    flat = points.reshape(-1, 3)
+    flat = flat[np.all(np.isfinite(flat), axis=1)]
+    if flat.size == 0:
+        return np.zeros(3), 1.0
+    low, high = flat.min(axis=0), flat.max(axis=0)
+    centre = (low + high) / 2
+    half = 0.55 * float(np.max(high - low))
+    return centre, max(half, 0.05)
+
+
+_NAMED_VIEWS = {
+    # (elev, azim, vertical axis, axis looked along): the plane of the name, face-on.
+    "xy": (90.0, -90.0, "z", 2),
+    "xz": (0.0, -90.0, "z", 1),
+    "yz": (0.0, 0.0, "z", 0),
+}
+
+
+def _resolve_view(view: Any, points: np.ndarray, system) -> tuple[float, float, str, int | None]:
+    """``(elev, azim, vertical_axis, normal)`` for ``view``; ``normal`` is the index of the
+    axis looked along for a face-on (orthographic) view, else None.
+
+    ``None`` picks automatically: a planar motion is shown face-on (orthographic), anything
+    else from an oblique angle with "up" opposite to gravity.
+    """
+    if isinstance(view, str):
+        key = view.lower()
+        if key in _NAMED_VIEWS:
+            return _NAMED_VIEWS[key]
+        if key in ("iso", "3d"):
+            view = None
+            points = None
+        else:
+            raise ValueError(f"view must be 'xy', 'xz', 'yz', 'iso' or (elev, azim) in degrees, got {view!r}")
+    elif view is not None:
+        try:
+            elev, azim = (float(v) for v in view)
+        except (TypeError, ValueError):
+            raise ValueError(f"view must be 'xy', 'xz', 'yz', 'iso' or (elev, azim) in degrees, got {view!r}") from None
+        return elev, azim, "z", None
+    if points is not None:
+        flat = points.reshape(-1, 3)
+        extent = np.ptp(flat, axis=0) if flat.size else np.zeros(3)
+        flat_axes = np.flatnonzero(extent <= 1e-9 * max(float(extent.max()), 1e-12))
+        if extent.max() > 0 and flat_axes.size == 1:
+            return _NAMED_VIEWS[{0: "yz", 1: "xz", 2: "xy"}[int(flat_axes[0])]]
+    gravity = np.asarray(system.parameters.get("gravity", (0.0, 0.0, -9.81)), dtype=float)
+    vertical = "xyz"[int(np.argmax(np.abs(gravity)))] if np.any(gravity) else "z"
+    return 22.0, -58.0, vertical, None
+
+
+class _Drawing:
+    """The matplotlib artists of one scene, created once and moved per frame."""
+
+    def __init__(self, ax, scene: _Scene, first: np.ndarray, centre: np.ndarray, half: float,
+                 normal: int | None = None):
+        import matplotlib as mpl
+        self.ax, self.scene = ax, scene
+        colors = mpl.colormaps["tab10"].colors
+        self.body_colors = [colors[k % len(colors)] for k in range(len(scene.bodies))]
+
+        for index in (0, 1, 2):
+            getattr(ax, f"set_{'xyz'[index]}lim")(centre[index] - half, centre[index] + half)
+        # Face-on: the axis looked along is a point, so its ticks would pile up; zoom in on the plane.
+        ax.set_box_aspect((1, 1, 1), zoom=1.0 if normal is None else 1.35)
+        for index, letter in enumerate("xyz"):
+            if index == normal:
+                getattr(ax, f"set_{letter}ticks")([])
+            else:
+                getattr(ax, f"set_{letter}label")(f"{letter} (m)")
+
+        for origin, axis in scene.sliders:     # guide lines, long enough to cross the view
+            ends = np.array([origin - 4 * half * axis, origin + 4 * half * axis])
+            ax.plot(*ends.T, color="0.6", linewidth=1.0, linestyle="--")
+        ground = first[scene.ground_marks]
+        ax.plot(*ground.T, linestyle="none", marker="^", markersize=11, color="0.15",
+                markeredgecolor="black", label="ground")
+        self.sticks = self._collection(first, scene.sticks, linewidths=3.0,
+                                       colors=[self.body_colors[k] for _, _, k in scene.sticks])
+        self.links = self._collection(first, scene.links, colors="0.35", linewidths=1.5, linestyles="dotted")
+        self.springs = self._collection(first, scene.springs, colors="tab:gray", linewidths=1.2,
+                                        linestyles="dashed")
+        joints = first[scene.joint_marks] if scene.joint_marks else np.empty((0, 3))
+        (self.joint_line,) = ax.plot(*joints.T, linestyle="none", marker="o", markersize=4.5,
+                                     markerfacecolor="white", markeredgecolor="black")
+        self.balls = []
+        for k, body in enumerate(scene.bodies):
+            p = first[scene.com_points[k]]
+            (ball,) = ax.plot([p[0]], [p[1]], [p[2]], linestyle="none", marker="o",
+                              markersize=float(np.sqrt(scene.ball_sizes[k])), color=self.body_colors[k],
+                              markeredgecolor="black", label=body.name)
+            self.balls.append(ball)
+        # Time at the top left, legend at the top right: both clear of the 3D box and its labels.
+        self.title = ax.figure.text(0.03, 0.97, "", ha="left", va="top", fontsize="large")
+        if len(scene.bodies) <= 8:
+            ax.figure.legend(loc="upper right", ncol=min(len(scene.bodies) + 1, 4), fontsize="small",
+                             frameon=False, bbox_to_anchor=(0.99, 0.99))
+
+    def _collection(self, points: np.ndarray, pairs: list, **style: Any):
+        """A Line3DCollection of the segments ``pairs`` (None when there are none: mplot3d
+        cannot add an empty collection)."""
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+        if not pairs:
+            return None
+        collection = Line3DCollection(self._segments(points, pairs), **style)
+        self.ax.add_collection3d(collection, autolim=False)
+        return collection
+
+    @staticmethod
+    def _segments(points: np.ndarray, pairs: Iterable[tuple]) -> list[np.ndarray]:
+        return [np.array([points[p[0]], points[p[1]]]) for p in pairs]
+
+    def update(self, points: np.ndarray, t: float) -> None:
+        scene = self.scene
+        for collection, pairs in ((self.sticks, scene.sticks), (self.links, scene.links),
+                                  (self.springs, scene.springs)):
+            if collection is not None:
+                collection.set_segments(self._segments(points, pairs))
+        if scene.joint_marks:
+            joints = points[scene.joint_marks]
+            self.joint_line.set_data_3d(joints[:, 0], joints[:, 1], joints[:, 2])
+        for k, ball in enumerate(self.balls):
+            p = points[scene.com_points[k]]
+            ball.set_data_3d([p[0]], [p[1]], [p[2]])
+        self.title.set_text(f"t = {t:.3f} s")
+
+
+def _scene_figure(scene: _Scene, points: np.ndarray, view: Any, figsize: tuple[float, float] | None):
+    fig = _new_figure(figsize=figsize or (6.0, 6.0))
+    ax = fig.add_subplot(projection="3d")
+    elev, azim, vertical, normal = _resolve_view(view, points, scene.system)
+    ax.view_init(elev=elev, azim=azim, vertical_axis=vertical)
+    if normal is not None:
+        ax.set_proj_type("ortho")
+    return fig, ax, normal
+
+
+def _frame_times(t: np.ndarray, fps: float, duration: float | None, frames: Any) -> np.ndarray:
+    """Simulation times (s) shown by the animation frames."""
+    t0, t1 = float(t[0]), float(t[-1])
+    if frames is not None and not np.isscalar(frames):
+        times = np.asarray(frames, dtype=float).reshape(-1)
+        if times.size == 0 or np.any(times < t0 - 1e-12) or np.any(times > t1 + 1e-12):
+            raise ValueError(f"frames must be times within the result's [{t0}, {t1}] s")
+        return times
+    if frames is not None:
+        count = int(frames)
+        if count < 1:
+            raise ValueError(f"frames must be at least 1, got {frames!r}")
+    else:
+        playback = (t1 - t0) if duration is None else float(duration)
+        if not np.isfinite(playback) or playback < 0:
+            raise ValueError(f"duration must be a non-negative number of seconds, got {duration!r}")
+        count = max(int(round(playback * fps)) + 1, 1)
+    return np.linspace(t0, t1, count) if t1 > t0 else np.full(count, t0)
+
+
+def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """q at ``times`` by linear interpolation of every coordinate (q is continuous, even across
+    impacts, so interpolation is safe)."""
+    if len(t) == 1:
+        return np.repeat(q[:1], len(times), axis=0)
+    return np.column_stack([np.interp(times, t, q[:, i]) for i in range(q.shape[1])]) if q.shape[1] \
+        else np.zeros((len(times), 0))
+
+
+def render_frame(result: Any, index: int = 0, path: Any = None, *, view: Any = None,
+                 figsize: tuple[float, float] | None = None):
+    """Draw the mechanism at one sample of ``result`` as a 3D stick-and-ball figure.
+
+    The axis limits are the animation's (they hold the whole motion), so single frames and
+    animations of one result look alike.
+
+    Parameters
+    ----------
+    result : Result
+    index : int
+        Sample index into ``result.t`` (negative counts from the end).
+    path : str or Path, optional
+        Save the figure there (PNG by suffix).
+    view : None, "xy", "xz", "yz", "iso" or (elev, azim) in degrees
+        Camera; ``None`` shows planar motions face-on and others obliquely, up against gravity.
+    figsize : (width, height) in inches, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    t = np.asarray(result.t, dtype=float)
+    q = np.asarray(result.q, dtype=float)
+    n = len(t)
+    if not -n <= int(index) < n:
+        raise IndexError(f"index {index} is out of range for a result with {n} samples")
+    scene = _Scene(result.system)
+    everything = scene.all_points(q)
+    centre, half = _limits(everything)
+    fig, ax, normal = _scene_figure(scene, everything, view, figsize)
+    drawing = _Drawing(ax, scene, everything[int(index)], centre, half, normal)
+    drawing.update(everything[int(index)], float(t[int(index)]))
+    fig.tight_layout()
+    _save(fig, path)
+    return fig
+
+
+def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float | None = None,
+                   view: Any = None, frames: Any = None, dpi: float = 80,
+                   figsize: tuple[float, float] | None = None) -> Path:
+    """Save a 3D stick-and-ball animation of a simulation (GIF, or MP4 with ffmpeg).
+
+    Each body is a ball at its COM (area by mass) joined by sticks to its joint locations and
+    attachment points; ground attachments are black triangles, joints white circles, springs
+    dashed lines, prismatic travel and loop closures dotted lines.  The axis limits are fixed
+    from the whole motion, so the picture does not jump.  The result is resampled (linear
+    interpolation of q) at evenly spaced frame times, since solver steps are not evenly spaced.
+
+    Parameters
+    ----------
+    result : Result
+    path : str or Path
+        ``.gif`` (written with Pillow) or ``.mp4`` (needs ``ffmpeg`` on the PATH).
+    fps : float
+        Frames per second of playback.
+    duration : float, optional
+        Playback length in seconds; by default the simulated time span (real time).
+    view : None, "xy", "xz", "yz", "iso" or (elev, azim) in degrees
+        Camera; ``None`` shows planar motions face-on and others obliquely, up against gravity.
+    frames : int or sequence of float, optional
+        Number of frames (overrides ``duration``), or the simulation times (s) to show.
+    dpi : float
+        Resolution of the frames (pixels = figsize * dpi).
+    figsize : (width, height) in inches, optional
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+
+    Raises
+    ------
+    ValueError
+        An unsupported file suffix or bad ``fps``/``duration``/``frames``/``view``.
+    RuntimeError
+        ``.mp4`` was asked for but ffmpeg is not available.
+
+    Examples
+    --------
+    >>> res.animate("pendulum.gif", fps=20)        # doctest: +SKIP
+    """
+    from matplotlib import animation
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be positive, got {fps!r}")
+    if suffix == ".gif":
+        writer = animation.PillowWriter(fps=fps)
+    elif suffix == ".mp4":
+        if not animation.FFMpegWriter.isAvailable():
+            raise RuntimeError(f"cannot write {path}: MP4 needs ffmpeg on the PATH "
+                               f"(install ffmpeg, or save as .gif, which needs only Pillow)")
+        writer = animation.FFMpegWriter(fps=fps)
+    else:
+        raise ValueError(f"cannot write {path}: the animation format follows the suffix, "
+                         f"use .gif or .mp4 (got {path.suffix or 'none'!r})")
+    t = np.asarray(result.t, dtype=float)
+    times = _frame_times(t, fps, duration, frames)
+    q = _resample(t, np.asarray(result.q, dtype=float), times)
+    scene = _Scene(result.system)
+    points = scene.all_points(q)
+    centre, half = _limits(points)
+    fig, ax, normal = _scene_figure(scene, points, view, figsize)
+    drawing = _Drawing(ax, scene, points[0], centre, half, normal)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with writer.saving(fig, str(path), dpi):
+        for k, time in enumerate(times):
+            drawing.update(points[k], float(time))
+            writer.grab_frame()
+    _close(fig)
+    return path
+
+
+def _close(fig) -> None:
+    """Release a figure made through pyplot (a bare Figure needs nothing)."""
+    if "matplotlib.pyplot" in sys.modules:
+        import matplotlib.pyplot as plt
+        plt.close(fig)
+
+
+# ----------------------------------------------------------------------------------------------
+# Benchmarks
+# ----------------------------------------------------------------------------------------------
+def work_precision_plot(rows: Iterable[Mapping[str, Any]], path: Any = None, title: str | None = None):
+    """Work-precision diagram: wall time against error, log-log, one line per label.
+
+    Parameters
+    ----------
+    rows : iterable of mappings
+        Each ``{"label": str, "error": float, "time": float}``: a method (or setting) name, the
+        error it reached (in the benchmark's own measure, e.g. max |q - q_ref| in rad) and the
+        wall time it took (s).  Points with a non-positive or non-finite error or time cannot
+        be drawn on log axes and are left out.
+    path : str or Path, optional
+        Save the figure there (PNG by suffix).
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Lower left is better: less time for less error.
+    """
+    groups: dict[str, list[tuple[float, float]]] = {}
+    for row in rows:
+        try:
+            label, error, wall = str(row["label"]), float(row["error"]), float(row["time"])
+        except KeyError as exc:
+            raise ValueError(f"work_precision_plot: every row needs 'label', 'error' and 'time'; "
+                             f"{dict(row)!r} lacks {exc}") from None
+        groups.setdefault(label, [])
+        if np.isfinite(error) and np.isfinite(wall) and error > 0 and wall > 0:
+            groups[label].append((error, wall))
+    fig = _new_figure(figsize=(7.0, 5.0))
+    ax = fig.add_subplot()
+    for label, points in groups.items():
+        if not points:
+            continue
+        points.sort()
+        errors, walls = np.array(points).T
+        ax.loglog(errors, walls, marker="o", label=label)
+    ax.set_xlabel("error")
+    ax.set_ylabel("wall time (s)")
+    ax.grid(True, which="both", alpha=0.3)
+    if title:
+        ax.set_title(title)
+    if any(groups.values()):
+        ax.legend(fontsize="small")
+    else:
+        ax.text(0.5, 0.5, "no drawable points", transform=ax.transAxes, ha="center", va="center", color="gray")
+    fig.tight_layout()
+    _save(fig, path)
+    return fig
