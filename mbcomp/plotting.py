@@ -372,6 +372,22 @@ def _resolve_view(view: Any, points: np.ndarray, system) -> tuple[float, float, 
     return 22.0, -58.0, vertical, None
 
 
+def _clip_line(origin: np.ndarray, axis: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray | None:
+    """The (2, 3) end points of the line ``origin + s axis`` inside the box [low, high] (slab
+    method), or None when the line misses the box."""
+    s_min, s_max = -np.inf, np.inf
+    for k in range(3):
+        if abs(axis[k]) < 1e-12:
+            if not low[k] <= origin[k] <= high[k]:
+                return None
+            continue
+        a, b = sorted(((low[k] - origin[k]) / axis[k], (high[k] - origin[k]) / axis[k]))
+        s_min, s_max = max(s_min, a), min(s_max, b)
+    if not s_min < s_max:
+        return None
+    return np.array([origin + s_min * axis, origin + s_max * axis])
+
+
 class _Drawing:
     """The matplotlib artists of one scene, created once and moved per frame."""
 
@@ -392,9 +408,10 @@ class _Drawing:
             else:
                 getattr(ax, f"set_{letter}label")(f"{letter} (m)")
 
-        for origin, axis in scene.sliders:     # guide lines, long enough to cross the view
-            ends = np.array([origin - 4 * half * axis, origin + 4 * half * axis])
-            ax.plot(*ends.T, color="0.6", linewidth=1.0, linestyle="--")
+        for origin, axis in scene.sliders:     # guide lines across the view (mplot3d does not clip)
+            ends = _clip_line(origin, axis, centre - half, centre + half)
+            if ends is not None:
+                ax.plot(*ends.T, color="0.6", linewidth=1.0, linestyle="--")
         ground = first[scene.ground_marks]
         ax.plot(*ground.T, linestyle="none", marker="^", markersize=11, color="0.15",
                 markeredgecolor="black", label="ground")
