@@ -35,6 +35,7 @@ class Result:
     stats: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
     tau: Any = None
+    offsets: dict = field(default_factory=dict, repr=False)
     _reactions: dict | None = field(default=None, repr=False)
 
     @property
@@ -58,7 +59,7 @@ class Result:
 
     def constraint_violation(self) -> np.ndarray:
         """max |C(q, t)| per sample (zeros for a model without constraints)."""
-        return np.array([self.system._formulation.constraint_violation(self.system, t, q)
+        return np.array([self.system._formulation.constraint_violation(self.system, t, q, self.offsets)
                          for t, q in zip(self.t, self.q)])
 
     @property
@@ -67,7 +68,7 @@ class Result:
         if self._reactions is None:
             series: dict[str, list] = {}
             for t, q, qd in zip(self.t, self.q, self.qd):
-                for name, value in self.system.reactions(q, qd, t, tau=self.tau).items():
+                for name, value in self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets).items():
                     series.setdefault(name, []).append(np.atleast_1d(value))
             self._reactions = {k: np.array(v) for k, v in series.items()}
         return self._reactions

@@ -121,8 +121,11 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     """Model -> System (see ``Model.compile``)."""
     from .formulations import get_formulation
     formulation_class = get_formulation(formulation)
+    from .formulations.base import analyse
     compiled = CompiledModel(model, cache=cache, backend=backend)
-    return System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    analyse(system._formulation, system)
+    return system
 
 
 class System:
@@ -154,6 +157,17 @@ class System:
     def ndof(self) -> int:
         """Degrees of freedom left after constraints."""
         return self._formulation.ndof
+
+    @property
+    def redundant_constraints(self) -> list[str]:
+        """Constraint equations found dependent on the others (by rank) and left out."""
+        return list(self._formulation.redundant)
+
+    @property
+    def constraint_names(self) -> list[str]:
+        """Every constraint (loop-closing joints, sliders, motors) by name."""
+        cs = self._formulation.constraints
+        return [] if cs is None else [name for name, _, _ in cs.groups]
 
     @property
     def formulation(self) -> str:
@@ -309,10 +323,13 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
 
-    def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> dict[str, np.ndarray]:
-        """``{constraint name: reaction}`` (motor torque/force, slider force, loop forces)."""
+    def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None
+                  ) -> dict[str, np.ndarray]:
+        """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
+        coordinate; a slider's force (N) on the body along the line's two normals; a
+        loop-closing joint's force on its child (N, world x y z) then its torques (N m)."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd))
+        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nq,) generalised forces that, applied, hold the system at rest at ``q``
@@ -367,10 +384,16 @@ class System:
         """(nq, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` (the columns of T)."""
         return self._kinematics(self.state_vector(q), np.zeros(self.nq))[1]
 
-    def assemble(self, q: Any, qd: Any = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(q, qd)`` moved onto the constraints (Newton on positions, projection of speeds)."""
+    def assemble(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, qd)`` moved onto the constraints: positions by Newton (minimum-norm steps from
+        the guess), speeds by mass-orthogonal projection.  ``SimulationError`` naming the
+        constraints that cannot be met."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.assemble(self, q, qd)
+        return self._formulation.assemble(self, q, qd, t)
+
+    def constraint_violation(self, q: Any, t: float = 0.0) -> float:
+        """max |g(q, t)| over the position-level constraint equations."""
+        return self._formulation.constraint_violation(self, t, self.state_vector(q))
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,

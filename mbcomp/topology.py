@@ -119,10 +119,6 @@ def build_topology(model) -> Topology:
         if node != ground.name and node not in reachable:
             why = "has no joint" if graph.degree(node) == 0 else "is not connected to the ground by a chain of parent->child joints"
             problems.append(f"{describe(components[node])}: {why}")
-    for joint in cut_joints:
-        if joint.n_coords:
-            problems.append(f"{describe(joint)}: a loop-closing joint must not carry coordinates "
-                            f"(its child {name_of(joint.child)!r} is already connected)")
 
     order = [n for n in nx.dfs_preorder_nodes(tree, ground.name) if n != ground.name]
     bodies = tuple(components[n] for n in order)

@@ -3,10 +3,26 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+import numpy as np
+
 from ..errors import ModelError
-from ..rotations import unit_axis
+from ..rotations import AXIS_NAMES, unit_axis
 from .base import Constraint
+from .primitives import CoordinateEquation, DotEquation, PointEquation
 from ._values import scalar, vector3
+
+WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def normals(axis) -> tuple[tuple, tuple]:
+    """Two unit vectors perpendicular to ``axis`` and to each other (exact for x, y, z)."""
+    a = np.asarray(axis, dtype=float)
+    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+    n1 = np.cross(a, helper)
+    n1 /= np.linalg.norm(n1)
+    n2 = np.cross(a, n1)
+    clean = lambda v: tuple(float(round(x, 15)) + 0.0 for x in v)
+    return clean(n1), clean(n2)
 
 
 class Slider(Constraint):
@@ -30,6 +46,11 @@ class Slider(Constraint):
 
     def structure(self):
         return (self.axis,)
+
+    def _equations(self, ground):
+        """Offsets of the point from the line along two world normals (m)."""
+        return [PointEquation(ground, n, ground, self.origin, self.body, self.point, f"n{i + 1}")
+                for i, n in enumerate(normals(self.axis))]
 
 
 class Motor(Constraint):
@@ -59,3 +80,47 @@ class Motor(Constraint):
 
     def structure(self):
         return ("position" if self.position is not None else "speed",)
+
+    def _equations(self, ground):
+        return [CoordinateEquation(self.joint, self.position, self.speed, "torque")]
+
+
+class LoopClosure(Constraint):
+    """The constraint equations of a loop-closing (cut) joint, made by the compiler.
+
+    Point coincidence of the joint's two points along world axes (multipliers: the
+    force on the child, N, world frame) plus the orientation conditions the joint
+    type imposes (multipliers: torques, N m).  Reactions carry the joint's name.
+    """
+
+    def __init__(self, joint):
+        super().__init__(joint.name)
+        self.joint = joint
+
+    def references(self):
+        return {"joint": self.joint}
+
+    def _equations(self, ground):
+        from .joints import Fixed, Prismatic, Revolute, Spherical
+        j = self.joint
+        a, b, pa, pb = j.parent, j.child, j.parent_point, j.child_point
+        if isinstance(j, Prismatic):
+            eqs = [PointEquation(a, n, a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
+            return eqs + _orientation_lock(a, b)
+        eqs = [PointEquation(ground, n, a, pa, b, pb, "fxyz"[i + 1]) for i, n in enumerate(WORLD_AXES)]
+        if isinstance(j, Fixed):
+            return eqs + _orientation_lock(a, b)
+        if isinstance(j, Revolute) or isinstance(j, Spherical) and len(j.sequence) == 1:
+            axis = j.axis if isinstance(j, Revolute) else AXIS_NAMES[j.sequence]
+            return eqs + [DotEquation(a, axis, b, n, f"t{i + 1}") for i, n in enumerate(normals(axis))]
+        if isinstance(j, Spherical) and len(j.sequence) == 2:
+            return eqs + [DotEquation(a, AXIS_NAMES[j.sequence[0]], b, AXIS_NAMES[j.sequence[1]], "t")]
+        if isinstance(j, Spherical):
+            return eqs
+        raise ModelError(j, "this joint type cannot close a loop")
+
+
+def _orientation_lock(a, b):
+    """Three conditions keeping body b's axes parallel to body a's."""
+    x, y, z = WORLD_AXES
+    return [DotEquation(a, x, b, y, "tz"), DotEquation(a, y, b, z, "tx"), DotEquation(a, z, b, x, "ty")]

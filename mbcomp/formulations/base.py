@@ -1,50 +1,259 @@
-"""The Formulation interface shared by ``lagrange`` and ``dae``, and their registry."""
+"""The Formulation interface shared by ``lagrange`` and ``dae``, and the machinery both use."""
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 
-from ..errors import ModelError
+from ..constraint_set import ConstraintSet, Frames
+from ..errors import ModelError, SimulationError
+
+#: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
+#: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of
+#: a planar loop at ~1e-16 relative; a mechanism within 1e-9 of a dead point is treated
+#: as at it (its reaction there would exceed the loads by ~1e9).
+RANK_TOLERANCE = 1e-9
+
+#: Newton tolerance on position residuals (m for point equations, rad-like for angles).
+ASSEMBLY_TOLERANCE = 1e-12
+
+
+def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE) -> np.ndarray:
+    """Indices of a maximal set of independent rows of ``J`` (pivoted QR of ``J^T``)."""
+    if J.shape[0] == 0 or J.shape[1] == 0:
+        return np.arange(0)
+    _, R, piv = scipy.linalg.qr(J.T, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    if diag.size == 0 or diag[0] == 0.0:
+        return np.arange(0)
+    rank = int(np.sum(diag > tol * diag[0]))
+    return np.sort(piv[:rank])
+
+
+class Workspace:
+    """Per-simulation state of a formulation (buffers, partitions, warm starts).
+
+    ``y0``: the integrator's initial state; ``rhs(t, y)``; ``full_state(t, y) -> (q, qd)``;
+    ``after_step(t, y) -> y or None`` (a corrected state, e.g. a projection, or None).
+    """
+
+    def __init__(self, formulation, system, t0: float, q0: np.ndarray, qd0: np.ndarray, tau):
+        self.formulation, self.system, self.tau = formulation, system, tau
+        self.n = system.nq
+        self.offsets = formulation.motor_offsets(q0, t0)
+        self.y0 = np.concatenate((q0, qd0))
+
+    def rhs(self, t, y):
+        q, qd = y[: self.n], y[self.n:]
+        qdd = self.formulation.accelerations(self.system, t, q, qd, self.system._tau(self.tau, t, q, qd),
+                                             offsets=self.offsets)
+        return np.concatenate((qd, qdd))
+
+    def full_state(self, t, y):
+        return y[: self.n], y[self.n:]
+
+    def after_step(self, t, y):
+        return None
 
 
 class Formulation:
     """How a compiled tree plus constraints becomes ODEs.
 
     The tree gives ``M(q) qdd = f(q, qd, t) + tau`` over all tree coordinates ``q``
-    (``nq`` of them).  Constraints ``C(q, t) = 0`` (``nc`` equations, Jacobian
-    ``C_q``) add reactions ``C_q^T lam``::
+    (``nq``).  Constraints ``g(q, t) = 0`` (``nc`` equations, Jacobian ``J``, with
+    ``gddot = J qdd + bias``) add reactions ``J^T lam``::
 
-        [ M    C_q^T ] [ qdd ]   [ f + tau                  ]
-        [ C_q  0     ] [ lam ] = [ -(dC_q/dt) qd - C_tt ... ]
+        [ M   -J^T ] [ qdd ]   [ f + tau ]
+        [ J    0   ] [ lam ] = [ -bias   ]
 
-    ``lagrange`` reduces this onto independent speeds; ``dae`` solves it as it
-    stands with Baumgarte stabilisation.  Without constraints both are the tree ODE.
-    Methods take the ``System`` whose parameters they evaluate with; a formulation
-    holds no per-simulation state.
+    ``lagrange`` projects this onto independent speeds; ``dae`` solves it as it
+    stands, with Baumgarte terms ``-2 alpha gdot - beta^2 g`` added to the second
+    row.  Without constraints both are the tree ODE.  Methods take the ``System``
+    whose parameters they use; per-simulation state lives in a ``Workspace``.
     """
 
     name = "base"
+    option_names: tuple[str, ...] = ()
+    workspace_class = Workspace
 
     def __init__(self, compiled, **options: Any):
+        unknown = sorted(set(options) - set(self.option_names))
+        if unknown:
+            raise ModelError(f"formulation {self.name!r}", f"unknown option(s) {unknown}; "
+                             f"it takes {list(self.option_names) or 'none'}")
         self.compiled = compiled
         self.options = options
         topology = compiled.topology
-        if options:
-            raise ModelError(f"formulation {self.name!r}", f"unknown option(s) {sorted(options)}")
-        self.ndof = topology.nq
+        has_constraints = bool(topology.cut_joints or topology.constraints)
+        self.constraints = ConstraintSet(topology) if has_constraints else None
 
-    def accelerations(self, system, t: float, q: np.ndarray, qd: np.ndarray, tau) -> np.ndarray:
+    # -- numeric pieces -----------------------------------------------------------------------
+    def frames(self, system, q, qd) -> Frames:
+        per_body, columns = system._kinematics(q, qd)
+        nb = per_body.shape[0]
+        return Frames(per_body[:, :9].reshape(nb, 3, 3), per_body[:, 9:12], per_body[:, 12:18],
+                      per_body[:, 18:24], columns)
+
+    def constraint_values(self, system, t, q, qd, offsets=None):
+        return self.constraints.evaluate(self.frames(system, q, qd), q, qd, t, offsets)
+
+    def motor_offsets(self, q0: np.ndarray, t0: float) -> dict:
+        """Start values of speed motors, so that their coordinate is ``q0 + speed (t - t0)``."""
+        if self.constraints is None:
+            return {}
+        offsets = {}
+        for r, eq in enumerate(self.constraints.equations):
+            if getattr(eq, "speed", None) is not None:
+                k = self.compiled.topology.q_slice[eq.joint if isinstance(eq.joint, str) else eq.joint.name].start
+                offsets[r] = q0[k] - eq.speed * t0
+        return offsets
+
+    def _factor(self, system, M, q):
+        try:
+            factor = scipy.linalg.cho_factor(M, lower=True, check_finite=False)
+        except np.linalg.LinAlgError:
+            factor = None
+        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
+        if factor is None or np.min(np.abs(np.diag(factor[0]))) ** 2 < 1e-13 * scale:
+            raise SimulationError(f"mass matrix is singular at q = {np.round(q, 6).tolist()}: {system._diagnose(q)}")
+        return factor
+
+    def _tree(self, system, t, q, qd, tau):
         M, f = system._dynamics(t, q, qd, tau)
         system._check_finite(M, "mass matrix", q)
         system._check_finite(f, "generalised forces", q)
-        return system._solve_tree(M, f, q)
+        return M, f
 
-    def reactions(self, system, t, q, qd, tau) -> dict[str, np.ndarray]:
-        return {}
+    def solve_constrained(self, system, M, f, J, rhs, q, t):
+        """``(qdd, lam)`` of the KKT system on the independent rows of ``J`` (lam 0 elsewhere)."""
+        factor = self._factor(system, M, q)
+        Minv_f = scipy.linalg.cho_solve(factor, f, check_finite=False)
+        lam = np.zeros(J.shape[0])
+        rows = independent_rows(J)
+        if rows.size == 0:
+            return Minv_f, lam
+        Js = J[rows]
+        Minv_JT = scipy.linalg.cho_solve(factor, Js.T, check_finite=False)
+        A = Js @ Minv_JT
+        try:
+            lam_s = scipy.linalg.solve(A, rhs[rows] - Js @ Minv_f, assume_a="pos", check_finite=False)
+        except (np.linalg.LinAlgError, ValueError):
+            raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
+                                  f"{self.constraints.names_of_rows(rows)}") from None
+        lam[rows] = lam_s
+        return Minv_f + Minv_JT @ lam_s, lam
 
-    def assemble(self, system, q: np.ndarray, qd: np.ndarray):
-        return q.copy(), qd.copy()
+    def check_dead_point(self, J, qd, t, q):
+        """At rest on a configuration where the Jacobian lost rank the motion is not
+        determined (a bifurcation): raise naming the constraints involved."""
+        rows = independent_rows(J)
+        nominal = self.nominal_rank
+        if nominal is not None and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
+            lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
+            raise SimulationError(
+                f"the constraint Jacobian loses rank at q = {np.round(q, 6).tolist()} (t = {t:g}) with the "
+                f"mechanism at rest: a dead point/bifurcation where the motion is not determined; constraints "
+                f"involved: {self.constraints.names_of_rows(lost)}")
 
-    def constraint_violation(self, system, t: float, q: np.ndarray) -> float:
-        return 0.0
+    nominal_rank: int | None = None
+
+    # -- the public operations ---------------------------------------------------------------------
+    def accelerations(self, system, t, q, qd, tau, offsets=None) -> np.ndarray:
+        return self.solve(system, t, q, qd, tau, offsets)[0]
+
+    def reactions(self, system, t, q, qd, tau, offsets=None) -> dict[str, np.ndarray]:
+        if self.constraints is None:
+            return {}
+        return self.constraints.split_reactions(self.solve(system, t, q, qd, tau, offsets)[1])
+
+    def solve(self, system, t, q, qd, tau, offsets=None):
+        """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
+        M, f = self._tree(system, t, q, qd, tau)
+        return system._solve_tree(M, f, q), np.zeros(0)
+
+    def assemble(self, system, q: np.ndarray, qd: np.ndarray, t: float = 0.0, offsets=None):
+        """Positions onto ``g = 0`` (Newton, minimum-norm steps), speeds onto ``gdot = 0``
+        (mass-orthogonal projection).  ``SimulationError`` naming the constraints that fail."""
+        if self.constraints is None:
+            return q.copy(), qd.copy()
+        q = q.copy()
+        zero = np.zeros_like(qd)
+        residual = np.inf
+        for _ in range(60):
+            cv = self.constraint_values(system, t, q, zero, offsets)
+            rows = np.isfinite(cv.g)
+            g = cv.g[rows]
+            new_residual = float(np.max(np.abs(g), initial=0.0))
+            if new_residual < ASSEMBLY_TOLERANCE:
+                break
+            if new_residual > residual and new_residual > 1e-3:
+                break  # diverging from a poor guess
+            residual = new_residual
+            step, *_ = np.linalg.lstsq(cv.J[rows], -g, rcond=1e-12)
+            q = q + step
+        else:
+            cv = self.constraint_values(system, t, q, zero, offsets)
+        g = np.where(np.isfinite(cv.g), cv.g, 0.0)
+        if float(np.max(np.abs(g), initial=0.0)) > 1e-9:
+            worst = np.argsort(-np.abs(g))
+            bad = [self.constraints.labels[r] for r in worst if abs(g[r]) > 1e-9][:6]
+            raise SimulationError(f"cannot assemble: constraints {bad} cannot be met near q = "
+                                  f"{np.round(q, 6).tolist()} (largest residual {np.max(np.abs(g)):.3g})")
+        return q, self.project_velocity(system, q, qd, t, offsets)
+
+    def project_velocity(self, system, q, qd, t=0.0, offsets=None):
+        """The speeds closest to ``qd`` in the kinetic-energy norm with ``J qd + g_t = 0``."""
+        cv = self.constraint_values(system, t, q, np.zeros_like(qd), offsets)
+        rows = independent_rows(cv.J)
+        if rows.size == 0:
+            return qd.copy()
+        J = cv.J[rows]
+        violation = J @ qd + cv.g_t[rows]
+        M, _ = system._dynamics(t, q, np.zeros_like(qd))
+        factor = self._factor(system, M, q)
+        Minv_JT = scipy.linalg.cho_solve(factor, J.T, check_finite=False)
+        correction = Minv_JT @ np.linalg.solve(J @ Minv_JT, violation)
+        return qd - correction
+
+    def constraint_violation(self, system, t: float, q: np.ndarray, offsets=None) -> float:
+        """max |g(q, t)| over the position-level constraint equations."""
+        if self.constraints is None:
+            return 0.0
+        g = self.constraint_values(system, t, q, np.zeros_like(q), offsets).g
+        return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
+
+    def start(self, system, t0, q0, qd0, tau) -> Workspace:
+        return self.workspace_class(self, system, t0, q0, qd0, tau)
+
+
+def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
+    """Find a consistent configuration and from it the rank of the constraints:
+    sets ``ndof``, ``nominal_rank`` and ``redundant`` (labels of dependent equations).
+
+    Raises ``ModelError`` when no configuration satisfies the constraints (they
+    conflict, or leave fewer than zero degrees of freedom).
+    """
+    nq = system.nq
+    formulation.ndof, formulation.redundant = nq, []
+    if formulation.constraints is None:
+        return
+    rng = np.random.default_rng(seed)
+    guesses = [np.zeros(nq)] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
+    last_error = None
+    for guess in guesses:
+        try:
+            q, _ = formulation.assemble(system, guess, np.zeros(nq))
+            break
+        except SimulationError as exc:
+            last_error = exc
+    else:
+        nc = formulation.constraints.nc
+        count = f"{nq} coordinates and {nc} constraint equations ({nq - nc} degrees of freedom by count)"
+        raise ModelError(None, f"the constraints cannot all be met (they conflict, or leave fewer than zero "
+                               f"degrees of freedom): {count}; {last_error}")
+    cv = formulation.constraint_values(system, 0.0, q, np.zeros(nq))
+    rows = independent_rows(cv.J)
+    formulation.nominal_rank = int(rows.size)
+    formulation.ndof = nq - int(rows.size)
+    formulation.redundant = [formulation.constraints.labels[r] for r in range(cv.J.shape[0]) if r not in set(rows.tolist())]

@@ -1,8 +1,145 @@
 """Minimal coordinates: constraints reduced away by coordinate partitioning."""
-from .base import Formulation
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import SimulationError
+from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace, independent_rows
+
+#: Re-choose the independent coordinates when the dependent block's condition number
+#: exceeds this (and a fresh choice is clearly better).
+REPARTITION_CONDITION = 1e3
+
+
+def partition(J: np.ndarray):
+    """``(dependent, independent)`` coordinate indices: the dependent ones are the pivot
+    columns of a column-pivoted QR of the (independent-row) Jacobian."""
+    nq = J.shape[1]
+    if J.shape[0] == 0:
+        return np.arange(0), np.arange(nq)
+    _, _, piv = scipy.linalg.qr(J, mode="economic", pivoting=True)
+    dep = np.sort(piv[: J.shape[0]])
+    ind = np.setdiff1d(np.arange(nq), dep)
+    return dep, ind
+
+
+class LagrangeWorkspace(Workspace):
+    """State ``[q_ind, qd_ind]``; dependent coordinates by warm-started Newton."""
+
+    def __init__(self, formulation, system, t0, q0, qd0, tau):
+        super().__init__(formulation, system, t0, q0, qd0, tau)
+        self.q = q0.copy()
+        self.choose(t0, q0)
+        self.y0 = np.concatenate((q0[self.ind], qd0[self.ind]))
+
+    def choose(self, t, q):
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets)
+        self.rows = independent_rows(cv.J)
+        self.dep, self.ind = partition(cv.J[self.rows])
+
+    def dependent(self, t, qi):
+        """Full q from the independent coordinates (Newton from the last solution)."""
+        q = self.q.copy()
+        q[self.ind] = qi
+        zero = np.zeros_like(q)
+        for _ in range(25):
+            cv = self.formulation.constraint_values(self.system, t, q, zero, self.offsets)
+            g = cv.g[self.rows]
+            if float(np.max(np.abs(g), initial=0.0)) < ASSEMBLY_TOLERANCE:
+                break
+            try:
+                q[self.dep] -= np.linalg.solve(cv.J[np.ix_(self.rows, self.dep)], g)
+            except np.linalg.LinAlgError:
+                raise SimulationError(f"dependent coordinates are singular at t = {t:g}: constraints "
+                                      f"{self.formulation.constraints.names_of_rows(self.rows)}") from None
+        else:
+            raise SimulationError(f"dependent coordinates did not converge at t = {t:g} (residual "
+                                  f"{np.max(np.abs(g)):.3g}): constraints "
+                                  f"{self.formulation.constraints.names_of_rows(self.rows)}")
+        self.q = q
+        return q, cv
+
+    def full_state(self, t, y):
+        k = len(self.ind)
+        qi, qdi = y[:k], y[k:]
+        q, cv = self.dependent(t, qi)
+        qd = np.zeros_like(q)
+        qd[self.ind] = qdi
+        if len(self.dep):
+            J = cv.J[self.rows]
+            qd[self.dep] = np.linalg.solve(J[:, self.dep], -(J[:, self.ind] @ qdi + cv.g_t[self.rows]))
+        return q, qd
+
+    def rhs(self, t, y):
+        q, qd = self.full_state(t, y)
+        tau = self.system._tau(self.tau, t, q, qd)
+        qdd, _ = self.formulation.solve(self.system, t, q, qd, tau, self.offsets, (self.rows, self.dep, self.ind))
+        return np.concatenate((qd[self.ind], qdd[self.ind]))
+
+    def after_step(self, t, y):
+        if not len(self.dep):
+            return None
+        q, qd = self.full_state(t, y)
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets)
+        condition = np.linalg.cond(cv.J[np.ix_(self.rows, self.dep)])
+        if condition < REPARTITION_CONDITION:
+            return None
+        rows = independent_rows(cv.J)
+        dep, ind = partition(cv.J[rows])
+        if np.array_equal(dep, self.dep) and np.array_equal(rows, self.rows):
+            return None
+        if np.linalg.cond(cv.J[np.ix_(rows, dep)]) > 0.5 * condition:
+            return None
+        self.rows, self.dep, self.ind = rows, dep, ind
+        return np.concatenate((q[ind], qd[ind]))
 
 
 class LagrangeFormulation(Formulation):
-    """Independent coordinates only; dependent ones follow from the constraints."""
+    """Independent coordinates only (coordinate partitioning)::
+
+        qd = B qd_i + b,   qdd = B qdd_i + c,   B = [I; -J_d^-1 J_i]
+        (B^T M B) qdd_i = B^T (f + tau - M c)
+
+    Dependent coordinates follow from ``g(q, t) = 0`` by Newton; motors make their
+    coordinate dependent.  Reactions come from the residual ``J^T lam = M qdd - f - tau``.
+    """
 
     name = "lagrange"
+    workspace_class = LagrangeWorkspace
+
+    def solve(self, system, t, q, qd, tau, offsets=None, partition_hint=None):
+        M, f = self._tree(system, t, q, qd, tau)
+        if self.constraints is None:
+            return system._solve_tree(M, f, q), np.zeros(0)
+        cv = self.constraint_values(system, t, q, qd, offsets)
+        if partition_hint is None:
+            self.check_dead_point(cv.J, qd, t, q)
+            rows = independent_rows(cv.J)
+            dep, ind = partition(cv.J[rows])
+        else:
+            rows, dep, ind = partition_hint
+        lam = np.zeros(cv.J.shape[0])
+        if rows.size == 0:
+            return system._solve_tree(M, f, q), lam
+        J = cv.J[rows]
+        Jd = J[:, dep]
+        try:
+            X = np.linalg.solve(Jd, np.column_stack((J[:, ind], cv.bias[rows])))
+        except np.linalg.LinAlgError:
+            raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
+                                  f"{self.constraints.names_of_rows(rows)}") from None
+        B = np.zeros((len(q), len(ind)))
+        B[ind, np.arange(len(ind))] = 1.0
+        B[dep] = -X[:, :-1]
+        c = np.zeros(len(q))
+        c[dep] = -X[:, -1]
+        if len(ind):
+            Mr = B.T @ M @ B
+            factor = self._factor(system, Mr, q)
+            qdd_i = scipy.linalg.cho_solve(factor, B.T @ (f - M @ c), check_finite=False)
+            qdd = B @ qdd_i + c
+        else:
+            qdd = c
+        lam[rows] = np.linalg.lstsq(J.T, M @ qdd - f, rcond=None)[0]
+        return qdd, lam

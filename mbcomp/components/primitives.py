@@ -1,0 +1,42 @@
+"""Geometric primitives that constraints are written in (evaluated by ``constraint_set``).
+
+- ``PointEquation``: ``n . (p_b - p_a) = 0`` with the unit ``n`` fixed in ``frame``
+  (a body or the ground), ``p_a``/``p_b`` body points (m, body frames).  Its multiplier
+  is the force (N) along ``n`` on body ``b`` (and its opposite on ``a``).
+- ``DotEquation``: ``u_a . u_b = 0`` for unit vectors fixed in two bodies; its
+  multiplier is a torque (N m) about ``u_b x u_a`` on body ``b``.
+- ``CoordinateEquation``: ``q_k - s(t) = 0`` (or, with ``speed``, ``qd_k - speed = 0``);
+  its multiplier is the generalised force along coordinate ``k``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+
+@dataclass(frozen=True)
+class PointEquation:
+    frame: Any
+    normal: tuple
+    body_a: Any
+    point_a: tuple
+    body_b: Any
+    point_b: tuple
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class DotEquation:
+    body_a: Any
+    u_a: tuple
+    body_b: Any
+    u_b: tuple
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class CoordinateEquation:
+    joint: Any
+    position: Callable[[float], float] | None = None
+    speed: float | None = None
+    label: str = ""
