@@ -17,6 +17,7 @@ FUNCTIONS = {
     "dynamics": ["mass_matrix", "forces"],
     "energy": ["energy"],
     "kinematics": ["kinematics"],
+    "constraints": ["constraints"],
 }
 
 

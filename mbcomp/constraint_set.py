@@ -1,8 +1,7 @@
 """The constraint equations of a compiled model: residual, Jacobian, acceleration bias.
 
-Everything is evaluated numerically from the generated kinematics (per body
-rotation, origin, spatial velocity and bias acceleration; per coordinate the
-motion column ``S_k = (w_k, v0_k)``), so constraints need no code generation.
+Geometric equations (point and dot primitives) are generated with the rest of the
+model (``equations.constraint_outputs``); motor equations are evaluated here.
 
 For every equation ``g(q, t)``: ``gdot = J qd + g_t`` and ``gddot = J qdd + bias``.
 """
@@ -15,19 +14,8 @@ import numpy as np
 
 from .components._values import name_of
 from .components.constraints import LoopClosure
-from .components.primitives import CoordinateEquation, DotEquation, PointEquation
+from .components.primitives import CoordinateEquation
 from .errors import SimulationError
-
-
-@dataclass
-class Frames:
-    """Numeric kinematics of every body at one state (world frame)."""
-
-    R: np.ndarray        # (nb, 3, 3)
-    origin: np.ndarray   # (nb, 3)
-    V: np.ndarray        # (nb, 6)  (w, v0)
-    A: np.ndarray        # (nb, 6)  bias (alpha, a0) at qdd = 0
-    S: np.ndarray        # (nq, 6)
 
 
 @dataclass
@@ -38,6 +26,13 @@ class ConstraintValues:
     J: np.ndarray
     g_t: np.ndarray
     bias: np.ndarray
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of 3-vectors (or rows of (k, 3) arrays); np.cross costs ~20 us a call."""
+    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
+    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
 
 
 def _derivatives(f, t: float, h: float = 1e-3):
@@ -74,86 +69,44 @@ class ConstraintSet:
             start += len(eqs)
         self.position_rows = np.array([not (isinstance(eq, CoordinateEquation) and eq.speed is not None)
                                        for eq in self.equations], dtype=bool)
-        self._chain = {b.name: topology.coord_indices_of_body(b) for b in topology.bodies}
-        self._index = {b.name: i for i, b in enumerate(topology.bodies)}
-
-    # -- body point kinematics -------------------------------------------------------------
-    def _point(self, frames: Frames, body, local):
-        """World position, velocity, bias acceleration and Jacobian (3, nq) of a body point."""
-        nq = self.topology.nq
-        name = name_of(body)
-        if name == self.topology.ground.name:
-            zero = np.zeros(3)
-            return np.asarray(local, float), zero, zero, np.zeros((3, nq))
-        i = self._index[name]
-        R, V, A = frames.R[i], frames.V[i], frames.A[i]
-        p = frames.origin[i] + R @ np.asarray(local, float)
-        w, v0, alpha, a0 = V[:3], V[3:], A[:3], A[3:]
-        v = v0 + np.cross(w, p)
-        a = a0 + np.cross(alpha, p) + np.cross(w, v)
-        J = np.zeros((3, nq))
-        idx = self._chain[name]
-        if idx:
-            S = frames.S[idx]
-            J[:, idx] = (np.cross(S[:, :3], p) + S[:, 3:]).T
-        return p, v, a, J
-
-    def _rotation(self, frames: Frames, body):
-        """Rotation, angular velocity, bias angular acceleration and Jacobian (3, nq)."""
-        nq = self.topology.nq
-        name = name_of(body)
-        if name == self.topology.ground.name:
-            return np.eye(3), np.zeros(3), np.zeros(3), np.zeros((3, nq))
-        i = self._index[name]
-        J = np.zeros((3, nq))
-        idx = self._chain[name]
-        if idx:
-            J[:, idx] = frames.S[idx][:, :3].T
-        return frames.R[i], frames.V[i][:3], frames.A[i][:3], J
+        self.coordinate_rows = [r for r, eq in enumerate(self.equations) if isinstance(eq, CoordinateEquation)]
+        self.geometric_rows = [r for r in range(self.nc) if r not in set(self.coordinate_rows)]
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, frames: Frames, q: np.ndarray, qd: np.ndarray, t: float,
+    def evaluate(self, system, q: np.ndarray, qd: np.ndarray, t: float,
                  motor_offsets: dict | None = None) -> ConstraintValues:
-        """Residuals, Jacobian (nc, nq), explicit time rates and acceleration bias."""
+        """Residuals, Jacobian (nc, nq), explicit time rates and acceleration bias.
+
+        Point and dot equations come from the generated ``constraints`` function;
+        motor rows are ``q_k - s(t)`` with s's derivatives by finite differences.
+        """
         nq, nc = self.topology.nq, self.nc
         g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nq)), np.zeros(nc), np.zeros(nc)
-        for r, eq in enumerate(self.equations):
-            if isinstance(eq, PointEquation):
-                pa, va, aa, Ja = self._point(frames, eq.body_a, eq.point_a)
-                pb, vb, ab, Jb = self._point(frames, eq.body_b, eq.point_b)
-                Rf, wf, alf, Jwf = self._rotation(frames, eq.frame)
-                n = Rf @ np.asarray(eq.normal, float)
-                d = pb - pa
-                wn = np.cross(wf, n)
-                g[r] = n @ d
-                J[r] = n @ (Jb - Ja) + np.cross(n, d) @ Jwf
-                bias[r] = n @ (ab - aa) + 2 * wn @ (vb - va) + (np.cross(alf, n) + np.cross(wf, wn)) @ d
-            elif isinstance(eq, DotEquation):
-                Ra, wa, ala, Jwa = self._rotation(frames, eq.body_a)
-                Rb, wb, alb, Jwb = self._rotation(frames, eq.body_b)
-                ua, ub = Ra @ np.asarray(eq.u_a, float), Rb @ np.asarray(eq.u_b, float)
-                axis = np.cross(ub, ua)
-                g[r] = ua @ ub
-                J[r] = axis @ (Jwb - Jwa)
-                rate = np.cross(np.cross(wb, ub), ua) + np.cross(ub, np.cross(wa, ua))
-                bias[r] = (alb - ala) @ axis + (wb - wa) @ rate
+        rows = self.geometric_rows
+        if rows:
+            ng = len(rows)
+            out = system._call("constraints", q, qd)
+            g[rows] = out[:ng]
+            J[rows] = out[ng: ng + ng * nq].reshape(ng, nq)
+            bias[rows] = out[ng + ng * nq:]
+        for r in self.coordinate_rows:
+            eq = self.equations[r]
+            k = self.topology.q_slice[name_of(eq.joint)].start
+            J[r, k] = 1.0
+            if eq.speed is not None and motor_offsets is not None and r in motor_offsets:
+                g[r] = q[k] - motor_offsets[r] - eq.speed * t
+                g_t[r] = -eq.speed
+            elif eq.speed is not None:
+                g[r] = np.nan  # a speed motor without a start value constrains qd only
+                g_t[r] = -eq.speed
             else:
-                k = self.topology.q_slice[name_of(eq.joint)].start
-                J[r, k] = 1.0
-                if eq.speed is not None and motor_offsets is not None and r in motor_offsets:
-                    g[r] = q[k] - motor_offsets[r] - eq.speed * t
-                    g_t[r] = -eq.speed
-                elif eq.speed is not None:
-                    g[r] = np.nan  # a speed motor without a start value constrains qd only
-                    g_t[r] = -eq.speed
-                else:
-                    try:
-                        s, s1, s2 = _derivatives(eq.position, t)
-                    except Exception as exc:  # the user's callable failed
-                        raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
-                    g[r] = q[k] - s
-                    g_t[r] = -s1
-                    bias[r] = -s2
+                try:
+                    s, s1, s2 = _derivatives(eq.position, t)
+                except Exception as exc:  # the user's callable failed
+                    raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
+                g[r] = q[k] - s
+                g_t[r] = -s1
+                bias[r] = -s2
         return ConstraintValues(g, J, g_t, bias)
 
     def groups_by_row(self, r: int):

@@ -250,7 +250,83 @@ class Kinematics:
         return [sp.Integer(0)] * 3 if name == self.topology.ground.name else self.V[name][:3]
 
 
-def build_program(topology, layout: ParameterLayout, inputs: dict) -> Program:
+def _vector(kin, spec) -> list:
+    """A parameter key's symbols, or a constant vector as exact numbers."""
+    return kin.layout.symbols(spec) if isinstance(spec, str) else [exact(v) for v in spec]
+
+
+def _point_terms(kin, body, spec):
+    """World position, velocity, bias acceleration and Jacobian columns ``{k: 3-vector}``
+    of a body point: ``v = sum_k (w_k x p + v0_k) qd_k``, ``a = J qdd + bias``."""
+    prog = kin.prog
+    p = kin.position(body, _vector(kin, spec))
+    name = name_of(body)
+    if name == kin.topology.ground.name:
+        zero = [sp.Integer(0)] * 3
+        return p, zero, zero, {}
+    V, A = kin.V[name], kin.A[name]
+    v = prog.lets([a + b for a, b in zip(V[3:], cross(V[:3], p))])
+    acc = prog.lets([a0 + x + y for a0, x, y in zip(A[3:], cross(A[:3], p), cross(V[:3], v))])
+    columns = {k: prog.lets([a + b for a, b in zip(cross(kin.S[k][:3], p), kin.S[k][3:])])
+               for k in kin.topology.coord_indices_of_body(body)}
+    return p, v, acc, columns
+
+
+def _rotation_terms(kin, body):
+    """Rotation, angular velocity, bias angular acceleration and Jacobian columns."""
+    name = name_of(body)
+    if name == kin.topology.ground.name:
+        zero = [sp.Integer(0)] * 3
+        return kin.R[name], zero, zero, {}
+    return kin.R[name], kin.V[name][:3], kin.A[name][:3], {k: kin.S[k][:3] for k in kin.topology.coord_indices_of_body(body)}
+
+
+def _combine(nq, *terms):
+    """Row of length nq from ``(vector, {k: column})`` pairs: sum of ``vector . column``."""
+    row = [sp.Integer(0)] * nq
+    for vector, columns in terms:
+        for k, column in columns.items():
+            row[k] += dot(vector, column)
+    return row
+
+
+def constraint_outputs(prog: Program, kin, equations) -> None:
+    """Outputs ``"constraints"``: residual g, Jacobian rows (row-major) and acceleration bias
+    of the geometric constraint equations (point and dot), as ``constraint_set`` documents."""
+    from .components.primitives import DotEquation, PointEquation
+    nq = kin.topology.nq
+    g_out, J_out, bias_out = [], [], []
+    for eq in equations:
+        if isinstance(eq, PointEquation):
+            pa, va, aa, Ja = _point_terms(kin, eq.body_a, eq.point_a)
+            pb, vb, ab, Jb = _point_terms(kin, eq.body_b, eq.point_b)
+            Rf, wf, alf, Jwf = _rotation_terms(kin, eq.frame)
+            n = prog.lets(matvec(Rf, [exact(c) for c in eq.normal]))
+            d = prog.lets([x - y for x, y in zip(pb, pa)])
+            wn = prog.lets(cross(wf, n))
+            g = dot(n, d)
+            row = _combine(nq, (n, Jb), ([-c for c in n], Ja), (cross(n, d), Jwf))
+            bias = (dot(n, [x - y for x, y in zip(ab, aa)]) + 2 * dot(wn, [x - y for x, y in zip(vb, va)])
+                    + dot([x + y for x, y in zip(cross(alf, n), cross(wf, wn))], d))
+        elif isinstance(eq, DotEquation):
+            Ra, wa, ala, Jwa = _rotation_terms(kin, eq.body_a)
+            Rb, wb, alb, Jwb = _rotation_terms(kin, eq.body_b)
+            ua = prog.lets(matvec(Ra, [exact(c) for c in eq.u_a]))
+            ub = prog.lets(matvec(Rb, [exact(c) for c in eq.u_b]))
+            axis = prog.lets(cross(ub, ua))
+            g = dot(ua, ub)
+            row = _combine(nq, (axis, Jwb), ([-c for c in axis], Jwa))
+            rate = [x + y for x, y in zip(cross(cross(wb, ub), ua), cross(ub, cross(wa, ua)))]
+            bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
+        else:
+            continue
+        g_out.append(prog.let(g))
+        J_out.extend(prog.lets(row))
+        bias_out.append(prog.let(bias))
+    prog.outputs["constraints"] = g_out + J_out + bias_out
+
+
+def build_program(topology, layout: ParameterLayout, inputs: dict, equations=()) -> Program:
     """The whole model as one straight-line program.
 
     Outputs: ``"mass_matrix"`` (lower triangle, row-major), ``"forces"`` (f_bar: gravity,
@@ -370,6 +446,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict) -> Program:
     for S in kin.S:
         kinematics += S
     prog.outputs["kinematics"] = kinematics
+    constraint_outputs(prog, kin, equations)
     prog.kin = kin
     return prog
 

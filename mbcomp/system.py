@@ -10,6 +10,7 @@ import numpy as np
 from . import codegen
 from .backend import FUNCTIONS, CFunctions, PythonFunctions, build_c_library
 from .components import Spherical
+from .constraint_set import cross
 from .components._values import name_of
 from .equations import (KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout,
                         parameter_values)
@@ -68,6 +69,9 @@ class CompiledModel:
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
         self.inputs = input_layout(self.topology)
+        from .constraint_set import ConstraintSet
+        self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
+        self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         description = structure_description(model, self.topology, self.layout, self.inputs)
         self.key = codegen.structure_key(description)
@@ -75,8 +79,9 @@ class CompiledModel:
         started = time.perf_counter()
         self.cache_hit = False
         nq, nb = self.topology.nq, len(self.topology.bodies)
+        ng = len(self.geometric_rows)
         self.sizes = {"dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq}
+                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2)}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -84,7 +89,8 @@ class CompiledModel:
     def program(self):
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
-            self._program = build_program(self.topology, self.layout, self.inputs)
+            equations = [] if self.constraint_set is None else self.constraint_set.equations
+            self._program = build_program(self.topology, self.layout, self.inputs, equations)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
 
@@ -93,9 +99,14 @@ class CompiledModel:
             raise ModelError(f"Model {self.model_name!r}", f"backend must be 'auto', 'c' or 'python', got {backend!r}")
         if backend in ("auto", "c"):
             source = None
-            if cache and (codegen.cache_dir() / f"{self.key}.so").exists():
-                self.cache_hit = True
-                return CFunctions(codegen.cache_dir() / f"{self.key}.so", self.sizes)
+            cached = codegen.cache_dir() / f"{self.key}.so"
+            if cache and cached.exists():
+                try:
+                    functions = CFunctions(cached, self.sizes)
+                    self.cache_hit = True
+                    return functions
+                except (OSError, AttributeError):
+                    cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
             source = codegen.c_source(self.program, FUNCTIONS)
             path = build_c_library(source, self.key if cache else self.key + f"-{id(self)}")
             if path is not None:
@@ -376,8 +387,8 @@ class System:
         A = A + columns[idx].T @ qdd[idx]
         w, v0, alpha, a0 = V[:3], V[3:], A[:3], A[3:]
         position = origin + R @ local
-        velocity = v0 + np.cross(w, position)
-        acceleration = a0 + np.cross(alpha, position) + np.cross(w, velocity)
+        velocity = v0 + cross(w, position)
+        acceleration = a0 + cross(alpha, position) + cross(w, velocity)
         return BodyState(position, velocity, acceleration, R, w.copy(), alpha.copy())
 
     def motion_columns(self, q: Any) -> np.ndarray:

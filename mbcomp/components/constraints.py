@@ -49,7 +49,7 @@ class Slider(Constraint):
 
     def _equations(self, ground):
         """Offsets of the point from the line along two world normals (m)."""
-        return [PointEquation(ground, n, ground, self.origin, self.body, self.point, f"n{i + 1}")
+        return [PointEquation(ground, n, ground, f"{self.name}.origin", self.body, f"{self.name}.point", f"n{i + 1}")
                 for i, n in enumerate(normals(self.axis))]
 
 
@@ -103,7 +103,7 @@ class LoopClosure(Constraint):
     def _equations(self, ground):
         from .joints import Fixed, Prismatic, Revolute, Spherical
         j = self.joint
-        a, b, pa, pb = j.parent, j.child, j.parent_point, j.child_point
+        a, b, pa, pb = j.parent, j.child, f"{j.name}.parent_point", f"{j.name}.child_point"
         if isinstance(j, Prismatic):
             eqs = [PointEquation(a, n, a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
             return eqs + _orientation_lock(a, b)

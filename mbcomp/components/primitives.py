@@ -1,7 +1,8 @@
 """Geometric primitives that constraints are written in (evaluated by ``constraint_set``).
 
 - ``PointEquation``: ``n . (p_b - p_a) = 0`` with the unit ``n`` fixed in ``frame``
-  (a body or the ground), ``p_a``/``p_b`` body points (m, body frames).  Its multiplier
+  (a body or the ground), ``p_a``/``p_b`` body points (m, body frames) given as the
+  key of the parameter that holds them (``"slider.point"``) or as constants.  Its multiplier
   is the force (N) along ``n`` on body ``b`` (and its opposite on ``a``).
 - ``DotEquation``: ``u_a . u_b = 0`` for unit vectors fixed in two bodies; its
   multiplier is a torque (N m) about ``u_b x u_a`` on body ``b``.

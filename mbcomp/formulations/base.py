@@ -6,7 +6,6 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from ..constraint_set import ConstraintSet, Frames
 from ..errors import ModelError, SimulationError
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
@@ -84,19 +83,11 @@ class Formulation:
                              f"it takes {list(self.option_names) or 'none'}")
         self.compiled = compiled
         self.options = options
-        topology = compiled.topology
-        has_constraints = bool(topology.cut_joints or topology.constraints)
-        self.constraints = ConstraintSet(topology) if has_constraints else None
+        self.constraints = compiled.constraint_set
 
     # -- numeric pieces -----------------------------------------------------------------------
-    def frames(self, system, q, qd) -> Frames:
-        per_body, columns = system._kinematics(q, qd)
-        nb = per_body.shape[0]
-        return Frames(per_body[:, :9].reshape(nb, 3, 3), per_body[:, 9:12], per_body[:, 12:18],
-                      per_body[:, 18:24], columns)
-
     def constraint_values(self, system, t, q, qd, offsets=None):
-        return self.constraints.evaluate(self.frames(system, q, qd), q, qd, t, offsets)
+        return self.constraints.evaluate(system, q, qd, t, offsets)
 
     def motor_offsets(self, q0: np.ndarray, t0: float) -> dict:
         """Start values of speed motors, so that their coordinate is ``q0 + speed (t - t0)``."""
