@@ -1,0 +1,25 @@
+"""Model builders shared by the benchmarks (the N-link 3D pendulum chain of the speed issue)."""
+from __future__ import annotations
+
+import numpy as np
+
+import mbcomp as mb
+
+
+def pendulum_chain(n: int, length: float = 0.5, mass: float = 1.0) -> mb.Model:
+    """N uniform rods (1 kg, 0.5 m, inertia diag(mL^2/12, mL^2/12, 1e-4)) hanging along -z
+    from a fixed point; revolute axes alternate x, y; gravity -9.81 along z."""
+    m = mb.Model(f"chain{n}", gravity=(0, 0, -9.81))
+    parent = m.ground
+    for i in range(n):
+        body = m.add(mb.Body(f"link{i}", mass=mass, com=(0, 0, -length / 2),
+                             inertia=(mass * length ** 2 / 12, mass * length ** 2 / 12, 1e-4)))
+        m.add(mb.Revolute(f"joint{i}", parent, body, axis="x" if i % 2 == 0 else "y",
+                          parent_point=(0, 0, -length) if i else (0, 0, 0)))
+        parent = body
+    return m
+
+
+def chain_initial_state(n: int):
+    """All angles 0.3 rad, at rest."""
+    return np.full(n, 0.3), np.zeros(n)
