@@ -34,6 +34,8 @@ class PythonFunctions:
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
         return np.array(self._fns[name](q.tolist(), qd.tolist(), p.tolist(), u.tolist()), dtype=float)
 
+    accelerations = None  # the System solves M qdd = f with numpy
+
 
 def c_compiler() -> str | None:
     """Path of a working C compiler (``$CC``, cc, gcc, clang) or None."""
@@ -46,27 +48,51 @@ def c_compiler() -> str | None:
     return None
 
 
+def _address(a: np.ndarray) -> int:
+    """Address of a float64 contiguous array (copied first if it is not one)."""
+    if a.dtype != np.float64 or not a.flags.c_contiguous:
+        raise TypeError("expected a contiguous float64 array")
+    return a.ctypes.data
+
+
 class CFunctions:
-    """The same functions compiled from generated C, called through ctypes."""
+    """The same functions compiled from generated C, called through ctypes.
+
+    Arguments go as raw addresses (``c_void_p``): converting arrays to ctypes
+    pointers on every call costs several microseconds each.
+    """
 
     name = "c"
 
     def __init__(self, library_path: Path, sizes: dict):
         self.lib = ctypes.CDLL(str(library_path))
+        self.path = library_path
         self.sizes = sizes
-        ptr = ctypes.POINTER(ctypes.c_double)
+        void = ctypes.c_void_p
         self._fns = {}
         for name in FUNCTIONS:
             fn = getattr(self.lib, name)
-            fn.argtypes = [ptr, ptr, ptr, ptr, ptr]
+            fn.argtypes = [void] * 5
             fn.restype = None
             self._fns[name] = fn
+        self._accelerations = self.lib.accelerations
+        self._accelerations.argtypes = [void] * 7
+        self._accelerations.restype = ctypes.c_int
+        self._empty = np.zeros(1)
 
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
         out = np.empty(self.sizes[name])
-        as_ptr = lambda a: np.ascontiguousarray(a, dtype=float).ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self._fns[name](as_ptr(q), as_ptr(qd), as_ptr(p), as_ptr(u if len(u) else np.zeros(1)), as_ptr(out))
+        q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
+        self._fns[name](q.ctypes.data, qd.ctypes.data, p.ctypes.data,
+                        (u if len(u) else self._empty).ctypes.data, out.ctypes.data)
         return out
+
+    def accelerations(self, q, qd, p, u, tau, out, work) -> int:
+        """Tree accelerations into ``out``; returns the C status (0 = ok)."""
+        q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
+        return self._accelerations(q.ctypes.data, qd.ctypes.data, p.ctypes.data,
+                                   (u if len(u) else self._empty).ctypes.data,
+                                   None if tau is None else tau.ctypes.data, out.ctypes.data, work.ctypes.data)
 
 
 def build_c_library(source: str, key: str) -> Path | None:

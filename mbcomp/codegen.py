@@ -10,7 +10,7 @@ from typing import Callable
 
 import sympy as sp
 
-CODEGEN_VERSION = "2"
+CODEGEN_VERSION = "3"
 
 
 # -- printing ---------------------------------------------------------------------------
@@ -146,6 +146,51 @@ def c_source(prog, functions: dict, chunk: int = 300) -> str:
         lines.append("}")
         lines.append("")
     return "\n".join(lines)
+
+
+def c_accelerations(nq: int) -> str:
+    """C source of ``int accelerations(q, qd, p, u, tau, qdd, work)``: the tree's
+    ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed
+    lower triangle that ``dynamics`` writes.  Returns 0, or k + 1 when pivot k shows
+    the mass matrix is not positive definite (same threshold as the Python path).
+    ``work`` holds nq (nq + 1) / 2 + nq doubles; ``tau`` may be NULL.
+    """
+    return f"""
+#define NQ {nq}
+#define IDX(i, j) ((i) * ((i) + 1) / 2 + (j))
+int accelerations(const double *q, const double *qd, const double *p, const double *u,
+                  const double *tau, double *qdd, double *work) {{
+    double *L = work, *f = work + NQ * (NQ + 1) / 2, scale = 1e-300;
+    dynamics(q, qd, p, u, work);
+    for (int i = 0; i < NQ; ++i) {{
+        qdd[i] = f[i] + (tau ? tau[i] : 0.0);
+        if (fabs(L[IDX(i, i)]) > scale) scale = fabs(L[IDX(i, i)]);
+    }}
+    for (int j = 0; j < NQ; ++j) {{
+        double s = L[IDX(j, j)];
+        for (int k = 0; k < j; ++k) s -= L[IDX(j, k)] * L[IDX(j, k)];
+        if (!(s > 1e-13 * scale)) return j + 1;
+        const double d = sqrt(s);
+        L[IDX(j, j)] = d;
+        for (int i = j + 1; i < NQ; ++i) {{
+            double t = L[IDX(i, j)];
+            for (int k = 0; k < j; ++k) t -= L[IDX(i, k)] * L[IDX(j, k)];
+            L[IDX(i, j)] = t / d;
+        }}
+    }}
+    for (int i = 0; i < NQ; ++i) {{
+        double s = qdd[i];
+        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * qdd[k];
+        qdd[i] = s / L[IDX(i, i)];
+    }}
+    for (int i = NQ - 1; i >= 0; --i) {{
+        double s = qdd[i];
+        for (int k = i + 1; k < NQ; ++k) s -= L[IDX(k, i)] * qdd[k];
+        qdd[i] = s / L[IDX(i, i)];
+    }}
+    return 0;
+}}
+"""
 
 
 # -- cache --------------------------------------------------------------------------------

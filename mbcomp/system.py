@@ -73,6 +73,7 @@ class CompiledModel:
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
+        self.no_inputs = np.zeros(0)
         description = structure_description(model, self.topology, self.layout, self.inputs)
         self.key = codegen.structure_key(description)
         self._program = None
@@ -107,7 +108,7 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
-            source = codegen.c_source(self.program, FUNCTIONS)
+            source = codegen.c_source(self.program, FUNCTIONS) + codegen.c_accelerations(self.topology.nq)
             path = build_c_library(source, self.key if cache else self.key + f"-{id(self)}")
             if path is not None:
                 return CFunctions(path, self.sizes)
@@ -309,6 +310,26 @@ class System:
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
             raise SimulationError(f"{what} is not finite at q = {np.round(q, 6).tolist()}: {reason}")
         return values
+
+    def _tree_accelerations(self, t, q, qd, tau) -> np.ndarray:
+        """Unconstrained tree accelerations (in compiled code when the backend has it)."""
+        functions = self._compiled.functions
+        if functions.accelerations is None:
+            M, f = self._dynamics(t, q, qd, tau)
+            self._check_finite(M, "mass matrix", q)
+            self._check_finite(f, "generalised forces", q)
+            return self._solve_tree(M, f, q)
+        n = self.nq
+        out = np.empty(n)
+        work = np.empty(n * (n + 1) // 2 + n)
+        u = self._inputs(t, q, qd) if self._compiled.n_inputs else self._compiled.no_inputs
+        status = functions.accelerations(q, qd, self._p, u, tau, out, work)
+        if status or not np.all(np.isfinite(out)):
+            M, f = self._dynamics(t, q, qd, tau)
+            self._check_finite(M, "mass matrix", q)
+            self._check_finite(f, "generalised forces", q)
+            return self._solve_tree(M, f, q)  # raises with a diagnosis
+        return out
 
     def _solve_tree(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
         """``M^-1 f`` by Cholesky, or a ``SimulationError`` naming why M is singular."""

@@ -160,8 +160,7 @@ class Formulation:
 
     def solve(self, system, t, q, qd, tau, offsets=None):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
-        M, f = self._tree(system, t, q, qd, tau)
-        return system._solve_tree(M, f, q), np.zeros(0)
+        return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
 
     def assemble(self, system, q: np.ndarray, qd: np.ndarray, t: float = 0.0, offsets=None):
         """Positions onto ``g = 0`` (Newton, minimum-norm steps), speeds onto ``gdot = 0``

@@ -53,9 +53,9 @@ class DaeFormulation(Formulation):
         self.projection = bool(options.get("projection", False))
 
     def solve(self, system, t, q, qd, tau, offsets=None):
-        M, f = self._tree(system, t, q, qd, tau)
         if self.constraints is None:
-            return system._solve_tree(M, f, q), np.zeros(0)
+            return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
+        M, f = self._tree(system, t, q, qd, tau)
         cv = self.constraint_values(system, t, q, qd, offsets)
         alpha, beta = self.baumgarte
         gdot = cv.J @ qd + cv.g_t

@@ -109,9 +109,9 @@ class LagrangeFormulation(Formulation):
     workspace_class = LagrangeWorkspace
 
     def solve(self, system, t, q, qd, tau, offsets=None, partition_hint=None):
-        M, f = self._tree(system, t, q, qd, tau)
         if self.constraints is None:
-            return system._solve_tree(M, f, q), np.zeros(0)
+            return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
+        M, f = self._tree(system, t, q, qd, tau)
         cv = self.constraint_values(system, t, q, qd, offsets)
         if partition_hint is None:
             self.check_dead_point(cv.J, qd, t, q)

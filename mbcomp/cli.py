@@ -1,0 +1,422 @@
+"""The ``mbcomp`` command: run, inspect and list model files (see docs/cli.md)."""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Sequence
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+DEFAULT_T_END = 5.0
+DEFAULT_SAMPLES = 501
+MAX_PRINTED_COORDS = 3  # equations of motion are printed up to this many coordinates
+
+
+class CommandError(Exception):
+    """A user-facing failure: the message is printed and the command exits with ``code``."""
+
+    def __init__(self, message: str, code: int = EXIT_FAILED):
+        super().__init__(message)
+        self.code = code
+
+
+# ----------------------------------------------------------------------------------------------
+# Argument parsing
+# ----------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="mbcomp",
+        description="Compose, compile and simulate multibody models from TOML files.",
+        epilog="FILE is a path to a .toml model file or the name of a library model "
+               "(see 'mbcomp library'). Documentation: docs/cli.md and docs/files.md.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    commands.required = True
+
+    run = commands.add_parser("run", help="simulate a model and print a summary",
+                              description="Compile and simulate a model file; print coordinates, final "
+                                          "state, energy drift and solver statistics.")
+    run.add_argument("file", metavar="FILE", help="model file or library model name")
+    run.add_argument("--t-end", type=float, metavar="T", help="end time in s (default: the file's, else %g)" % DEFAULT_T_END)
+    run.add_argument("--formulation", choices=("lagrange", "dae"), help="default: the file's, else lagrange")
+    run.add_argument("--method", metavar="M", help="solve_ivp method: RK45, RK23, DOP853, Radau, BDF, LSODA "
+                                                   "(default: the file's, else DOP853)")
+    run.add_argument("--rtol", type=float, metavar="R", help="relative tolerance (default 1e-8)")
+    run.add_argument("--atol", type=float, metavar="A", help="absolute tolerance (default 1e-10)")
+    run.add_argument("--samples", type=int, metavar="N",
+                     help="output samples, evenly spaced (default: the file's n_samples, else %d)" % DEFAULT_SAMPLES)
+    run.add_argument("--out", metavar="CSV", help="write t, coordinates, speeds and energies as CSV")
+    run.add_argument("--plot", metavar="PNG", help="save a plot of the coordinates and energy")
+    run.add_argument("--animate", metavar="GIF", help="save an animation (GIF, or MP4 with ffmpeg)")
+    run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                     help="show a progress bar on stderr (default: on when stderr is a terminal)")
+    run.set_defaults(handler=cmd_run)
+
+    info = commands.add_parser("info", help="describe a model and print its equations of motion",
+                               description="Print the model's components, coordinates, degrees of freedom, "
+                                           "constraints and (for up to %d coordinates) its equations of "
+                                           "motion M(q) q'' = f(q, q', t)." % MAX_PRINTED_COORDS)
+    info.add_argument("file", metavar="FILE", help="model file or library model name")
+    info.add_argument("--simplify", action="store_true",
+                      help="trigonometric simplification of the equations (slower)")
+    info.add_argument("--no-equations", dest="equations", action="store_false",
+                      help="skip the equations of motion")
+    info.set_defaults(handler=cmd_info)
+
+    library = commands.add_parser("library", help="list the ready-made models",
+                                  description="List the library models with their descriptions, or print "
+                                              "one model file (to copy and edit).")
+    library.add_argument("name", nargs="?", help="print this model's file")
+    library.set_defaults(handler=cmd_library)
+    return parser
+
+
+def _version() -> str:
+    try:
+        from . import __version__
+        return __version__
+    except ImportError:  # pragma: no cover
+        return "unknown"
+
+
+# ----------------------------------------------------------------------------------------------
+# Shared steps
+# ----------------------------------------------------------------------------------------------
+def resolve_model_file(spec: str) -> Path:
+    """A path that exists, else a library model of that name; ``CommandError`` otherwise."""
+    from .io import find_library_model, library_models
+    path = Path(spec)
+    if path.is_file():
+        return path
+    if path.exists():
+        raise CommandError(f"{spec}: not a file", EXIT_BAD_INPUT)
+    found = find_library_model(spec) if "/" not in spec and os.sep not in spec else None
+    if found is not None:
+        return found
+    names = ", ".join(library_models()) or "none found"
+    raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
+                       EXIT_BAD_INPUT)
+
+
+def load_model(spec: str):
+    """(model, path): the loader's ``ModelError`` becomes a ``CommandError`` exiting 2."""
+    from .errors import ModelError
+    from .io import load
+    path = resolve_model_file(spec)
+    try:
+        return load(path), path
+    except ModelError as exc:
+        raise CommandError(str(exc), EXIT_BAD_INPUT) from None
+
+
+def compile_model(model, formulation: str | None = None):
+    from .errors import ModelError
+    try:
+        return model.compile(formulation or model.simulation.get("formulation", "lagrange"))
+    except ModelError as exc:
+        raise CommandError(f"cannot compile {model.name!r}: {exc}") from None
+
+
+def initial_state(model, system) -> tuple[list[float], list[float], list[str]]:
+    """q0, qd0 in ``system.coords`` order from the file's [initial] (0 where not given),
+    and warnings for values of coordinates the compiled system does not have."""
+    q_values, qd_values = model.initial.get("q", {}), model.initial.get("qd", {})
+    q0 = [float(q_values.get(c, 0.0)) for c in system.coords]
+    qd0 = [float(qd_values.get(c, 0.0)) for c in system.coords]
+    extra = [c for c in list(q_values) + list(qd_values) if c not in system.coords]
+    warnings = [f"[initial] value for {c!r} ignored: not a coordinate of the compiled system "
+                "(a loop-closing joint's coordinate?)" for c in dict.fromkeys(extra)]
+    return q0, qd0, warnings
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def _table(rows: list[list[str]], indent: str = "  ") -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join(indent + "  ".join(cell.rjust(w) if i else cell.ljust(w) for i, (cell, w)
+                                        in enumerate(zip(row, widths))).rstrip() for row in rows)
+
+
+# ----------------------------------------------------------------------------------------------
+# mbcomp run
+# ----------------------------------------------------------------------------------------------
+def cmd_run(args: argparse.Namespace) -> int:
+    import numpy as np
+    from .errors import ModelError, SimulationError
+
+    model, path = load_model(args.file)
+    settings = dict(model.simulation)
+    t_end = args.t_end if args.t_end is not None else settings.get("t_end", DEFAULT_T_END)
+    method = args.method or settings.get("method", "DOP853")
+    rtol = args.rtol if args.rtol is not None else settings.get("rtol", 1e-8)
+    atol = args.atol if args.atol is not None else settings.get("atol", 1e-10)
+    samples = args.samples if args.samples is not None else settings.get("n_samples", DEFAULT_SAMPLES)
+    if not (t_end > 0 and np.isfinite(t_end)):
+        raise CommandError(f"--t-end must be a positive number, got {t_end}", EXIT_BAD_INPUT)
+    if samples < 2:
+        raise CommandError(f"--samples must be at least 2, got {samples}", EXIT_BAD_INPUT)
+    for option, value in (("--rtol", rtol), ("--atol", atol)):
+        if not (value > 0 and np.isfinite(value)):
+            raise CommandError(f"{option} must be a positive number, got {value}", EXIT_BAD_INPUT)
+    progress = args.progress if args.progress is not None else sys.stderr.isatty()
+
+    system = compile_model(model, args.formulation)
+    q0, qd0, warnings = initial_state(model, system)
+    for warning in warnings:
+        print(f"mbcomp: warning: {warning}", file=sys.stderr)
+    t_eval = np.linspace(0.0, t_end, samples)
+    try:
+        result = system.simulate(t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
+                                 progress=progress)
+    except (ModelError, SimulationError) as exc:
+        raise CommandError(f"simulation of {model.name!r} failed: {exc}") from None
+
+    print(run_summary(model, path, system, result))
+    outputs = []
+    if args.out:
+        _write(lambda: result.to_csv(args.out), args.out)
+        outputs.append(f"wrote {args.out} ({len(result.t)} rows)")
+    if args.plot:
+        _write(lambda: _save_plot(result, args.plot), args.plot)
+        outputs.append(f"wrote {args.plot}")
+    if args.animate:
+        _write(lambda: result.animate(args.animate), args.animate)
+        outputs.append(f"wrote {args.animate}")
+    for line in outputs:
+        print(line)
+    return EXIT_OK
+
+
+def _save_plot(result, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure = result.plot()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def _write(action, path: str) -> None:
+    """Run an output step; file-system and missing-feature errors become messages."""
+    try:
+        action()
+    except OSError as exc:
+        raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
+    except (ImportError, NotImplementedError) as exc:
+        raise CommandError(f"cannot write {path}: {exc}") from None
+
+
+def run_summary(model, path: Path, system, result) -> str:
+    """The text ``mbcomp run`` prints after a simulation."""
+    import numpy as np
+    stats = result.stats
+    lines = [f"model        {model.name} ({path})"]
+    lines.append(f"coordinates  {', '.join(system.coords)} ({system.nq} coordinate{'s' * (system.nq != 1)}, "
+                 f"{system.ndof} degree{'s' * (system.ndof != 1)} of freedom)")
+    lines.append(f"compiled     formulation {system.formulation}, backend {system.backend}, "
+                 f"{system.compile_time:.2f} s")
+    counters = [f"{stats['nfev']} evaluations" if stats.get("nfev") is not None else None,
+                f"{stats['steps']} steps" if stats.get("steps") else None,
+                f"{stats['wall_time']:.3g} s wall" if stats.get("wall_time") is not None else None]
+    lines.append(f"simulated    t = 0 .. {_fmt(result.t[-1])} s, {stats.get('method', '?')}, rtol {stats.get('rtol')}, "
+                 f"atol {stats.get('atol')}: " + ", ".join(c for c in counters if c))
+    rows = [["coordinate", "q", "qd"]] + [[c, _fmt(result.q[-1, i]), _fmt(result.qd[-1, i])]
+                                          for i, c in enumerate(system.coords)]
+    lines.append(f"final state (t = {_fmt(result.t[-1])} s)")
+    lines.append(_table(rows))
+    try:
+        energy = result.energy()
+        total = np.asarray(energy.total, dtype=float)
+        drift = float(np.max(np.abs(total - total[0])))
+        scale = max(abs(float(total[0])), float(np.max(np.abs(energy.kinetic))), 1e-300)
+        conservative = _is_conservative(model)
+        label = "drift" if conservative else "change (the model is not conservative)"
+        lines.append(f"energy       initial {_fmt(total[0])} J, final {_fmt(total[-1])} J, max {label} "
+                     f"{drift:.3g} J ({drift / scale:.3g} relative)")
+    except Exception as exc:  # energy is a report, not the result: never fail the run on it
+        lines.append(f"energy       unavailable ({exc})")
+    if _has_constraints(model) or getattr(system.topology, "cut_joints", ()):
+        try:
+            violation = np.asarray(result.constraint_violation(), dtype=float)
+            lines.append(f"constraints  max violation {float(np.max(violation)):.3g}")
+        except Exception as exc:
+            lines.append(f"constraints  violation unavailable ({exc})")
+    events = list(getattr(result, "events", []) or [])
+    if events:
+        lines.append(f"events       {len(events)} impact{'s' * (len(events) != 1)}, first at t = "
+                     f"{_fmt(events[0].time)} s")
+    return "\n".join(lines)
+
+
+def _is_conservative(model) -> bool:
+    from .components import Constraint, Contact, Damper, Force, JointTorque, Spring, TorsionSpring
+    for comp in model.components.values():
+        if isinstance(comp, (Damper, Force, JointTorque, Contact)):
+            return False
+        if isinstance(comp, (Spring, TorsionSpring)) and comp.damping:
+            return False
+        if isinstance(comp, Constraint) and type(comp).__name__ == "Motor":
+            return False
+    return True
+
+
+def _has_constraints(model) -> bool:
+    from .components import Constraint
+    return any(isinstance(c, Constraint) for c in model.components.values())
+
+
+# ----------------------------------------------------------------------------------------------
+# mbcomp info
+# ----------------------------------------------------------------------------------------------
+def describe_components(model) -> list[str]:
+    """One line per component group, in the file's vocabulary."""
+    from .components import Body, Constraint, Contact, ForceElement, Joint
+    from .components._values import name_of
+    comps = [c for c in model.components.values() if c is not model.ground]
+    lines = []
+    bodies = [c for c in comps if isinstance(c, Body)]
+    lines.append(f"bodies       {len(bodies)}: " + ", ".join(
+        f"{b.name} ({b.mass:g} kg{', point mass' if b.is_point_mass else ''})" for b in bodies))
+    joints = [c for c in comps if isinstance(c, Joint)]
+    if joints:
+        lines.append("joints")
+        for j in joints:
+            kind = type(j).__name__.lower()
+            detail = {"revolute": lambda: f" about {_axis_text(j.axis)}", "prismatic": lambda: f" along {_axis_text(j.axis)}",
+                      "spherical": lambda: f" {j.sequence!r}"}.get(kind, lambda: "")()
+            coords = f" [{', '.join(j.coords)}]" if j.coords else ""
+            lines.append(f"  {j.name}: {kind}{detail}, {name_of(j.parent)} -> {name_of(j.child)}{coords}")
+    for title, cls in (("forces", ForceElement), ("constraints", Constraint), ("contacts", Contact)):
+        group = [c for c in comps if isinstance(c, cls)]
+        lines.append(f"{title:<12} " + (", ".join(f"{c.name} ({type(c).__name__.lower()})" for c in group)
+                                         if group else "none"))
+    return lines
+
+
+def _axis_text(axis) -> str:
+    from .io import _axis_value
+    value = _axis_value(axis)
+    return value if isinstance(value, str) else "(" + ", ".join(f"{c:g}" for c in value) + ")"
+
+
+def numeric_equations(system, simplify: bool = False):
+    """``(M, f)`` with the parameter values substituted as exact rationals and expanded,
+    speeds renamed ``<coord>'`` (so sympy's pretty printer shows them plainly)."""
+    import sympy as sp
+    M, f = system.equations()
+    symbols = {str(s): s for s in M.free_symbols | f.free_symbols}
+    values = {}
+    for key, value in system.parameters.items():
+        entries = value if isinstance(value, (tuple, list)) else (value,)
+        for i, x in enumerate(entries):
+            name = f"{key}[{i}]" if isinstance(value, (tuple, list)) else key
+            if name in symbols:
+                values[symbols[name]] = sp.nsimplify(float(x), rational=True)
+    for coord in system.coords:
+        speed = symbols.get(f"\\dot{{{coord}}}")
+        if speed is not None:
+            values[speed] = sp.Symbol(f"{coord}'")
+    M, f = M.xreplace(values).applyfunc(sp.expand), f.xreplace(values).applyfunc(sp.expand)
+    if simplify:
+        M, f = M.applyfunc(sp.trigsimp), f.applyfunc(sp.trigsimp)
+    return M, f
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    model, path = load_model(args.file)
+    print(f"model        {model.name} ({path})")
+    if getattr(model, "description", ""):
+        print(f"description  {model.description}")
+    for line in describe_components(model):
+        print(line)
+    system = compile_model(model)
+    print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
+    print(f"degrees of freedom  {system.ndof}")
+    constraints = [c for c in model.components.values() if type(c).__name__ in ("Slider", "Motor")]
+    cut = list(getattr(system.topology, "cut_joints", ()))
+    if cut:
+        print(f"loops        closed by {', '.join(j.name for j in cut)}")
+    if not args.equations:
+        return EXIT_OK
+    print()
+    if system.nq > MAX_PRINTED_COORDS:
+        print(f"equations of motion: {system.nq} coordinates are too many to print legibly; in Python:\n"
+              f"  M, f = mbcomp.load({str(path)!r}).compile().equations()   # M qdd = f (sympy)")
+        return EXIT_OK
+    import sympy as sp
+    M, f = numeric_equations(system, simplify=args.simplify)
+    width = shutil.get_terminal_size((100, 24)).columns
+    qdd = ", ".join(f"{c}''" for c in system.coords)
+    print(f"equations of motion  M(q) q'' = f(q, q', t),  q'' = [{qdd}]")
+    if constraints or cut:
+        print("(tree equations; the constraints add their reactions C_q^T lambda to f)")
+    for i in range(system.nq):
+        for j in range(i, system.nq):
+            if M[i, j] != 0:
+                _print_entry(f"M[{i},{j}]", M[i, j], width)
+    for i in range(system.nq):
+        _print_entry(f"f[{i}]", f[i], width)
+    if system.nq > 1:
+        print("(M is symmetric; entries not shown are zero or mirror the ones shown)")
+    return EXIT_OK
+
+
+def _print_entry(label: str, expr, width: int) -> None:
+    import sympy as sp
+    text = sp.pretty(expr, use_unicode=False, num_columns=max(width - 4, 40))
+    if "\n" not in text:
+        print(f"{label} = {text}")
+    else:
+        print(f"{label} =")
+        print("\n".join("    " + line for line in text.splitlines()))
+
+
+# ----------------------------------------------------------------------------------------------
+# mbcomp library
+# ----------------------------------------------------------------------------------------------
+def cmd_library(args: argparse.Namespace) -> int:
+    from .io import library_dirs, library_models, read_description
+    models = library_models()
+    if args.name:
+        path = models.get(args.name[:-5] if args.name.endswith(".toml") else args.name)
+        if path is None:
+            raise CommandError(f"no library model {args.name!r}; available: {', '.join(models) or 'none'}",
+                               EXIT_BAD_INPUT)
+        sys.stdout.write(path.read_text(encoding="utf-8"))
+        return EXIT_OK
+    if not models:
+        raise CommandError("no library found (looked in $MBCOMP_LIBRARY and the library/ folder beside "
+                           "the package)")
+    width = max(len(name) for name in models)
+    for name, path in models.items():
+        print(f"{name.ljust(width)}  {read_description(path) or '(no description)'}")
+    print(f"\n{len(models)} models in {', '.join(str(d) for d in library_dirs())}; "
+          "run one with 'mbcomp run NAME', copy one with 'mbcomp library NAME > my.toml'")
+    return EXIT_OK
+
+
+# ----------------------------------------------------------------------------------------------
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mbcomp`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = args.handler(args)
+    except CommandError as exc:
+        print(f"mbcomp: {exc}" if "\n" not in str(exc) else f"mbcomp: error: {exc}", file=sys.stderr)
+        code = exc.code
+    except KeyboardInterrupt:
+        print("mbcomp: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    except BrokenPipeError:  # e.g. 'mbcomp library | head'
+        code = EXIT_OK
+    sys.stdout.flush()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
