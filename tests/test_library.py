@@ -1,0 +1,260 @@
+"""Every library model loads, compiles, simulates briefly, and gets one number right.
+
+Each model has a check in ``CHECKS`` against something independent of mbcomp: the course's
+reference numbers (hardcoded below with their case ids, since ``shared/`` is not shipped),
+a conservation law, a closed-form period or impact time.  Models that need constraints or
+contacts skip while the compiler says they are "not yet supported" (or, for contacts,
+while ``System.impact`` does not exist), and run once it supports them.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import trapezoid
+
+import mbcomp as mb
+from mbcomp.io import library_models, load
+
+MODELS = library_models()
+ENERGY_RTOL = 1e-6
+
+
+# ----------------------------------------------------------------------------------------------
+# Helpers
+# ----------------------------------------------------------------------------------------------
+def needs_constraints(model) -> bool:
+    from mbcomp.components import Constraint, Contact
+    return any(isinstance(c, (Constraint, Contact)) for c in model.components.values())
+
+
+def compile_or_skip(model, **options):
+    """Compile, skipping while the compiler does not yet support what the model needs."""
+    try:
+        system = model.compile(**options)
+    except mb.ModelError as exc:
+        text = str(exc)
+        # "a loop-closing joint must not carry coordinates": the tree-only compiler's
+        # refusal of a revolute loop closure; remove once loops are compiled everywhere.
+        if needs_constraints(model) or "loop-closing" in text:
+            if "not yet supported" in text or "loop-closing joint must not carry coordinates" in text:
+                pytest.skip(f"{model.name}: {text}")
+        raise
+    from mbcomp.components import Contact
+    if any(isinstance(c, Contact) for c in model.components.values()) and not hasattr(system, "impact"):
+        pytest.skip(f"{model.name}: contacts are not yet supported (System.impact missing)")
+    return system
+
+
+def initial_state(model, system):
+    q = np.array([model.initial["q"].get(c, 0.0) for c in system.coords])
+    qd = np.array([model.initial["qd"].get(c, 0.0) for c in system.coords])
+    return q, qd
+
+
+def simulate(model, system, t_end, n=101, q=None, qd=None, **options):
+    q0, qd0 = initial_state(model, system)
+    q0 = q0 if q is None else q
+    qd0 = qd0 if qd is None else qd
+    return system.simulate(t_end, q0, qd0, t_eval=np.linspace(0.0, t_end, n), **options)
+
+
+def assert_energy_conserved(result, rtol=ENERGY_RTOL):
+    energy = result.energy()
+    total = np.asarray(energy.total)
+    scale = max(abs(total[0]), float(np.max(np.abs(energy.kinetic))), float(np.max(np.abs(energy.potential))))
+    drift = float(np.max(np.abs(total - total[0])))
+    assert drift <= rtol * scale, f"energy drift {drift:.3g} J exceeds {rtol:g} x {scale:.3g} J"
+
+
+def index(system, name):
+    return list(system.coords).index(name)
+
+
+# ----------------------------------------------------------------------------------------------
+# One check per model
+# ----------------------------------------------------------------------------------------------
+def check_arm3d(model, system):
+    # arm3d.c.torques (shared/reference/seed_cases.json): holding torques at q = (110, -20, -20)
+    # deg, independent of rotational inertia; the library file starts there.
+    q0, _ = initial_state(model, system)
+    np.testing.assert_allclose(q0, np.radians([110, -20, -20]), rtol=0, atol=1e-15)
+    expected = [10.2808526794633, 1.61255394884406, 0.114084912734962]
+    np.testing.assert_allclose(system.holding_forces(q0), expected, rtol=1e-10, atol=1e-10)
+    assert_energy_conserved(simulate(model, system, 0.5))
+
+
+def _dpend_accelerations(system, q, expected_absolute):
+    """Compare (phi1'', phi2'') of the course (absolute angles) with the relative coordinates."""
+    qdd = system.accelerations(q, np.zeros(system.nq))
+    phi1dd, theta2dd = qdd[index(system, "phi1")], qdd[index(system, "theta2")]
+    np.testing.assert_allclose([phi1dd, phi1dd + theta2dd], expected_absolute, rtol=1e-9, atol=1e-9)
+
+
+def check_double_pendulum(model, system):
+    # dpend.A2b.free: released at phi1 = phi2 = pi/2, phi1'' = -22.9324675324675, phi2'' = 7.64415584415584.
+    q0, _ = initial_state(model, system)
+    _dpend_accelerations(system, q0, [-22.9324675324675, 7.64415584415584])
+    assert_energy_conserved(simulate(model, system, 1.0))
+
+
+def check_double_pendulum_spring(model, system):
+    # dpend.A3a.spring: phi1'' = -7.64415584415584, phi2'' = -15.2883116883117.
+    q0, _ = initial_state(model, system)
+    _dpend_accelerations(system, q0, [-7.64415584415584, -15.2883116883117])
+    assert_energy_conserved(simulate(model, system, 1.0))
+
+
+def check_double_pendulum_slider(model, system):
+    # dpend.A2e.slider: phi1'' = -26.7545454545455, phi2'' = 26.7545454545455 (1 degree of freedom).
+    assert system.ndof == 1
+    q0, _ = initial_state(model, system)
+    _dpend_accelerations(system, q0, [-26.7545454545455, 26.7545454545455])
+    result = simulate(model, system, 0.2)
+    assert_energy_conserved(result)
+    assert np.max(result.constraint_violation()) < 1e-8
+
+
+def check_double_pendulum_motor(model, system):
+    # The motor prescribes phi1 = 0.5 sin(2 pi t); its reaction, applied as a joint torque to
+    # the same pendulum without the motor (double_pendulum.toml, same bodies), reproduces the motion.
+    result = simulate(model, system, 0.5, n=51)
+    np.testing.assert_allclose(result["phi1"], 0.5 * np.sin(2 * np.pi * result.t), rtol=0, atol=1e-7)
+    free = load(MODELS["double_pendulum"]).compile()
+    assert free.coords == system.coords
+    k = 30
+    t, q, qd = result.t[k], result.q[k], result.qd[k]
+    torque = np.atleast_1d(system.reactions(q, qd, t)["motor"])
+    tau = np.zeros(free.nq)
+    tau[index(free, "phi1")] = torque[0]
+    np.testing.assert_allclose(free.accelerations(q, qd, t, tau=tau), system.accelerations(q, qd, t),
+                               rtol=1e-7, atol=1e-7)
+
+
+def check_spherical_pendulum(model, system):
+    # Energy and the angular momentum about the vertical are conserved; a small swing has the
+    # period 2 pi sqrt(L / g) (to O(amplitude^2): 1e-5 relative at 0.01 rad).
+    result = simulate(model, system, 1.0, n=201)
+    assert_energy_conserved(result)
+    mass = model["bob"].mass
+
+    def lz(q, qd):
+        s = system.body_state("bob", q, qd)
+        return mass * (s.position[0] * s.velocity[1] - s.position[1] * s.velocity[0])
+    start, end = lz(result.q[0], result.qd[0]), lz(result.q[-1], result.qd[-1])
+    assert abs(end - start) <= 1e-6 * abs(start)
+
+    L, g = model.named_parameters["L"], 9.81
+    period = 2 * np.pi * math.sqrt(L / g)
+    small = simulate(model, system, 2.2 * period, n=2001, q=np.array([0.01, 0.0]), qd=np.zeros(2))
+    alpha = small["alpha"]
+    crossings = [small.t[i] - alpha[i] * (small.t[i + 1] - small.t[i]) / (alpha[i + 1] - alpha[i])
+                 for i in range(len(alpha) - 1) if alpha[i] > 0 >= alpha[i + 1]]
+    assert len(crossings) >= 2
+    assert abs((crossings[1] - crossings[0]) - period) < 1e-4 * period
+
+
+def check_spinning_top(model, system):
+    # psi and phi are cyclic: their momenta (M qd) are conserved; energy too.  The fast top
+    # precesses at about Omega = m g h / (I3 spin) instead of falling (gyroscopic terms).
+    result = simulate(model, system, 1.0, n=201)
+    assert_energy_conserved(result)
+
+    def momenta(q, qd):
+        p = system.mass_matrix(q) @ qd
+        return p[index(system, "psi")], p[index(system, "phi")]
+    start, end = momenta(result.q[0], result.qd[0]), momenta(result.q[-1], result.qd[-1])
+    np.testing.assert_allclose(end, start, rtol=1e-6)
+    p = model.named_parameters
+    omega = p["m"] * 9.81 * p["h"] / (p["I3"] * p["spin"])
+    rate = (result["psi"][-1] - result["psi"][0]) / (result.t[-1] - result.t[0])
+    assert abs(rate - omega) < 0.05 * omega
+    assert np.max(np.abs(result["theta"] - 0.3)) < 0.05  # nutation stays small: it does not fall
+
+
+def check_five_link_pendulum(model, system):
+    assert system.nq == 5
+    assert_energy_conserved(simulate(model, system, 1.0))
+
+
+def check_four_bar(model, system):
+    assert system.ndof == 1
+    result = simulate(model, system, 0.5)
+    assert_energy_conserved(result)
+    assert np.max(result.constraint_violation()) < 1e-8
+
+
+def check_slider_crank(model, system):
+    # The crank turns at omega; the piston follows x = r cos(theta) + sqrt(l^2 - r^2 sin^2(theta));
+    # the motor's power integrates to the energy change.
+    p = model.named_parameters
+    r, l, omega = p["r"], p["l"], p["omega"]
+    result = simulate(model, system, 0.3, n=301)
+    theta = omega * result.t
+    np.testing.assert_allclose(result["theta"], theta, atol=1e-7)
+    np.testing.assert_allclose(result["x"], r * np.cos(theta) + np.sqrt(l ** 2 - (r * np.sin(theta)) ** 2),
+                               atol=1e-7)
+    torque = np.asarray(result.reactions["motor"]).reshape(len(result.t), -1)[:, 0]
+    work = trapezoid(torque * omega, result.t)
+    total = np.asarray(result.energy().total)
+    assert abs((total[-1] - total[0]) - work) < 1e-4 * max(np.max(np.abs(total - total[0])), 1e-12)
+
+
+def check_bouncing_ball(model, system):
+    # First impact at sqrt(2 (h - r) / g); the ball returns to e^2 (h - r) above touching height.
+    p = model.named_parameters
+    h, r, g, e = p["h"], p["r"], 9.81, model["floor"].restitution
+    t_hit = math.sqrt(2 * (h - r) / g)
+    result = simulate(model, system, 1.2, n=1201)
+    assert result.events, "no impact recorded"
+    assert abs(result.events[0].time - t_hit) < 1e-6
+    after = result.t > t_hit
+    apex = np.max(result["z"][after])
+    assert abs(apex - (r + e ** 2 * (h - r))) < 1e-4
+
+
+def check_pendulum_wall(model, system):
+    # The bob hits the wall at the bottom after a quarter of the large-amplitude period,
+    # K(sin^2(q0/2)) sqrt(L/g), and rebounds to cos(q1) = 1 - e^2 (1 - cos(q0)).
+    from scipy.special import ellipk
+    L, g, e = model.named_parameters["L"], 9.81, model["wall"].restitution
+    q0 = model.initial["q"]["q"]
+    t_hit = ellipk(math.sin(q0 / 2) ** 2) * math.sqrt(L / g)
+    result = simulate(model, system, 2.0 * t_hit, n=801)
+    assert result.events, "no impact recorded"
+    assert abs(result.events[0].time - t_hit) < 1e-6
+    q1 = math.acos(1 - e ** 2 * (1 - math.cos(q0)))
+    assert abs(np.max(result["q"][result.t > t_hit]) - q1) < 1e-4
+
+
+CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
+
+
+# ----------------------------------------------------------------------------------------------
+# Tests
+# ----------------------------------------------------------------------------------------------
+def test_library_is_found_and_complete():
+    assert MODELS, "no library models found"
+    assert sorted(MODELS) == sorted(CHECKS), "every library model needs exactly one check here"
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_file_starts_with_a_description(name):
+    text = MODELS[name].read_text(encoding="utf-8")
+    first = next(line for line in text.splitlines() if line.strip() and not line.startswith("#"))
+    assert first.startswith("description = "), f"{name}: the first key must be the description"
+    model = load(MODELS[name])
+    assert model.description.endswith(".") and len(model.description) > 20
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_library_model(name):
+    model = load(MODELS[name])
+    system = compile_or_skip(model)
+    assert set(model.initial["q"]) <= set(system.coords) | _loop_coords(system)
+    CHECKS[name](model, system)
+
+
+def _loop_coords(system) -> set:
+    return {c for j in getattr(system.topology, "cut_joints", ()) for c in j.coords}
