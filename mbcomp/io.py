@@ -473,8 +473,9 @@ class _Reader:
         if value not in known:
             names = ", ".join(known) or "none declared"
             hint = _close_match(value, tuple(known))
+            plural = "bodies" if kind == "body" else kind + "s"
             return self.problem(table, key, f"unknown {kind} {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
-                                + f"; {kind}s: {names}")
+                                + f"; {plural}: {names}")
         return value
 
     def inertia(self, table: str, value: Any) -> Any:
@@ -513,7 +514,7 @@ def _short(value: Any, width: int = 40) -> str:
 
 def _close_match(word: str, choices: tuple) -> str | None:
     import difflib
-    found = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.75)
+    found = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
     return found[0] if found else None
 
 
@@ -630,14 +631,14 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model | None:
             if coord in coords_seen:
                 r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
             coords_seen[coord] = f"[{label}]"
-        _add(r, model, joint, label)
+        _add_component(r, model, joint, label)
 
     for comp_name, label, table in named_tables("forces"):
-        _add(r, model, _read_force(r, comp_name, label, table, bodies, joints), label)
+        _add_component(r, model, _read_force(r, comp_name, label, table, bodies, joints), label)
     for comp_name, label, table in named_tables("constraints"):
-        _add(r, model, _read_constraint(r, comp_name, label, table, bodies, joints), label)
+        _add_component(r, model, _read_constraint(r, comp_name, label, table, bodies, joints), label)
     for comp_name, label, table in named_tables("contacts"):
-        _add(r, model, _read_contact(r, comp_name, label, table, bodies), label)
+        _add_component(r, model, _read_contact(r, comp_name, label, table, bodies), label)
 
     model.description = description
     model.named_parameters = dict(r.parameters)
@@ -648,7 +649,7 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model | None:
     return model
 
 
-def _add(r: _Reader, model: Model, component: Any, label: str) -> None:
+def _add_component(r: _Reader, model: Model, component: Any, label: str) -> None:
     if component is None:
         return
     try:
