@@ -1,0 +1,248 @@
+"""Code generation: the expression printer, Python/C agreement, and the on-disk cache helpers."""
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import subprocess
+import sys as _sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import mbcomp as mb
+from mbcomp import codegen
+from mbcomp.backend import FUNCTIONS, CFunctions, PythonFunctions, build_c_library, c_compiler
+from conftest import arm_model, assert_close
+
+x, y, z, w = SYMBOLS = sp.symbols("x y z w")
+
+# Everything the equation builder emits: sums, differences, products, numeric
+# coefficients, integer and half powers, sin and cos (and nestings of them).
+EXPRESSIONS = {
+    "sum": x + y + z,
+    "difference": x - y - 2 * z,
+    "negated-sum": -(x + y) * z,
+    "product": x * y * z,
+    "negative-product": -x * y,
+    "coefficient": sp.Float(2.5) * x * y - sp.Rational(1, 3) * z,
+    "small-coefficient": sp.Float(1e-7) * x + sp.Float(-3e5) * y,
+    "square": (x - y) ** 2,
+    "inverse": 1 / (x + y),
+    "inverse-square": (y + 2 * z) ** -2,
+    "sqrt": sp.sqrt(x * x + y * y + z * z),
+    "inverse-sqrt": 1 / sp.sqrt(x + y),
+    "cube": x ** 3 - y ** -3,
+    "three-halves": (x + z) ** sp.Rational(3, 2),
+    "sin-cos": sp.sin(x) * sp.cos(y) - sp.cos(x + y),
+    "trig-powers": sp.sin(x) ** 2 + sp.cos(x) ** 2 * w,
+    "nested": sp.sin(sp.cos(x * y) + z) / (1 + w ** 2) - sp.sqrt(x) * (y - z) ** 2,
+    "rodrigues": sp.cos(x) + y * y * (1 - sp.cos(x)) - z * sp.sin(x),
+    "constant": sp.Float(-4.25),
+    "symbol": w,
+}
+IDS = list(EXPRESSIONS)
+NAMES = {s: f"v[{i}]" for i, s in enumerate(SYMBOLS)}
+
+
+def random_values(seed, n=4):
+    """Positive values (so that half powers of sums stay real)."""
+    return np.random.default_rng(seed).uniform(0.3, 2.0, size=(n, len(SYMBOLS)))
+
+
+class TestPrinter:
+    @pytest.mark.parametrize("name", IDS)
+    def test_printed_python_matches_lambdify(self, name):
+        expr = EXPRESSIONS[name]
+        source = codegen.Printer(NAMES, "python")(expr)
+        reference = sp.lambdify(SYMBOLS, expr, "math")
+        for values in random_values(hash(name) % 1000):
+            got = eval(source, {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt, "v": list(values)})
+            assert got == pytest.approx(reference(*values), rel=1e-13, abs=1e-15), source
+
+    @pytest.mark.parametrize("name", ["sum", "difference", "negated-sum", "product", "coefficient", "square",
+                                      "cube", "sin-cos", "nested", "rodrigues"])
+    def test_printed_python_handles_negative_values(self, name):
+        expr = EXPRESSIONS[name]
+        source = codegen.Printer(NAMES, "python")(expr)
+        reference = sp.lambdify(SYMBOLS, expr, "math")
+        values = [-1.3, 0.7, -0.4, 1.9]
+        if name == "nested":
+            values[0] = 1.3                                  # sqrt(x)
+        got = eval(source, {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt, "v": values})
+        assert got == pytest.approx(reference(*values), rel=1e-13, abs=1e-15), source
+
+    def test_printed_c_matches_lambdify(self, tmp_path):
+        compiler = c_compiler()
+        if compiler is None:
+            pytest.skip("no C compiler")
+        printer = codegen.Printer(NAMES, "c")
+        body = ["#include <math.h>", ""]
+        for i, name in enumerate(IDS):
+            body.append(f"double f{i}(const double *v) {{ return {printer(EXPRESSIONS[name])}; }}")
+        src, lib = tmp_path / "printed.c", tmp_path / "printed.so"
+        src.write_text("\n".join(body) + "\n")
+        subprocess.run([compiler, "-O1", "-shared", "-fPIC", str(src), "-o", str(lib), "-lm"], check=True,
+                       capture_output=True)
+        library = ctypes.CDLL(str(lib))
+        for i, name in enumerate(IDS):
+            fn = getattr(library, f"f{i}")
+            fn.argtypes, fn.restype = [ctypes.POINTER(ctypes.c_double)], ctypes.c_double
+            reference = sp.lambdify(SYMBOLS, EXPRESSIONS[name], "math")
+            for values in random_values(i):
+                arr = (ctypes.c_double * 4)(*values)
+                assert fn(arr) == pytest.approx(reference(*values), rel=1e-13, abs=1e-15), name
+
+    def test_numbers_are_printed_as_floats(self):
+        printer = codegen.Printer(NAMES, "c")
+        assert printer(sp.Integer(3)) == "3.0"
+        assert printer(sp.Rational(1, 4)) == "0.25"
+        assert printer(sp.Integer(-2)) == "(-2.0)"          # parenthesised: safe after any operator
+        assert printer(x / 2) == "0.5*v[0]"
+
+    def test_half_powers_use_sqrt(self):
+        printer = codegen.Printer(NAMES, "python")
+        assert printer(sp.sqrt(x)) == "sqrt(v[0])"
+        assert printer(1 / sp.sqrt(x)) == "(1.0/sqrt(v[0]))"
+        assert printer(x ** 2) == "(v[0]*v[0])"
+
+    @pytest.mark.parametrize("expr", [sp.exp(x), sp.tan(x), sp.pi * x, sp.Abs(x)], ids=["exp", "tan", "pi", "abs"])
+    def test_unsupported_expressions_raise(self, expr):
+        with pytest.raises(TypeError, match="cannot print"):
+            codegen.Printer(NAMES, "python")(expr)
+
+
+# ----------------------------------------------------------------------------------
+# Whole programs: Python and C agree
+# ----------------------------------------------------------------------------------
+def driven_arm():
+    """The arm plus run-time inputs (callable force and torque) and a spring."""
+    m = arm_model()
+    m.add(mb.Force("push", "lower", point=(0, 0.3, 0), force=lambda t, q, qd: (0.0, 0.0, 0.0)))
+    m.add(mb.JointTorque("drive", "shoulder", lambda t, q, qd: (0.0, 0.0)))
+    m.add(mb.Spring("tendon", a=("ground", (0.1, 0.2, 0.3)), b=("lower", (0, 0.2, 0)), stiffness=50.0,
+                    rest_length=0.1, damping=0.5))
+    return m
+
+
+@pytest.fixture
+def compiled(tmp_path, monkeypatch):
+    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+    sys = driven_arm().compile(backend="python", cache=False)
+    return sys._compiled, sys._p
+
+
+def _random_inputs(compiled, p, seed):
+    rng = np.random.default_rng(seed)
+    nq = compiled.topology.nq
+    return rng.uniform(-1, 1, nq), rng.normal(size=nq), p, rng.normal(size=compiled.n_inputs)
+
+
+class TestGeneratedPrograms:
+    def test_inputs_are_wired(self, compiled):
+        compiled, _ = compiled
+        assert compiled.n_inputs == 3 + 2
+
+    @pytest.mark.parametrize("chunk", [300, 7, 1], ids=["one-part", "chunks-of-7", "chunks-of-1"])
+    def test_generated_c_and_python_agree(self, compiled, chunk):
+        compiled, p = compiled
+        if c_compiler() is None:
+            pytest.skip("no C compiler")
+        program = compiled.program
+        python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
+        library = build_c_library(codegen.c_source(program, FUNCTIONS, chunk=chunk), f"test-chunk{chunk}")
+        c = CFunctions(library, compiled.sizes)
+        for seed in range(3):
+            args = _random_inputs(compiled, p, seed)
+            for name in FUNCTIONS:
+                expected = python(name, *args)
+                assert expected.shape == (compiled.sizes[name],)
+                assert_close(c(name, *args), expected, rtol=1e-13, atol=1e-13, name=f"{name} (chunk={chunk})")
+
+    def test_python_program_matches_the_symbolic_outputs(self, compiled):
+        """The generated function evaluates the straight-line program exactly as sympy does."""
+        compiled, p = compiled
+        program = compiled.program
+        python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
+        q, qd, p, u = _random_inputs(compiled, p, 7)
+        values = {s: v for s, v in zip(program.q, q)}
+        values.update({s: v for s, v in zip(program.qd, qd)})
+        values.update({s: v for s, v in zip(program.p, p)})
+        values.update({s: v for s, v in zip(program.u, u)})
+        for symbol, expr in program.assignments:
+            values[symbol] = float(expr.xreplace(values))
+        expected = [float(sp.sympify(e).xreplace(values)) for e in program.outputs["energy"]]
+        assert_close(python("energy", q, qd, p, u), expected, rtol=1e-12, name="energy")
+
+    def test_each_function_keeps_only_the_assignments_it_needs(self, compiled):
+        compiled, _ = compiled
+        program = compiled.program
+        energy, dynamics = program.needed(["energy"]), program.needed(["mass_matrix", "forces"])
+        assert 0 < len(energy) < len(program.assignments)
+        assert len(dynamics) < len(program.assignments)
+        defined = {s for s, _ in energy} | set(program.q) | set(program.qd) | set(program.p) | set(program.u)
+        for _, expr in energy:
+            assert expr.free_symbols <= defined
+        order = {s: i for i, (s, _) in enumerate(program.assignments)}
+        assert [order[s] for s, _ in energy] == sorted(order[s] for s, _ in energy)
+
+    def test_python_source_is_valid_and_self_contained(self, compiled):
+        compiled, _ = compiled
+        source = codegen.python_source(compiled.program, FUNCTIONS)
+        namespace = codegen.load_python(source, "test")
+        assert set(FUNCTIONS) <= set(namespace)
+        assert "import" in source.splitlines()[0] and "mbcomp" not in source
+
+
+# ----------------------------------------------------------------------------------
+# Cache helpers
+# ----------------------------------------------------------------------------------
+class TestCacheFiles:
+    def test_write_atomic_writes_and_leaves_no_temporary_files(self, tmp_path):
+        target = tmp_path / "deep" / "er" / "file.so"
+        codegen.write_atomic(target, b"first")
+        codegen.write_atomic(target, b"second version")
+        assert target.read_bytes() == b"second version"
+        assert [p.name for p in target.parent.iterdir()] == ["file.so"]
+
+    def test_failed_write_keeps_the_old_file_and_cleans_up(self, tmp_path):
+        target = tmp_path / "file.py"
+        codegen.write_atomic(target, b"good")
+        with pytest.raises(TypeError):
+            codegen.write_atomic(target, "not bytes")
+        assert target.read_bytes() == b"good"
+        assert [p.name for p in tmp_path.iterdir()] == ["file.py"]
+
+    def test_cached_text_round_trips(self, tmp_path, monkeypatch):
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path / "cache"))
+        assert codegen.read_cached("abc", ".py") is None
+        codegen.write_cached("abc", ".py", "x = 1\n")
+        assert codegen.read_cached("abc", ".py") == "x = 1\n"
+        assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["abc.py"]
+
+    @pytest.mark.parametrize("backend", ["python", "c"])
+    def test_unwritable_cache_is_not_an_error(self, tmp_path, monkeypatch, backend):
+        blocker = tmp_path / "file"
+        blocker.write_text("not a directory")
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(blocker / "cache"))
+        codegen.write_cached("abc", ".py", "x = 1\n")            # silently skipped
+        assert codegen.read_cached("abc", ".py") is None
+        sys = arm_model().compile(backend=backend)                # still compiles, without the cache
+        assert not sys._compiled.cache_hit and sys.backend == backend
+        assert sys.accelerations([0.1, 0.2, 0.3], None).shape == (3,)
+
+    def test_cache_dir_follows_environment(self, tmp_path, monkeypatch):
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path / "mine"))
+        assert codegen.cache_dir() == tmp_path / "mine"
+        monkeypatch.delenv("MBCOMP_CACHE_DIR")
+        monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+        if _sys.platform.startswith("linux"):
+            assert codegen.cache_dir() == tmp_path / "xdg" / "mbcomp"
+
+    def test_structure_key_is_stable_and_sensitive(self):
+        a = codegen.structure_key("Revolute|elbow|x")
+        assert a == codegen.structure_key("Revolute|elbow|x")
+        assert a != codegen.structure_key("Revolute|elbow|y")
+        assert len(a) == 32 and all(ch in "0123456789abcdef" for ch in a)
