@@ -495,13 +495,32 @@ def _frame_times(t: np.ndarray, fps: float, duration: float | None, frames: Any)
     return np.linspace(t0, t1, count) if t1 > t0 else np.full(count, t0)
 
 
-def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """q at ``times`` by linear interpolation of every coordinate (q is continuous, even across
-    impacts, so interpolation is safe)."""
-    if len(t) == 1:
-        return np.repeat(q[:1], len(times), axis=0)
-    return np.column_stack([np.interp(times, t, q[:, i]) for i in range(q.shape[1])]) if q.shape[1] \
-        else np.zeros((len(times), 0))
+def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray, qd: np.ndarray | None = None) -> np.ndarray:
+    """q at ``times``: cubic Hermite interpolation through the samples and their speeds ``qd``
+    (third-order accurate, so sparse solver output still animates smoothly), or linear without
+    ``qd``.  Repeated sample times (before/after an impact) split the series into pieces that
+    are interpolated separately, since ``qd`` jumps there while ``q`` is continuous.
+    """
+    from scipy.interpolate import CubicHermiteSpline
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float).reshape(len(t), -1)
+    times = np.asarray(times, dtype=float)
+    out = np.repeat(q[:1], len(times), axis=0)
+    breaks = np.flatnonzero(np.diff(t) <= 0) + 1
+    for start, stop in zip([0, *breaks], [*breaks, len(t)]):
+        piece = t[start:stop]
+        inside = (times >= piece[0]) & (times <= piece[-1])   # later pieces win at a shared time
+        if not np.any(inside) or q.shape[1] == 0:
+            continue
+        if len(piece) == 1:
+            out[inside] = q[start]
+        elif qd is not None:
+            spline = CubicHermiteSpline(piece, q[start:stop], np.asarray(qd, dtype=float)[start:stop], axis=0)
+            out[inside] = spline(times[inside])
+        else:
+            out[inside] = np.column_stack([np.interp(times[inside], piece, q[start:stop, i])
+                                           for i in range(q.shape[1])])
+    return out
 
 
 def render_frame(result: Any, index: int = 0, path: Any = None, *, view: Any = None,
@@ -550,8 +569,9 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
     Each body is a ball at its COM (area by mass) joined by sticks to its joint locations and
     attachment points; ground attachments are black triangles, joints white circles, springs
     dashed lines, prismatic travel and loop closures dotted lines.  The axis limits are fixed
-    from the whole motion, so the picture does not jump.  The result is resampled (linear
-    interpolation of q) at evenly spaced frame times, since solver steps are not evenly spaced.
+    from the whole motion, so the picture does not jump.  The result is resampled (cubic
+    Hermite interpolation of q with qd) at evenly spaced frame times, since solver steps are not
+    evenly spaced.
 
     Parameters
     ----------
@@ -604,7 +624,7 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
                          f"use .gif or .mp4 (got {path.suffix or 'none'!r})")
     t = np.asarray(result.t, dtype=float)
     times = _frame_times(t, fps, duration, frames)
-    q = _resample(t, np.asarray(result.q, dtype=float), times)
+    q = _resample(t, np.asarray(result.q, dtype=float), times, np.asarray(result.qd, dtype=float))
     scene = _Scene(result.system)
     points = scene.all_points(q)
     centre, half = _limits(points)

@@ -208,11 +208,27 @@ class TestScene:
         on_parent, hub = scene.links[1]
         np.testing.assert_allclose(scene.points(q)[hub], [0.5, 0.0, 0.0], atol=1e-12)
 
-    def test_resampling_interpolates_between_samples(self):
+    def test_resampling_without_speeds_is_linear(self):
         t = np.array([0.0, 1.0, 3.0])
         q = np.column_stack([2 * t, t ** 2])
         out = plotting._resample(t, q, np.array([0.5, 2.0]))
         np.testing.assert_allclose(out, [[1.0, 0.5], [4.0, 5.0]])
+
+    def test_resampling_with_speeds_is_exact_for_cubics(self):
+        t = np.array([0.0, 1.0, 3.0])
+        q, qd = np.column_stack([t ** 3, np.sin(t)]), np.column_stack([3 * t ** 2, np.cos(t)])
+        times = np.linspace(0.0, 3.0, 13)
+        out = plotting._resample(t, q, times, qd)
+        np.testing.assert_allclose(out[:, 0], times ** 3, atol=1e-12)
+        np.testing.assert_allclose(out[:, 1], np.sin(times), atol=0.05)   # h^4 max|q""|/384
+
+    def test_resampling_splits_at_impacts(self):
+        # q = |t - 1| bounces at t = 1: the sample is repeated with the speed before and after.
+        t = np.array([0.0, 1.0, 1.0, 2.0])
+        q = np.abs(t - 1.0)[:, None]
+        qd = np.array([-1.0, -1.0, 1.0, 1.0])[:, None]
+        out = plotting._resample(t, q, np.array([0.5, 1.0, 1.5]), qd)
+        np.testing.assert_allclose(out[:, 0], [0.5, 0.0, 0.5], atol=1e-12)
 
 
 class TestAnimate:
