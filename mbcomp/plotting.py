@@ -299,12 +299,23 @@ class _Scene:
     def poses(self, q: np.ndarray):
         if self._fast is None:
             # Use the fast path only once it agrees with the public API at this configuration.
-            reference = self._poses_public(q)
+            # (body_state also evaluates accelerations, which can fail off the constraints, e.g.
+            # at a drifted sample; then the kinematics alone are all there is to go on.)
+            try:
+                reference = self._poses_public(q)
+            except Exception as exc:     # noqa: BLE001 - fall back to the kinematics below
+                reference, failure = None, exc
             try:
                 fast = self._poses_fast(q)
-                self._fast = all(np.allclose(a, b, rtol=1e-9, atol=1e-9) for a, b in zip(fast, reference))
             except Exception:            # noqa: BLE001 - any failure means: use the public API
-                self._fast = False
+                fast = None
+            if reference is None:
+                if fast is None:
+                    raise failure
+                self._fast = True
+                return fast
+            self._fast = fast is not None and all(np.allclose(a, b, rtol=1e-9, atol=1e-9)
+                                                  for a, b in zip(fast, reference))
             return reference
         return self._poses_fast(q) if self._fast else self._poses_public(q)
 
