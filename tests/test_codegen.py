@@ -152,14 +152,53 @@ class TestGeneratedPrograms:
             pytest.skip("no C compiler")
         program = compiled.program
         python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
-        library = build_c_library(codegen.c_source(program, FUNCTIONS, chunk=chunk), f"test-chunk{chunk}")
-        c = CFunctions(library, compiled.sizes)
+        source = codegen.c_source(program, FUNCTIONS, chunk=chunk) + codegen.c_accelerations(compiled.topology.nq)
+        c = CFunctions(build_c_library(source, f"test-chunk{chunk}"), compiled.sizes)
         for seed in range(3):
             args = _random_inputs(compiled, p, seed)
             for name in FUNCTIONS:
                 expected = python(name, *args)
                 assert expected.shape == (compiled.sizes[name],)
                 assert_close(c(name, *args), expected, rtol=1e-13, atol=1e-13, name=f"{name} (chunk={chunk})")
+
+    def test_c_accelerations_solve_the_python_equations(self, compiled):
+        """The C Cholesky solve of ``M qdd = f + tau`` against numpy on the Python outputs."""
+        compiled, p = compiled
+        if c_compiler() is None:
+            pytest.skip("no C compiler")
+        program, nq = compiled.program, compiled.topology.nq
+        python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
+        source = codegen.c_source(program, FUNCTIONS) + codegen.c_accelerations(nq)
+        c = CFunctions(build_c_library(source, "test-accelerations"), compiled.sizes)
+        rng = np.random.default_rng(3)
+        for seed in range(3):
+            q, qd, p, u = _random_inputs(compiled, p, seed)
+            out = python("dynamics", q, qd, p, u)
+            M = np.zeros((nq, nq))
+            M[np.tril_indices(nq)] = out[: nq * (nq + 1) // 2]
+            M = M + np.tril(M, -1).T
+            f = out[nq * (nq + 1) // 2:]
+            for tau in (None, rng.normal(size=nq)):
+                qdd, work = np.empty(nq), np.empty(nq * (nq + 1) // 2 + nq)
+                assert c.accelerations(q, qd, p, u, tau, qdd, work) == 0
+                expected = np.linalg.solve(M, f if tau is None else f + tau)
+                assert_close(qdd, expected, rtol=1e-11, atol=1e-12, name="C accelerations")
+
+    def test_c_accelerations_report_a_singular_mass_matrix(self, tmp_path, monkeypatch):
+        if c_compiler() is None:
+            pytest.skip("no C compiler")
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+        m = mb.Model("gimbal")
+        b = m.add(mb.Body("b", mass=1.0, com=(0.1, 0.2, -0.5), inertia=(0.1, 0.2, 0.25)))
+        m.add(mb.Spherical("wrist", m.ground, b, sequence="zxz"))
+        compiled = m.compile(backend="python", cache=False)._compiled
+        source = codegen.c_source(compiled.program, FUNCTIONS) + codegen.c_accelerations(3)
+        c = CFunctions(build_c_library(source, "test-singular"), compiled.sizes)
+        p = compiled.layout.pack(compiled.default_parameters)
+        qdd, work = np.empty(3), np.empty(9)
+        status = c.accelerations(np.array([0.3, 0.0, -0.4]), np.zeros(3), p, np.zeros(0), None, qdd, work)
+        assert status == 3                       # pivot 3: the third axis repeats the first
+        assert c.accelerations(np.array([0.3, 0.5, -0.4]), np.zeros(3), p, np.zeros(0), None, qdd, work) == 0
 
     def test_python_program_matches_the_symbolic_outputs(self, compiled):
         """The generated function evaluates the straight-line program exactly as sympy does."""

@@ -154,9 +154,6 @@ class TestCutJoints:
         assert [j.name for j in top.tree_joints] == ["first"]
         assert [j.name for j in top.cut_joints] == ["second"]
 
-    @pytest.mark.xfail(strict=True, reason="bug/limitation: build_topology rejects a loop-closing joint that has "
-                       "coordinates ('must not carry coordinates'), so a revolute-closed four-bar does not compile; "
-                       "API.md says the compiler turns any loop-closing joint into constraint equations")
     def test_revolute_closing_a_loop_is_a_cut_joint_without_tree_coordinates(self):
         m = four_bar(lambda c, r: mb.Revolute("j4", c, r, axis="y", parent_point=(0, 0, -1), child_point=(0, 0, -1)))
         top = build_topology(m)
