@@ -108,7 +108,8 @@ def load_model(spec: str):
     try:
         return load(path), path
     except ModelError as exc:
-        raise CommandError(str(exc), EXIT_BAD_INPUT) from None
+        problems = getattr(exc, "problems", [])
+        raise CommandError(problems[0] if len(problems) == 1 else str(exc), EXIT_BAD_INPUT) from None
 
 
 def compile_model(model, formulation: str | None = None):

@@ -130,7 +130,7 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
     if isinstance(node, ast.Call):
         func = node.func.id if isinstance(node.func, ast.Name) else None
         if func not in FUNCTIONS:
-            shown = func if func is not None else ast.dump(node.func)[:40]
+            shown = func if func is not None else _short(ast.unparse(node.func), 40)
             raise ExpressionError(f"{text!r}: calling {shown} is not allowed (only sin, cos, exp, sqrt)")
         if node.keywords or len(node.args) != 1 or isinstance(node.args[0], ast.Starred):
             raise ExpressionError(f"{text!r}: {func}() takes exactly one argument")
