@@ -273,8 +273,9 @@ def _has_constraints(model) -> bool:
 # ----------------------------------------------------------------------------------------------
 # mbcomp info
 # ----------------------------------------------------------------------------------------------
-def describe_components(model) -> list[str]:
-    """One line per component group, in the file's vocabulary."""
+def describe_components(model, cut_joints: Sequence[str] = ()) -> list[str]:
+    """One line per component group, in the file's vocabulary (``cut_joints``: the names of
+    the joints that close loops; their coordinates are not among the system's)."""
     from .components import Body, Constraint, Contact, ForceElement, Joint
     from .components._values import name_of
     comps = [c for c in model.components.values() if c is not model.ground]
@@ -290,6 +291,8 @@ def describe_components(model) -> list[str]:
             detail = {"revolute": lambda: f" about {_axis_text(j.axis)}", "prismatic": lambda: f" along {_axis_text(j.axis)}",
                       "spherical": lambda: f" {j.sequence!r}"}.get(kind, lambda: "")()
             coords = f" [{', '.join(j.coords)}]" if j.coords else ""
+            if j.name in cut_joints:
+                coords = ", closes a loop"
             lines.append(f"  {j.name}: {kind}{detail}, {name_of(j.parent)} -> {name_of(j.child)}{coords}")
     for title, cls in (("forces", ForceElement), ("constraints", Constraint), ("contacts", Contact)):
         group = [c for c in comps if isinstance(c, cls)]
@@ -346,15 +349,18 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"model        {model.name} ({path})")
     if getattr(model, "description", ""):
         print(f"description  {model.description}")
-    for line in describe_components(model):
+    try:
+        system = compile_model(model)
+    except CommandError:
+        for line in describe_components(model):
+            print(line)
+        raise
+    cut = [j.name for j in getattr(system.topology, "cut_joints", ())]
+    for line in describe_components(model, cut):
         print(line)
-    system = compile_model(model)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     print(f"degrees of freedom  {system.ndof}")
     constraints = [c for c in model.components.values() if type(c).__name__ in ("Slider", "Motor")]
-    cut = list(getattr(system.topology, "cut_joints", ()))
-    if cut:
-        print(f"loops        closed by {', '.join(j.name for j in cut)}")
     if not args.equations:
         return EXIT_OK
     print()
@@ -382,7 +388,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def _print_entry(label: str, expr, width: int) -> None:
     import sympy as sp
-    text = sp.pretty(sp.N(expr, 6), use_unicode=False, num_columns=max(width - 4, 40))
+    text = sp.pretty(sp.N(expr, 6), use_unicode=False, full_prec=False, num_columns=max(width - 4, 40))
     if "\n" not in text:
         print(f"{label} = {text}")
     else:

@@ -214,7 +214,9 @@ class Formulation:
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
     def start(self, system, t0, q0, qd0, tau) -> Workspace:
-        return self.workspace_class(self, system, t0, q0, qd0, tau)
+        """The per-simulation workspace (the plain tree one when there are no constraints)."""
+        cls = Workspace if self.constraints is None else self.workspace_class
+        return cls(self, system, t0, q0, qd0, tau)
 
 
 def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
