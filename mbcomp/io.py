@@ -906,25 +906,22 @@ def _read_initial(r: _Reader, table: dict, coords: dict | None) -> dict:
 def _read_simulation(r: _Reader, table: dict) -> dict:
     r.keys("simulation", table, SIMULATION_KEYS)
     out: dict[str, Any] = {}
-    for key in ("t_end", "rtol", "atol"):
-        if key in table:
-            x = r.number("simulation", key, table[key], positive=True)
-            if x is not BAD:
-                out[key] = x
-    if "method" in table:
-        x = r.string("simulation", "method", table["method"], METHODS)
-        if x is not BAD:
-            out["method"] = x
-    if "formulation" in table:
-        x = r.string("simulation", "formulation", table["formulation"], FORMULATIONS)
-        if x is not BAD:
-            out["formulation"] = x
-    if "n_samples" in table:
-        n = table["n_samples"]
-        if isinstance(n, bool) or not isinstance(n, int) or n < 2:
-            r.problem("simulation", "n_samples", f"must be an integer >= 2, got {_short(n)}")
+    for key, value in table.items():  # in file order
+        if key in ("t_end", "rtol", "atol"):
+            x = r.number("simulation", key, value, positive=True)
+        elif key == "method":
+            x = r.string("simulation", key, value, METHODS)
+        elif key == "formulation":
+            x = r.string("simulation", key, value, FORMULATIONS)
+        elif key == "n_samples":
+            if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+                x = r.problem("simulation", key, f"must be an integer >= 2, got {_short(value)}")
+            else:
+                x = value
         else:
-            out["n_samples"] = n
+            continue  # reported as an unknown key
+        if x is not BAD:
+            out[key] = x
     return out
 
 

@@ -164,6 +164,17 @@ class TestLoad:
         np.testing.assert_allclose([speed(x) for x in t], amplitude * w * np.cos(w * t), atol=1e-12)
         np.testing.assert_allclose([acceleration(x) for x in t], -amplitude * w ** 2 * np.sin(w * t), atol=1e-10)
 
+    def test_the_documented_example_loads_and_compiles(self, tmp_path):
+        import pathlib
+        import re
+        docs = pathlib.Path(__file__).resolve().parents[1] / "docs" / "files.md"
+        if not docs.is_file():
+            pytest.skip("docs/files.md not present")
+        block = re.search(r"```toml\n(.*?)```", docs.read_text(encoding="utf-8"), re.S).group(1)
+        model = load(write(tmp_path, block))
+        assert model.simulation["method"] == "DOP853" and list(model.simulation)[0] == "t_end"
+        assert model.compile().coords == ("alpha", "beta", "gamma")
+
     def test_library_models_load(self):
         assert len(MODELS) >= 12
         for name, path in MODELS.items():
