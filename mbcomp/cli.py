@@ -165,6 +165,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise CommandError(f"{option} must be a positive number, got {value}", EXIT_BAD_INPUT)
     progress = args.progress if args.progress is not None else sys.stderr.isatty()
 
+    if args.plot or args.animate:
+        import matplotlib
+        matplotlib.use("Agg")  # files only: no display needed
     system = compile_model(model, args.formulation)
     q0, qd0, warnings = initial_state(model, system)
     for warning in warnings:
@@ -193,8 +196,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _save_plot(result, path: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     figure = result.plot()
     figure.savefig(path, dpi=100)
