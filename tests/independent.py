@@ -11,8 +11,10 @@ a.k.a. Kane's method):
                - dV_springs/dq
 
 with ``Jv_b`` the Jacobian of body b's centre of mass and ``Jw_b`` the Jacobian of its
-angular velocity in its own frame.  ``derive(..., method="lagrange")`` obtains the same
-quantities from the Lagrangian ``L = T - V`` instead, so the oracle can check itself.
+angular velocity in its own frame, both propagated joint by joint (no differentiation of
+large expressions).  ``derive(..., method="lagrange")`` obtains the same quantities from
+Lagrange's equations with M built from differentiated positions and rotation matrices,
+so the oracle can check itself.
 
 Description format (all vectors are 3-sequences; ``inertia`` is a 3x3 matrix about the
 centre of mass in the body frame, or ``None`` for a point mass)::
@@ -268,19 +270,32 @@ class Equations:
     """
 
     coords: list[str]
-    mass_matrix: Callable[[Any], np.ndarray]
-    forcing: Callable[[Any, Any], np.ndarray]
-    kinetic: Callable[[Any, Any], float]
-    potential: Callable[[Any], float]
-    _kinematics: Callable[[Any, Any, Any], Any] = field(repr=False)
-    bodies: list[str] = field(default_factory=list)
+    bodies: list[str]
+    _evaluate: Callable[[Any, Any], tuple] = field(repr=False)
+
+    def mass_matrix(self, q: Any) -> np.ndarray:
+        """(n, n) mass matrix."""
+        return self._evaluate(q, np.zeros(len(self.coords)))[0]
+
+    def forcing(self, q: Any, qd: Any) -> np.ndarray:
+        """(n,) right-hand side F of ``M qdd = F``: gravity, springs, gyroscopic and
+        convective terms."""
+        return self._evaluate(q, qd)[1]
+
+    def kinetic(self, q: Any, qd: Any) -> float:
+        """Kinetic energy (J)."""
+        return self._evaluate(q, qd)[2]
+
+    def potential(self, q: Any) -> float:
+        """Potential energy (J): ``-sum m g . r_com`` plus spring energy."""
+        return self._evaluate(q, np.zeros(len(self.coords)))[3]
 
     def accelerations(self, q: Any, qd: Any, tau: Any = None) -> np.ndarray:
         """``qdd = M^-1 (F + tau)``."""
-        rhs = self.forcing(q, qd)
+        M, F = self._evaluate(q, qd)[:2]
         if tau is not None:
-            rhs = rhs + np.asarray(tau, dtype=float)
-        return np.linalg.solve(self.mass_matrix(q), rhs)
+            F = F + np.asarray(tau, dtype=float)
+        return np.linalg.solve(M, F)
 
     def body_state(self, body: str, q: Any, qd: Any, qdd: Any = None) -> dict[str, np.ndarray]:
         """World-frame ``position``, ``rotation``, ``velocity``, ``angular_velocity``,
@@ -289,10 +304,9 @@ class Equations:
         n = len(self.coords)
         q, qd = _as_vector(q, n), _as_vector(qd, n)
         qdd = self.accelerations(q, qd) if qdd is None else _as_vector(qdd, n)
-        values = self._kinematics(q, qd, qdd)[self.bodies.index(body)]
-        names = ("position", "rotation", "velocity", "angular_velocity", "acceleration", "angular_acceleration")
-        return {name: np.asarray(value, dtype=float).reshape(3, 3 if name == "rotation" else 1).squeeze()
-                for name, value in zip(names, values)}
+        com, R, J_com, J_w, bias_com, bias_alpha = self._evaluate(q, qd)[4][self.bodies.index(body)]
+        return {"position": com, "rotation": R, "velocity": J_com @ qd, "angular_velocity": J_w @ qd,
+                "acceleration": J_com @ qdd + bias_com, "angular_acceleration": J_w @ qdd + bias_alpha}
 
 
 def _as_vector(values: Any, n: int) -> np.ndarray:
@@ -307,16 +321,15 @@ def derive(description: dict, method: str = "virtual_power") -> Equations:
 
     ``method="virtual_power"`` projects each body's Newton-Euler equations on the
     coordinates through velocity Jacobians propagated joint by joint.
-    ``method="lagrange"`` (slower, for self-checks on small models) differentiates
-    ``L = T - V`` with T built from the derivatives of the positions and rotation
-    matrices alone, so it shares nothing with the propagated velocities.
+    ``method="lagrange"`` (slower, for self-checks) uses Lagrange's equations with
+    ``M`` built from differentiated positions and rotation matrices alone, so it shares
+    nothing with the propagated velocities (see ``_lagrange``).
     """
     coords = coordinate_names(description)
     n = len(coords)
     q = list(sp.symbols(f"q0:{n}", real=True)) if n else []
     qd = list(sp.symbols(f"u0:{n}", real=True)) if n else []
-    qdd = list(sp.symbols(f"a0:{n}", real=True)) if n else []
-    rates, accels = sp.Matrix(qd) if n else sp.zeros(0, 1), sp.Matrix(qdd) if n else sp.zeros(0, 1)
+    rates = sp.Matrix(qd) if n else sp.zeros(0, 1)
     params = _Parameters()
     frames = _frames(description, params, q, qd)
     gravity = params.vector(description.get("gravity", (0, 0, -9.81)))
@@ -338,47 +351,41 @@ def derive(description: dict, method: str = "virtual_power") -> Equations:
             - J_wb.T * (inertia * bias_alpha_b + omega_b.cross(inertia * omega_b))
         kinetic += (mass * (J_com * rates).dot(J_com * rates) + omega_b.dot(inertia * omega_b)) / 2
         potential += -mass * gravity.dot(com)
-        kinematics.append([com, frame.R, J_com * rates, frame.J_w * rates,
-                           J_com * accels + bias_com, frame.J_w * accels + frame.bias_alpha])
+        kinematics.append([com, frame.R, J_com, frame.J_w, bias_com, frame.bias_alpha])
         rigid.append((mass, inertia, com, frame.R))
 
     spring_energy, spring_force = _springs(description, frames, params, rates, n)
     potential += spring_energy
     forcing += spring_force
 
-    if method == "lagrange":
-        kinetic = _kinetic_from_positions(rigid, q, qd)
-        mass_matrix, forcing = _lagrange(kinetic, potential, q, qd)
-    elif method != "virtual_power":
+    if method not in ("virtual_power", "lagrange"):
         raise ValueError(f"unknown method {method!r}")
-    return _numeric(coords, bodies, params, (q, qd, qdd), mass_matrix, forcing, kinetic, potential, kinematics)
+    projected = _numeric(coords, bodies, params, (q, qd), mass_matrix, forcing, kinetic, potential, kinematics)
+    if method == "lagrange":
+        return _lagrange(projected, rigid, potential, q, params)
+    return projected
 
 
 def _numeric(coords, bodies, params, variables, mass_matrix, forcing, kinetic, potential, kinematics) -> Equations:
-    """Compile the symbolic results to numpy functions with the parameter values bound."""
-    q, qd, qdd = variables
+    """Compile the symbolic results into one numpy function with the parameter values
+    bound (a single common-subexpression pass shares the kinematics with the dynamics)."""
+    q, qd = variables
     n = len(coords)
     values = np.asarray(params.values, dtype=float)
-    args = [q, qd, params.symbols]
-    f_dyn = sp.lambdify(args, [mass_matrix, forcing, kinetic, potential], modules="numpy", cse=True)
-    lazy: dict[str, Callable] = {}
+    outputs = [mass_matrix, forcing, kinetic, potential] + [item for body in kinematics for item in body]
+    function = sp.lambdify([q, qd, params.symbols], outputs, modules="numpy", use_imps=False,
+                          cse=lambda exprs: sp.cse(exprs, order="none"))
+    shapes = [(3,), (3, 3), (3, n), (3, n), (3,), (3,)]
 
     def evaluate(qv, qdv):
-        M, F, T, V = f_dyn(_as_vector(qv, n), _as_vector(qdv, n), values)
-        return np.asarray(M, dtype=float).reshape(n, n), np.asarray(F, dtype=float).reshape(n), float(T), float(V)
+        out = function(_as_vector(qv, n), _as_vector(qdv, n), values)
+        M = np.asarray(out[0], dtype=float).reshape(n, n)
+        F = np.asarray(out[1], dtype=float).reshape(n)
+        body_values = [[np.asarray(v, dtype=float).reshape(shape) for v, shape in zip(out[k:k + 6], shapes)]
+                       for k in range(4, len(out), 6)]
+        return M, F, float(out[2]), float(out[3]), body_values
 
-    def K(qv, qdv, qddv):
-        if "kin" not in lazy:            # compiled on first use: only body-state checks need it
-            lazy["kin"] = sp.lambdify([q, qd, qdd, params.symbols], kinematics, modules="numpy", cse=True)
-        return lazy["kin"](qv, qdv, qddv, values)
-
-    zeros = np.zeros(n)
-    return Equations(coords,
-                     mass_matrix=lambda qv: evaluate(qv, zeros)[0],
-                     forcing=lambda qv, qdv: evaluate(qv, qdv)[1],
-                     kinetic=lambda qv, qdv: evaluate(qv, qdv)[2],
-                     potential=lambda qv: evaluate(qv, zeros)[3],
-                     _kinematics=K, bodies=bodies)
+    return Equations(coords, bodies, evaluate)
 
 
 def _springs(description: dict, frames: dict, params: _Parameters, rates: sp.Matrix, n: int):
@@ -399,29 +406,43 @@ def _springs(description: dict, frames: dict, params: _Parameters, rates: sp.Mat
     return energy, force
 
 
-def _kinetic_from_positions(rigid: list, q: list, qd: list) -> sp.Expr:
-    """T from differentiated positions and ``w_body = vee(R^T dR/dt)`` only."""
-    rates = sp.Matrix(qd)
-    kinetic = sp.Integer(0)
+def _lagrange(projected: Equations, rigid: list, potential: sp.Expr, q: list, params: _Parameters) -> Equations:
+    """Lagrange's equations ``M qdd = -dV/dq - dM/dt qd + 1/2 d(qd^T M qd)/dq``.
+
+    ``M = sum m Jr^T Jr + Jw^T I Jw`` with ``Jr = d r_com/dq`` and the columns of ``Jw``
+    from ``vee(R^T dR/dq_k)``: only first derivatives of positions and rotation matrices.
+    The derivatives of M are taken numerically by complex steps (exact to round-off, as
+    M is analytic in q), which avoids differentiating large expressions symbolically.
+    Body kinematics are taken from ``projected``.
+    """
+    n = len(q)
+    mass_matrix = sp.zeros(n, n)
     for mass, inertia, com, R in rigid:
-        velocity = com.jacobian(q) * rates
-        R_dot = sp.zeros(3, 3)
-        for qk, uk in zip(q, qd):
-            R_dot += R.diff(qk) * uk
-        W = R.T * R_dot                                     # skew-symmetric: [w_body]x
-        omega_b = sp.Matrix([W[2, 1], W[0, 2], W[1, 0]])
-        kinetic += (mass * velocity.dot(velocity) + omega_b.dot(inertia * omega_b)) / 2
-    return kinetic
+        J_r = com.jacobian(q)
+        J_w = sp.zeros(3, n)
+        for k, qk in enumerate(q):
+            W = R.T * R.diff(qk)                                # skew-symmetric: [column k]x
+            J_w[:, k] = sp.Matrix([W[2, 1], W[0, 2], W[1, 0]])
+        mass_matrix += mass * J_r.T * J_r + J_w.T * inertia * J_w
+    gradient = sp.Matrix([potential]).jacobian(q).T
+    function = sp.lambdify([q, params.symbols], [mass_matrix, gradient, potential], modules="numpy",
+                           use_imps=False, cse=lambda exprs: sp.cse(exprs, order="none"))
+    values = np.asarray(params.values, dtype=float)
+    step = 1e-30
 
+    def mass(qv):
+        return np.asarray(function(qv, values)[0], dtype=complex).reshape(n, n)
 
-def _lagrange(kinetic: sp.Expr, potential: sp.Expr, q: list, qd: list):
-    """``M = d2T/dqd2`` and ``F = dL/dq - d/dq(dT/dqd) qd`` from Lagrange's equations."""
-    if not q:
-        return sp.zeros(0, 0), sp.zeros(0, 1)
-    momentum = sp.Matrix([kinetic]).jacobian(qd).T          # dT/dqd = M qd
-    mass_matrix = momentum.jacobian(qd)
-    forcing = sp.Matrix([kinetic - potential]).jacobian(q).T - momentum.jacobian(q) * sp.Matrix(qd)
-    return mass_matrix, forcing
+    def evaluate(qv, qdv):
+        qv, qdv = _as_vector(qv, n), _as_vector(qdv, n)
+        M = mass(qv).real
+        M_dot = mass(qv + 1j * step * qdv).imag / step
+        dT_dq = np.array([qdv @ (mass(qv + 1j * step * e).imag / step) @ qdv / 2 for e in np.eye(n)])
+        _, grad_V, V = function(qv, values)
+        F = -np.asarray(grad_V, dtype=float).reshape(n) - M_dot @ qdv + dT_dq
+        return M, F, float(qdv @ M @ qdv / 2), float(V), projected._evaluate(qv, qdv)[4]
+
+    return Equations(projected.coords, projected.bodies, evaluate)
 
 
 # ----------------------------------------------------------------------------------
