@@ -18,6 +18,7 @@ FUNCTIONS = {
     "energy": ["energy"],
     "kinematics": ["kinematics"],
     "constraints": ["constraints"],
+    "contacts": ["contacts"],
 }
 
 

@@ -290,9 +290,9 @@ def _combine(nq, *terms):
     return row
 
 
-def constraint_outputs(prog: Program, kin, equations) -> None:
-    """Outputs ``"constraints"``: residual g, Jacobian rows (row-major) and acceleration bias
-    of the geometric constraint equations (point and dot), as ``constraint_set`` documents."""
+def constraint_outputs(prog: Program, kin, equations, output: str = "constraints") -> None:
+    """Output ``output``: residual g, Jacobian rows (row-major) and acceleration bias of the
+    geometric constraint equations (point and dot), as ``constraint_set`` documents."""
     from .components.primitives import DotEquation, PointEquation
     nq = kin.topology.nq
     g_out, J_out, bias_out = [], [], []
@@ -323,7 +323,7 @@ def constraint_outputs(prog: Program, kin, equations) -> None:
         g_out.append(prog.let(g))
         J_out.extend(prog.lets(row))
         bias_out.append(prog.let(bias))
-    prog.outputs["constraints"] = g_out + J_out + bias_out
+    prog.outputs[output] = g_out + J_out + bias_out
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=()) -> Program:
@@ -447,6 +447,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         kinematics += S
     prog.outputs["kinematics"] = kinematics
     constraint_outputs(prog, kin, equations)
+    constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
     prog.kin = kin
     return prog
 

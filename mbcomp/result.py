@@ -12,7 +12,8 @@ from .system import Energy
 
 @dataclass
 class Event:
-    """An impact: time (s), contact names and impulses (N s, positive pushing apart)."""
+    """An impact on one contact: time (s), contact name, impulse (N s, positive pushing
+    apart) and the kinetic energy the whole impact lost (J)."""
 
     time: float
     contact: Any
@@ -36,6 +37,7 @@ class Result:
     events: list = field(default_factory=list)
     tau: Any = None
     offsets: dict = field(default_factory=dict, repr=False)
+    persistent_contacts: list = field(default_factory=list)
     _reactions: dict | None = field(default=None, repr=False)
 
     @property

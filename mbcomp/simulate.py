@@ -9,8 +9,11 @@ import numpy as np
 from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.ivp import METHODS
 
+from scipy.optimize import brentq
+
 from .errors import ModelError, SimulationError
-from .result import Result
+from .impact import GAP_TOLERANCE, contact_values, solve_impact
+from .result import Event, Result
 
 
 class _Progress:
@@ -78,6 +81,24 @@ class _Recorder:
         self.q.append(np.array(q, dtype=float))
         self.qd.append(np.array(qd, dtype=float))
 
+    def record_until(self, workspace, solver, dense, t_old, t_stop, q_stop, qd_stop):
+        """Samples up to an event at ``t_stop`` (the state there is given)."""
+        if self.t_eval is None:
+            self.add(t_stop, q_stop, qd_stop)
+            return
+        while self.next < len(self.t_eval) and self.t_eval[self.next] < t_stop:
+            ts = self.t_eval[self.next]
+            self.add(ts, *workspace.full_state(ts, dense(ts)))
+            self.next += 1
+
+    def add_event_state(self, t, q, qd):
+        """The state just after an impact (every-step output only)."""
+        if self.t_eval is None:
+            self.add(t, q, qd)
+        elif self.next < len(self.t_eval) and self.t_eval[self.next] == t:
+            self.add(t, q, qd)
+            self.next += 1
+
     def record_step(self, workspace, solver, t_old, t_new):
         if self.t_eval is None:
             q, qd = workspace.full_state(t_new, solver.y)
@@ -94,9 +115,83 @@ class _Recorder:
             self.next += 1
 
 
+class _ContactWatch:
+    """Watches contact gaps between steps: locates closings, applies impacts, and turns
+    contacts that keep closing with vanishing speed into persistent constraints (released
+    when their reaction would pull)."""
+
+    def __init__(self, system, rest_speed: float, offsets):
+        self.system, self.rest_speed, self.offsets = system, rest_speed, offsets
+        self.names = [c.name for c in system.topology.contacts]
+        self.persistent: tuple = ()
+        self.events: list = []
+
+    def gaps(self, q, qd):
+        return contact_values(self.system, q, qd)
+
+    def check_initial(self, q, qd):
+        values = self.gaps(q, qd)
+        for i, gap in enumerate(values.g):
+            if gap < -GAP_TOLERANCE:
+                raise SimulationError(f"initial state penetrates the contact by {-gap:.3g} m (gap {gap:.3g} m); "
+                                      f"move the body out of contact", self.system.topology.contacts[i])
+        return [i for i in range(len(values.g)) if values.g[i] < GAP_TOLERANCE and values.J[i] @ qd < 0]
+
+    def locate(self, workspace, dense, t_old, t_new, g_old, g_new):
+        """Earliest time in (t_old, t_new] at which a free contact's gap closes, or None."""
+        earliest = None
+        for i in range(len(self.names)):
+            if i in self.persistent or not (g_new[i] < 0.0 <= g_old[i] or g_new[i] < -GAP_TOLERANCE < g_old[i]):
+                continue
+            def gap(s, i=i):
+                q, qd = workspace.full_state(s, dense(s))
+                return self.gaps(q, qd).g[i]
+            a = t_old
+            if gap(a) <= 0.0:
+                te = t_old
+            else:
+                te = brentq(gap, a, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+            if earliest is None or te < earliest:
+                earliest = te
+        return earliest
+
+    def impact(self, t, q, qd):
+        """Apply the impact of every contact that is closed and closing at ``(t, q, qd)``."""
+        values = self.gaps(q, qd)
+        active = [i for i in range(len(self.names)) if i not in self.persistent
+                  and values.g[i] < GAP_TOLERANCE + 1e-7 and values.J[i] @ qd < 0]
+        if not active:
+            return qd, False
+        result = solve_impact(self.system, t, q, qd, active, offsets=self.offsets, persistent=self.persistent)
+        qd_plus = result.qd
+        after = self.gaps(q, qd_plus)
+        resting = [i for i in active if abs(after.J[i] @ qd_plus) < self.rest_speed]
+        if resting:
+            # Coming to rest: close these contacts for good (a plastic impact on them).
+            self.persistent = tuple(sorted(set(self.persistent) | set(resting)))
+            result2 = solve_impact(self.system, t, q, qd_plus, [], offsets=self.offsets, persistent=self.persistent)
+            qd_plus = result2.qd
+        for name, impulse in result.impulses.items():
+            self.events.append(Event(time=float(t), contact=name, impulse=impulse, energy_loss=result.energy_loss))
+        return qd_plus, True
+
+    def release(self, system, workspace, t, q, qd, tau):
+        """Persistent contacts whose reaction would pull are opened again."""
+        if not self.persistent:
+            return False
+        formulation = system._formulation
+        _, lam = formulation.solve(system, t, q, qd, system._tau(tau, t, q, qd), self.offsets, self.persistent)
+        contact_lam = lam[len(lam) - len(self.persistent):]
+        keep = tuple(i for i, value in zip(self.persistent, contact_lam) if value >= 0.0)
+        if keep == self.persistent:
+            return False
+        self.persistent = keep
+        return True
+
+
 def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
-             max_step: float = np.inf) -> Result:
+             max_step: float = np.inf, rest_speed: float = 1e-4) -> Result:
     """Integrate ``system`` from ``(q0, qd0)`` at t = 0 to ``t_end``; see ``System.simulate``."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
     cls = solver_class(method)
@@ -107,7 +202,10 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     formulation = system._formulation
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
-    workspace = formulation.start(system, 0.0, q0, qd0, tau)
+    watch = _ContactWatch(system, rest_speed, offsets) if system.topology.contacts else None
+    if watch is not None and watch.check_initial(q0, qd0):
+        qd0, _ = watch.impact(0.0, q0, qd0)
+    workspace = formulation.start(system, 0.0, q0, qd0, tau, watch.persistent if watch else ())
     bar = _Progress(t_end, progress)
     recorder = _Recorder(t_eval)
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
@@ -120,11 +218,15 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     def make_solver(t0, y0):
         return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step)
 
+    def add_counts(solver):
+        for key in ("nfev", "njev", "nlu"):
+            counts[key] += getattr(solver, key, 0)
+
     started = time.perf_counter()
-    t = 0.0
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
+    gaps_old = watch.gaps(q0, qd0).g if watch else None
     try:
         solver = make_solver(0.0, workspace.y0)
         while True:
@@ -133,22 +235,50 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                 raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
             counts["steps"] += 1
             t_old, t = solver.t_old, solver.t
-            recorder.record_step(workspace, solver, t_old, t)
+            restart = None
+            if watch is not None:
+                q, qd = workspace.full_state(t, solver.y)
+                gaps_new = watch.gaps(q, qd).g
+                dense = solver.dense_output()
+                te = watch.locate(workspace, dense, t_old, t, gaps_old, gaps_new)
+                if te is not None:
+                    t = te
+                    q, qd = workspace.full_state(te, dense(te) if te != solver.t else solver.y)
+                    recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
+                    qd, changed = watch.impact(te, q, qd)
+                    recorder.add_event_state(te, q, qd)
+                    restart = (te, q, qd)
+                elif watch.release(system, workspace, t, q, qd, tau):
+                    recorder.record_step(workspace, solver, t_old, t)
+                    restart = (t, q, qd)
+                else:
+                    recorder.record_step(workspace, solver, t_old, t)
+                gaps_old = watch.gaps(*(restart[1:] if restart else (q, qd))).g
+            else:
+                recorder.record_step(workspace, solver, t_old, t)
             bar.update(t)
-            if solver.status == "finished":
+            if restart is None and solver.status == "finished":
                 break
-            corrected = workspace.after_step(t, solver.y)
-            if corrected is not None:
-                for key in ("nfev", "njev", "nlu"):
-                    counts[key] += getattr(solver, key, 0)
-                counts["restarts"] += 1
-                solver = make_solver(t, corrected)
+            if restart is None:
+                corrected = workspace.after_step(t, solver.y)
+                if corrected is not None:
+                    add_counts(solver)
+                    counts["restarts"] += 1
+                    solver = make_solver(t, corrected)
+                continue
+            add_counts(solver)
+            counts["restarts"] += 1
+            t_restart, q_r, qd_r = restart
+            if t_restart >= t_end:
+                break
+            workspace = formulation.start(system, t_restart, q_r, qd_r, tau, watch.persistent)
+            workspace.offsets = offsets
+            solver = make_solver(t_restart, workspace.y0)
     except SimulationError as exc:
         raise SimulationError(f"simulation stopped: {exc}") from None
     finally:
         bar.close()
-    for key in ("nfev", "njev", "nlu"):
-        counts[key] += getattr(solver, key, 0)
+    add_counts(solver)
     wall = time.perf_counter() - started
     q = np.array(recorder.q).reshape(-1, system.nq)
     qd = np.array(recorder.qd).reshape(-1, system.nq)
@@ -157,4 +287,6 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     stats = {"method": getattr(cls, "__name__", str(method)), **counts, "status": 0,
              "message": "The solver successfully reached the end of the integration interval.",
              "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
-    return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets)
+    events = watch.events if watch else []
+    return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
+                  events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [])

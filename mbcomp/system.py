@@ -82,7 +82,8 @@ class CompiledModel:
         nq, nb = self.topology.nq, len(self.topology.bodies)
         ng = len(self.geometric_rows)
         self.sizes = {"dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2)}
+                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
+                      "contacts": len(self.topology.contacts) * (nq + 2)}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -430,12 +431,40 @@ class System:
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
-                 max_step: float = np.inf):
-        """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``."""
+                 max_step: float = np.inf, rest_speed: float = 1e-4):
+        """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
+
+        ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
+        contacts are watched between steps and impacts applied where gaps close;
+        a contact closing slower than ``rest_speed`` (m/s) stays closed until its
+        reaction would pull.
+        """
         from .simulate import simulate
         system = self.with_parameters(parameters)
         return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
-                        tau=tau, progress=progress, max_step=max_step)
+                        tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed)
+
+    def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
+        """Newton's impact law with ``contacts`` active (names or objects; default: every
+        contact that is closed and closing), consistent with every other constraint.
+
+        Returns ``.qd`` after the impact, ``.impulses`` ``{contact: N s}`` (positive pushes
+        apart) and ``.energy_loss`` (J).  ``restitution`` overrides the contacts' own.
+        """
+        from .impact import GAP_TOLERANCE, contact_indices, contact_values, solve_impact
+        q, qd = self.state_vector(q), self._velocity(qd)
+        indices = contact_indices(self, contacts)
+        if contacts is None:
+            values = contact_values(self, q, qd)
+            indices = [i for i in indices if values.g[i] < GAP_TOLERANCE and values.J[i] @ qd < 0]
+        return solve_impact(self, t, q, qd, indices, restitution)
+
+    def gaps(self, q: Any) -> dict[str, float]:
+        """``{contact: gap}`` (m), negative when penetrated."""
+        from .impact import contact_values
+        q = self.state_vector(q)
+        values = contact_values(self, q, np.zeros(self.nq))
+        return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
     # -- display ----------------------------------------------------------------------------------
     def equations(self):

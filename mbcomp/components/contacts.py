@@ -33,3 +33,11 @@ class Contact(Component):
 
     def references(self):
         return {"body": self.body}
+
+    def structure(self):
+        return (self.normal,)
+
+    def _gap_equation(self, ground):
+        """The gap as a point equation: ``normal . (p - origin)`` (m), world-fixed normal."""
+        from .primitives import PointEquation
+        return PointEquation(ground, self.normal, ground, f"{self.name}.origin", self.body, f"{self.name}.point", "gap")

@@ -6,6 +6,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from ..constraint_set import ConstraintValues
 from ..errors import ModelError, SimulationError
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
@@ -37,8 +38,9 @@ class Workspace:
     ``after_step(t, y) -> y or None`` (a corrected state, e.g. a projection, or None).
     """
 
-    def __init__(self, formulation, system, t0: float, q0: np.ndarray, qd0: np.ndarray, tau):
+    def __init__(self, formulation, system, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts=()):
         self.formulation, self.system, self.tau = formulation, system, tau
+        self.contacts = tuple(contacts)
         self.n = system.nq
         self.offsets = formulation.motor_offsets(q0, t0)
         self.y0 = np.concatenate((q0, qd0))
@@ -46,7 +48,7 @@ class Workspace:
     def rhs(self, t, y):
         q, qd = y[: self.n], y[self.n:]
         qdd = self.formulation.accelerations(self.system, t, q, qd, self.system._tau(self.tau, t, q, qd),
-                                             offsets=self.offsets)
+                                             offsets=self.offsets, contacts=self.contacts)
         return np.concatenate((qd, qdd))
 
     def full_state(self, t, y):
@@ -86,8 +88,27 @@ class Formulation:
         self.constraints = compiled.constraint_set
 
     # -- numeric pieces -----------------------------------------------------------------------
-    def constraint_values(self, system, t, q, qd, offsets=None):
-        return self.constraints.evaluate(system, q, qd, t, offsets)
+    def constraint_values(self, system, t, q, qd, offsets=None, contacts=()):
+        """Constraint equations at a state, with the gap rows of closed (persistent)
+        ``contacts`` appended after the model's own."""
+        nq = len(q)
+        if self.constraints is not None:
+            cv = self.constraints.evaluate(system, q, qd, t, offsets)
+        else:
+            cv = ConstraintValues(np.zeros(0), np.zeros((0, nq)), np.zeros(0), np.zeros(0))
+        if contacts:
+            from ..impact import contact_values
+            ck = contact_values(system, q, qd)
+            idx = list(contacts)
+            cv = ConstraintValues(np.concatenate((cv.g, ck.g[idx])), np.vstack((cv.J, ck.J[idx])),
+                                  np.concatenate((cv.g_t, ck.g_t[idx])), np.concatenate((cv.bias, ck.bias[idx])))
+        return cv
+
+    def row_names(self, rows, contacts=()) -> list[str]:
+        """Names of the constraints (or contacts) owning the given equation rows."""
+        names = [] if self.constraints is None else list(self.constraints.owner)
+        names += [self.compiled.topology.contacts[i].name for i in contacts]
+        return sorted({names[r] for r in rows if r < len(names)})
 
     def motor_offsets(self, q0: np.ndarray, t0: float) -> dict:
         """Start values of speed motors, so that their coordinate is ``q0 + speed (t - t0)``."""
@@ -116,7 +137,7 @@ class Formulation:
         system._check_finite(f, "generalised forces", q)
         return M, f
 
-    def solve_constrained(self, system, M, f, J, rhs, q, t):
+    def solve_constrained(self, system, M, f, J, rhs, q, t, contacts=()):
         """``(qdd, lam)`` of the KKT system on the independent rows of ``J`` (lam 0 elsewhere)."""
         factor = self._factor(system, M, q)
         Minv_f = scipy.linalg.cho_solve(factor, f, check_finite=False)
@@ -131,34 +152,34 @@ class Formulation:
             lam_s = scipy.linalg.solve(A, rhs[rows] - Js @ Minv_f, assume_a="pos", check_finite=False)
         except (np.linalg.LinAlgError, ValueError):
             raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
-                                  f"{self.constraints.names_of_rows(rows)}") from None
+                                  f"{self.row_names(rows, contacts)}") from None
         lam[rows] = lam_s
         return Minv_f + Minv_JT @ lam_s, lam
 
-    def check_dead_point(self, J, qd, t, q):
+    def check_dead_point(self, J, qd, t, q, contacts=()):
         """At rest on a configuration where the Jacobian lost rank the motion is not
         determined (a bifurcation): raise naming the constraints involved."""
         rows = independent_rows(J)
         nominal = self.nominal_rank
-        if nominal is not None and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
+        if nominal is not None and not contacts and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
             raise SimulationError(
                 f"the constraint Jacobian loses rank at q = {np.round(q, 6).tolist()} (t = {t:g}) with the "
                 f"mechanism at rest: a dead point/bifurcation where the motion is not determined; constraints "
-                f"involved: {self.constraints.names_of_rows(lost)}")
+                f"involved: {self.row_names(lost, contacts)}")
 
     nominal_rank: int | None = None
 
     # -- the public operations ---------------------------------------------------------------------
-    def accelerations(self, system, t, q, qd, tau, offsets=None) -> np.ndarray:
-        return self.solve(system, t, q, qd, tau, offsets)[0]
+    def accelerations(self, system, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
+        return self.solve(system, t, q, qd, tau, offsets, contacts=contacts)[0]
 
     def reactions(self, system, t, q, qd, tau, offsets=None) -> dict[str, np.ndarray]:
         if self.constraints is None:
             return {}
         return self.constraints.split_reactions(self.solve(system, t, q, qd, tau, offsets)[1])
 
-    def solve(self, system, t, q, qd, tau, offsets=None):
+    def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
         return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
 
@@ -213,10 +234,10 @@ class Formulation:
         g = self.constraint_values(system, t, q, np.zeros_like(q), offsets).g
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
-    def start(self, system, t0, q0, qd0, tau) -> Workspace:
+    def start(self, system, t0, q0, qd0, tau, contacts=()) -> Workspace:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
-        cls = Workspace if self.constraints is None else self.workspace_class
-        return cls(self, system, t0, q0, qd0, tau)
+        cls = Workspace if self.constraints is None and not contacts else self.workspace_class
+        return cls(self, system, t0, q0, qd0, tau, contacts)
 
 
 def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:

@@ -52,13 +52,13 @@ class DaeFormulation(Formulation):
         self.baumgarte = (alpha, beta)
         self.projection = bool(options.get("projection", False))
 
-    def solve(self, system, t, q, qd, tau, offsets=None):
-        if self.constraints is None:
+    def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
+        if self.constraints is None and not contacts:
             return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
         M, f = self._tree(system, t, q, qd, tau)
-        cv = self.constraint_values(system, t, q, qd, offsets)
+        cv = self.constraint_values(system, t, q, qd, offsets, contacts)
         alpha, beta = self.baumgarte
         gdot = cv.J @ qd + cv.g_t
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
-        self.check_dead_point(cv.J, qd, t, q)
-        return self.solve_constrained(system, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t)
+        self.check_dead_point(cv.J, qd, t, q, contacts)
+        return self.solve_constrained(system, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t, contacts)

@@ -27,14 +27,14 @@ def partition(J: np.ndarray):
 class LagrangeWorkspace(Workspace):
     """State ``[q_ind, qd_ind]``; dependent coordinates by warm-started Newton."""
 
-    def __init__(self, formulation, system, t0, q0, qd0, tau):
-        super().__init__(formulation, system, t0, q0, qd0, tau)
+    def __init__(self, formulation, system, t0, q0, qd0, tau, contacts=()):
+        super().__init__(formulation, system, t0, q0, qd0, tau, contacts)
         self.q = q0.copy()
         self.choose(t0, q0)
         self.y0 = np.concatenate((q0[self.ind], qd0[self.ind]))
 
     def choose(self, t, q):
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets)
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
         self.rows = independent_rows(cv.J)
         self.dep, self.ind = partition(cv.J[self.rows])
 
@@ -44,7 +44,7 @@ class LagrangeWorkspace(Workspace):
         q[self.ind] = qi
         zero = np.zeros_like(q)
         for _ in range(25):
-            cv = self.formulation.constraint_values(self.system, t, q, zero, self.offsets)
+            cv = self.formulation.constraint_values(self.system, t, q, zero, self.offsets, self.contacts)
             g = cv.g[self.rows]
             if float(np.max(np.abs(g), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
@@ -52,11 +52,11 @@ class LagrangeWorkspace(Workspace):
                 q[self.dep] -= np.linalg.solve(cv.J[np.ix_(self.rows, self.dep)], g)
             except np.linalg.LinAlgError:
                 raise SimulationError(f"dependent coordinates are singular at t = {t:g}: constraints "
-                                      f"{self.formulation.constraints.names_of_rows(self.rows)}") from None
+                                      f"{self.formulation.row_names(self.rows, self.contacts)}") from None
         else:
             raise SimulationError(f"dependent coordinates did not converge at t = {t:g} (residual "
                                   f"{np.max(np.abs(g)):.3g}): constraints "
-                                  f"{self.formulation.constraints.names_of_rows(self.rows)}")
+                                  f"{self.formulation.row_names(self.rows, self.contacts)}")
         self.q = q
         return q, cv
 
@@ -74,14 +74,15 @@ class LagrangeWorkspace(Workspace):
     def rhs(self, t, y):
         q, qd = self.full_state(t, y)
         tau = self.system._tau(self.tau, t, q, qd)
-        qdd, _ = self.formulation.solve(self.system, t, q, qd, tau, self.offsets, (self.rows, self.dep, self.ind))
+        qdd, _ = self.formulation.solve(self.system, t, q, qd, tau, self.offsets, self.contacts,
+                                        (self.rows, self.dep, self.ind))
         return np.concatenate((qd[self.ind], qdd[self.ind]))
 
     def after_step(self, t, y):
         if not len(self.dep):
             return None
         q, qd = self.full_state(t, y)
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets)
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
         condition = np.linalg.cond(cv.J[np.ix_(self.rows, self.dep)])
         if condition < REPARTITION_CONDITION:
             return None
@@ -108,13 +109,13 @@ class LagrangeFormulation(Formulation):
     name = "lagrange"
     workspace_class = LagrangeWorkspace
 
-    def solve(self, system, t, q, qd, tau, offsets=None, partition_hint=None):
-        if self.constraints is None:
+    def solve(self, system, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None):
+        if self.constraints is None and not contacts:
             return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
         M, f = self._tree(system, t, q, qd, tau)
-        cv = self.constraint_values(system, t, q, qd, offsets)
+        cv = self.constraint_values(system, t, q, qd, offsets, contacts)
         if partition_hint is None:
-            self.check_dead_point(cv.J, qd, t, q)
+            self.check_dead_point(cv.J, qd, t, q, contacts)
             rows = independent_rows(cv.J)
             dep, ind = partition(cv.J[rows])
         else:
@@ -128,7 +129,7 @@ class LagrangeFormulation(Formulation):
             X = np.linalg.solve(Jd, np.column_stack((J[:, ind], cv.bias[rows])))
         except np.linalg.LinAlgError:
             raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
-                                  f"{self.constraints.names_of_rows(rows)}") from None
+                                  f"{self.row_names(rows, contacts)}") from None
         B = np.zeros((len(q), len(ind)))
         B[ind, np.arange(len(ind))] = 1.0
         B[dep] = -X[:, :-1]
