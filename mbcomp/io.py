@@ -818,13 +818,37 @@ def _read_force(r: _Reader, name: str, label: str, table: dict, bodies: dict, jo
         value = got("value", lambda v: _time_input(r, label, "value", v, owner, vector=False))
         if joint is BAD or value is BAD:
             return None
+        size = len(value) if isinstance(value, (tuple, TimeVector)) else 1
+        n_coords = _coordinate_count(joints.get(joint))
+        if n_coords is not None and size != n_coords:
+            r.problem(label, "value", f"has {size} entr{'y' if size == 1 else 'ies'}, joint {joint!r} has "
+                      f"{n_coords} coordinate(s)")
+            return None
         return _construct(r, label, JointTorque, name, joint, value=value)
+    joint = _one_dof(r, label, joint, joints, "a torsion spring")
     stiffness = got("stiffness", lambda v: r.number(label, "stiffness", v, nonnegative=True))
     rest = got("rest", lambda v: r.number(label, "rest", v), 0.0)
     damping = got("damping", lambda v: r.number(label, "damping", v, nonnegative=True), 0.0)
     if BAD in (joint, stiffness, rest, damping):
         return None
     return _construct(r, label, TorsionSpring, name, joint, stiffness=stiffness, rest=rest, damping=damping)
+
+
+def _coordinate_count(joint: Any) -> int | None:
+    """Coordinates of a joint read from the file (None when it failed to read)."""
+    return joint.n_coords if hasattr(joint, "n_coords") else None
+
+
+def _one_dof(r: _Reader, label: str, joint: Any, joints: dict, what: str) -> Any:
+    """``joint`` unless it is known to have other than one coordinate."""
+    if joint is BAD:
+        return BAD
+    n_coords = _coordinate_count(joints.get(joint))
+    if n_coords is not None and n_coords != 1:
+        kind = type(joints[joint]).__name__.lower()
+        return r.problem(label, "joint", f"{what} needs a 1-DOF joint; {joint!r} is a {kind} joint with "
+                         f"{n_coords} coordinate(s)")
+    return joint
 
 
 def _read_constraint(r: _Reader, name: str, label: str, table: dict, bodies: dict, joints: dict):
@@ -846,6 +870,7 @@ def _read_constraint(r: _Reader, name: str, label: str, table: dict, bodies: dic
         return _construct(r, label, Slider, name, body, point=point, origin=origin, axis=axis)
     r.keys(label, table, CONSTRAINT_KEYS[kind], ("joint",))
     joint = r.reference(label, "joint", table["joint"], joints, "joint") if "joint" in table else BAD
+    joint = _one_dof(r, label, joint, joints, "a motor")
     if ("speed" in table) == ("position" in table):
         r.problem(label, None, "a motor needs exactly one of speed (rad/s or m/s) or position (an expression of t)")
         return None

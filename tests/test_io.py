@@ -129,7 +129,7 @@ class TestLoad:
         assert model.initial == {"q": {}, "qd": {}} and model.simulation == {}
 
     def test_time_inputs_reach_the_system(self, tmp_path):
-        # a 2 kg block pushed along x by F = 3 t + sin(t) from the file: x'' = F / m
+        # a 2 kg block pushed along x by F = 3 t + sin(t) and a joint force 0.5 t^2: x'' = F / m
         path = write(tmp_path, """
             gravity = [0.0, 0.0, 0.0]
             [parameters]
@@ -145,12 +145,17 @@ class TestLoad:
             type = "force"
             body = "block"
             force = ["k*t + sin(t)", 0.0, 0.0]
+            [forces.drive]
+            type = "joint_torque"
+            joint = "slide"
+            value = "0.5*t**2"
             """)
         model = load(path)
         assert isinstance(model["push"].force, TimeVector)
         system = model.compile()
         for t in (0.0, 0.7, 2.0):
-            assert system.accelerations([0.0], [0.0], t=t)[0] == pytest.approx((3 * t + math.sin(t)) / 2, rel=1e-12)
+            expected = (3 * t + math.sin(t) + 0.5 * t ** 2) / 2
+            assert system.accelerations([0.0], [0.0], t=t)[0] == pytest.approx(expected, rel=1e-12)
 
     def test_motor_position_is_a_callable_of_t_with_exact_derivatives(self, tmp_path):
         model = load(MODELS["double_pendulum_motor"])
@@ -308,6 +313,11 @@ BROKEN = {
                    ["[constraints.m]: a motor needs exactly one of speed"]),
     "motor_expression": ("[bodies.b]\nmass = 1.0\n" + JOINT + "[constraints.m]\ntype = \"motor\"\njoint = \"j\"\nposition = \"open('x')\"\n",
                          ["[constraints.m] position: ", "calling open is not allowed"]),
+    "motor_on_spherical": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('"revolute"', '"spherical"').replace('axis = "x"', 'sequence = "xy"')
+                           + "[constraints.m]\ntype = \"motor\"\njoint = \"j\"\nspeed = 1.0\n",
+                           ["[constraints.m] joint: a motor needs a 1-DOF joint; 'j' is a spherical joint with 2 coordinate(s)"]),
+    "torque_size": ("[bodies.b]\nmass = 1.0\n" + JOINT + "[forces.tq]\ntype = \"joint_torque\"\njoint = \"j\"\nvalue = [1.0, \"sin(t)\"]\n",
+                    ["[forces.tq] value: has 2 entries, joint 'j' has 1 coordinate(s)"]),
     "restitution_range": ("[bodies.b]\nmass = 1.0\n" + JOINT + "[contacts.c]\nbody = \"b\"\nnormal = \"z\"\nrestitution = 1.5\n",
                           ["[contacts.c] restitution: must lie in [0, 1], got 1.5"]),
     "duplicate_name": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace("[joints.j]", "[joints.b]"),
