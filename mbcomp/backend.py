@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sysconfig
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +112,10 @@ def build_c_library(source: str, key: str) -> Path | None:
         cmd = [compiler, "-O1", "-shared", "-fPIC", "-fno-math-errno", str(src), "-o", str(out), "-lm"]
         try:
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+        except subprocess.CalledProcessError as exc:
+            warnings.warn(f"mbcomp: the C compiler failed, using the Python backend: {exc.stderr.decode()[-2000:]}",
+                          RuntimeWarning, stacklevel=2)
+            return None
         except (OSError, subprocess.SubprocessError):
             return None
         try:

@@ -13,6 +13,7 @@ from scipy.optimize import brentq
 
 from .errors import ModelError, SimulationError
 from .impact import GAP_TOLERANCE, contact_values, solve_impact
+from .integrators import run_compiled, why_not_compiled
 from .result import Event, Result
 
 
@@ -191,14 +192,33 @@ class _ContactWatch:
 
 def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
-             max_step: float = np.inf, rest_speed: float = 1e-4) -> Result:
+             max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
+             dt: float | None = None) -> Result:
     """Integrate ``system`` from ``(q0, qd0)`` at t = 0 to ``t_end``; see ``System.simulate``."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
-    cls = solver_class(method)
     q0 = system.state_vector(q0, "q0")
     qd0 = system._velocity(qd0)
     if tau is not None and not callable(tau):
         system._tau(tau, 0.0, q0, qd0)
+    if integrator not in ("auto", "compiled", "scipy"):
+        raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
+    if not (max_step > 0):
+        raise ModelError("simulate", f"max_step must be positive, got {max_step}")
+    reason = why_not_compiled(system, method, tau) if integrator != "scipy" else "integrator='scipy'"
+    if method == "RK4" and reason is not None:
+        raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
+    if reason is None and not progress:
+        times, values, counts, wall = run_compiled(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol,
+                                                   t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
+        n = system.nq
+        stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
+                 "status": 0, "message": "The solver successfully reached the end of the integration interval.",
+                 "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
+        return Result(system=system, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
+                      qd=values[:, n:].copy(), stats=stats, tau=tau)
+    if integrator == "compiled":
+        raise ModelError("simulate", f"integrator='compiled' is not possible: {reason or 'progress=True'}")
+    cls = solver_class(method)
     formulation = system._formulation
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
@@ -284,7 +304,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     qd = np.array(recorder.qd).reshape(-1, system.nq)
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
-    stats = {"method": getattr(cls, "__name__", str(method)), **counts, "status": 0,
+    stats = {"method": getattr(cls, "__name__", str(method)), "integrator": "scipy", **counts, "status": 0,
              "message": "The solver successfully reached the end of the integration interval.",
              "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
     events = watch.events if watch else []

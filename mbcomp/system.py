@@ -109,7 +109,9 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
-            source = codegen.c_source(self.program, FUNCTIONS) + codegen.c_accelerations(self.topology.nq)
+            from .integrators import c_integrators
+            source = (codegen.c_source(self.program, FUNCTIONS) + codegen.c_accelerations(self.topology.nq)
+                      + c_integrators(self.topology.nq))
             path = build_c_library(source, self.key if cache else self.key + f"-{id(self)}")
             if path is not None:
                 return CFunctions(path, self.sizes)
@@ -431,18 +433,23 @@ class System:
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
-                 max_step: float = np.inf, rest_speed: float = 1e-4):
+                 max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
+                 dt: float | None = None):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
         contacts are watched between steps and impacts applied where gaps close;
         a contact closing slower than ``rest_speed`` (m/s) stays closed until its
-        reaction would pull.
+        reaction would pull.  ``integrator="auto"`` runs ``"DOP853"`` (and the fixed-step
+        ``"RK4"`` with step ``dt``) entirely in compiled code when the model allows it
+        (C backend, a tree without constraints, contacts or callable inputs); ``"scipy"``
+        forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
         return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
-                        tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed)
+                        tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed,
+                        integrator=integrator, dt=dt)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every

@@ -1,0 +1,374 @@
+"""Integration loops compiled with the model: DOP853 (adaptive, dense output) and RK4.
+
+The C source is generated next to the model's code so that the right-hand side is a
+direct C call: no Python between steps.  DOP853 follows scipy's implementation step
+for step (same tableau, error norm, step-size control and dense output; Hairer,
+Norsett & Wanner, Solving ODEs I, II.5), so results match ``solve_ivp`` to rounding.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as dop
+
+#: Status codes returned by the compiled loops.
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE = 0, 1, -1, -2, -3
+
+
+def _array(name: str, values) -> str:
+    flat = ", ".join(repr(float(v)) for v in np.ravel(values))
+    shape = "".join(f"[{s}]" for s in np.shape(values))
+    return f"static const double {name}{shape} = {{{flat}}};"
+
+
+def c_integrators(nq: int) -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree of ``nq`` coordinates."""
+    A = dop.A[:16, :16]
+    return "\n".join([
+        "#include <stdlib.h>",
+        "#include <string.h>",
+        "#include <float.h>",
+        f"#define NY {2 * nq}",
+        f"#define NWORK {nq * (nq + 1) // 2 + nq}",
+        _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
+        _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
+        _C_BODY,
+    ])
+
+
+_C_BODY = r"""
+static double dummy_input[1];
+
+/* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status. */
+static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+    (void)t;
+    for (int i = 0; i < NY / 2; ++i) f[i] = y[NY / 2 + i];
+    return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+}
+
+static int all_finite(const double *v, int n) {
+    for (int i = 0; i < n; ++i) if (!(fabs(v[i]) <= DBL_MAX)) return 0;
+    return 1;
+}
+
+static double rms(const double *v, int n) {
+    double s = 0.0;
+    for (int i = 0; i < n; ++i) s += v[i] * v[i];
+    return sqrt(s / n);
+}
+
+/* scipy's select_initial_step (order 7). */
+static double initial_step(double t0, const double *y0, const double *f0, double t_end, double max_step,
+                           double rtol, double atol, const double *p, const double *tau, double *work,
+                           double *y1, double *f1, long *nfev) {
+    double scaled[NY], d0, d1, d2, h0, h1;
+    for (int i = 0; i < NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
+    d0 = rms(scaled, NY);
+    for (int i = 0; i < NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
+    d1 = rms(scaled, NY);
+    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > t_end - t0) h0 = t_end - t0;
+    for (int i = 0; i < NY; ++i) y1[i] = y0[i] + h0 * f0[i];
+    rhs(t0 + h0, y1, f1, p, tau, work);
+    ++*nfev;
+    for (int i = 0; i < NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
+    d2 = rms(scaled, NY) / h0;
+    if (d1 <= 1e-15 && d2 <= 1e-15) {
+        h1 = h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6;
+    } else {
+        h1 = pow(0.01 / (d1 > d2 ? d1 : d2), 1.0 / 8.0);
+    }
+    double h = 100 * h0 < h1 ? 100 * h0 : h1;
+    if (h > t_end - t0) h = t_end - t0;
+    return h < max_step ? h : max_step;
+}
+
+/*
+ * Adaptive DOP853 from state[0] = t to t_end.  state[1] = h (<= 0: choose one).
+ * y (NY) and f (NY, the derivative at y; computed when state[1] <= 0) are updated in place.
+ * Output: dense values at t_out[*i_out .. n_out) into y_out (rows of NY), or, when
+ * n_out == 0, every accepted step into t_steps / y_steps (capacity cap, count *n_steps).
+ * counts: [nfev, accepted, rejected].  Returns FINISHED (0), BUFFER_FULL (1, resume by
+ * calling again), STEP_TOO_SMALL (-1), SINGULAR (-2) or NOT_FINITE (-3).
+ */
+int dop853_run(const double *p, const double *tau, double *state, double *y, double *f, double t_end,
+               double rtol, double atol, double max_step, const double *t_out, long n_out, long *i_out,
+               double *y_out, double *t_steps, double *y_steps, long cap, long *n_steps, long *counts) {
+    double *K = malloc(sizeof(double) * 16 * NY);
+    double *work = malloc(sizeof(double) * NWORK);
+    double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
+    double *F = malloc(sizeof(double) * 7 * NY);
+    int status = FINISHED_CODE;
+    double t = state[0], h_abs = state[1];
+    if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
+    if (h_abs <= 0) {
+        if (rhs(t, y, f, p, tau, work)) { status = -2; goto done; }
+        counts[0] += 1;
+        h_abs = initial_step(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
+    }
+    while (t < t_end) {
+        if (n_out == 0 && *n_steps >= cap) { status = 1; goto done; }
+        double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
+        if (h_abs > max_step) h_abs = max_step;
+        else if (h_abs < min_step) h_abs = min_step;
+        int rejected = 0;
+        double h, t_new, err;
+        for (;;) {
+            if (h_abs < min_step) { status = -1; goto done; }
+            t_new = t + h_abs;
+            if (t_new > t_end) t_new = t_end;
+            h = t_new - t;
+            h_abs = fabs(h);
+            memcpy(K, f, sizeof(double) * NY);
+            for (int s = 1; s < 12; ++s) {
+                for (int i = 0; i < NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                if (rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work)) { status = -2; goto done; }
+            }
+            for (int i = 0; i < NY; ++i) {
+                double acc = 0.0;
+                for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * NY + i];
+                y_new[i] = y[i] + h * acc;
+            }
+            if (rhs(t_new, y_new, K + 12 * NY, p, tau, work)) { status = -2; goto done; }
+            counts[0] += 12;
+            if (!all_finite(y_new, NY) || !all_finite(K + 12 * NY, NY)) { status = -3; goto done; }
+            double e5 = 0.0, e3 = 0.0;
+            for (int i = 0; i < NY; ++i) {
+                double scale = atol + rtol * (fabs(y[i]) > fabs(y_new[i]) ? fabs(y[i]) : fabs(y_new[i]));
+                double a5 = 0.0, a3 = 0.0;
+                for (int j = 0; j < 13; ++j) { a5 += DOP_E5[j] * K[j * NY + i]; a3 += DOP_E3[j] * K[j * NY + i]; }
+                a5 /= scale; a3 /= scale;
+                e5 += a5 * a5; e3 += a3 * a3;
+            }
+            err = (e5 == 0.0 && e3 == 0.0) ? 0.0 : h_abs * e5 / sqrt((e5 + 0.01 * e3) * NY);
+            if (err < 1) {
+                double factor = err == 0.0 ? 10.0 : 0.9 * pow(err, -1.0 / 8.0);
+                if (factor > 10.0) factor = 10.0;
+                if (rejected && factor > 1.0) factor = 1.0;
+                h_abs *= factor;
+                break;
+            }
+            double factor = 0.9 * pow(err, -1.0 / 8.0);
+            h_abs *= factor > 0.2 ? factor : 0.2;
+            rejected = 1;
+            counts[2] += 1;
+        }
+        counts[1] += 1;
+        /* dense output for the requested times within (t, t_new] */
+        if (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new) {
+            for (int s = 13; s < 16; ++s) {
+                for (int i = 0; i < NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                if (rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work)) { status = -2; goto done; }
+            }
+            counts[0] += 3;
+            for (int i = 0; i < NY; ++i) {
+                double dy = y_new[i] - y[i];
+                F[0 * NY + i] = dy;
+                F[1 * NY + i] = h * K[i] - dy;
+                F[2 * NY + i] = 2 * dy - h * (K[12 * NY + i] + K[i]);
+                for (int r = 0; r < 4; ++r) {
+                    double acc = 0.0;
+                    for (int j = 0; j < 16; ++j) acc += DOP_D[r][j] * K[j * NY + i];
+                    F[(3 + r) * NY + i] = h * acc;
+                }
+            }
+            while (*i_out < n_out && t_out[*i_out] <= t_new) {
+                double x = (t_out[*i_out] - t) / h;
+                double *out = y_out + (*i_out) * NY;
+                for (int i = 0; i < NY; ++i) {
+                    double v = 0.0;
+                    for (int r = 6; r >= 0; --r) {
+                        v += F[r * NY + i];
+                        v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+                    }
+                    out[i] = v + y[i];
+                }
+                if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * NY);
+                ++*i_out;
+            }
+        }
+        t = t_new;
+        memcpy(y, y_new, sizeof(double) * NY);
+        memcpy(f, K + 12 * NY, sizeof(double) * NY);
+        if (n_out == 0) {
+            t_steps[*n_steps] = t;
+            memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
+            ++*n_steps;
+        }
+    }
+done:
+    state[0] = t;
+    state[1] = h_abs;
+    free(K); free(work); free(y_new); free(y_stage); free(F);
+    return status;
+}
+
+/* Classical RK4 with fixed step dt for n steps from t0; y_out gets n + 1 rows (y0 first). */
+int rk4_run(const double *p, const double *tau, double t0, const double *y0, double dt, long n,
+            double *y_out, long *counts) {
+    double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
+    double *work = malloc(sizeof(double) * NWORK);
+    int status = 0;
+    if (!k || !stage || !work) { status = -4; goto done; }
+    memcpy(y_out, y0, sizeof(double) * NY);
+    for (long s = 0; s < n; ++s) {
+        const double *y = y_out + s * NY;
+        double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        if (rhs(t, y, k, p, tau, work)) { status = -2; goto done; }
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
+        if (rhs(t + 0.5 * dt, stage, k + NY, p, tau, work)) { status = -2; goto done; }
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
+        if (rhs(t + 0.5 * dt, stage, k + 2 * NY, p, tau, work)) { status = -2; goto done; }
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + dt * k[2 * NY + i];
+        if (rhs(t + dt, stage, k + 3 * NY, p, tau, work)) { status = -2; goto done; }
+        for (int i = 0; i < NY; ++i)
+            next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
+        counts[0] += 4;
+        counts[1] += 1;
+        if (!all_finite(next, NY)) { status = -3; goto done; }
+    }
+done:
+    free(k); free(stage); free(work);
+    return status;
+}
+""".replace("FINISHED_CODE", "0")
+
+
+# -- Python drivers ------------------------------------------------------------------------------
+import ctypes  # noqa: E402
+import time  # noqa: E402
+
+from .errors import ModelError, SimulationError  # noqa: E402
+
+COMPILED_METHODS = ("DOP853", "RK4")
+
+
+def why_not_compiled(system, method, tau) -> str | None:
+    """Why the compiled loop cannot run this simulation (None when it can)."""
+    topology = system.topology
+    if method not in COMPILED_METHODS:
+        return f"method {method!r} has no compiled loop (compiled: {', '.join(COMPILED_METHODS)})"
+    if system.backend != "c":
+        return "the model was compiled without a C compiler (backend 'python')"
+    if topology.cut_joints or topology.constraints:
+        return "the model has constraints"
+    if topology.contacts:
+        return "the model has contacts"
+    if system._compiled.n_inputs:
+        return "the model has callable forces or torques"
+    if callable(tau):
+        return "tau is a callable"
+    return None
+
+
+def _bind(lib):
+    void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
+    run = lib.dop853_run
+    run.argtypes = [void, void, void, void, void, dbl, dbl, dbl, dbl, void, lng, void, void, void, void, lng,
+                    void, void]
+    run.restype = ctypes.c_int
+    rk4 = lib.rk4_run
+    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, void]
+    rk4.restype = ctypes.c_int
+    return run, rk4
+
+
+def _fail(system, status: int, t: float, y: np.ndarray, method: str):
+    n = system.nq
+    if status == STEP_TOO_SMALL:
+        raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
+                              f"spacing between numbers")
+    if status == SINGULAR:
+        system._solve_tree(*system._dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
+        raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
+    if status == NOT_FINITE:
+        raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
+    raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
+
+
+def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
+                 atol: float, t_eval, tau, max_step: float, dt: float | None):
+    """Integrate a tree model entirely in compiled code; returns ``(t, y, stats)``."""
+    lib = system._compiled.functions.lib
+    run, rk4 = _bind(lib)
+    n = system.nq
+    p = system._p
+    tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
+    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
+    y = np.ascontiguousarray(np.concatenate((q0, qd0)), dtype=float)
+    started = time.perf_counter()
+    if method == "RK4":
+        if dt is None:
+            raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
+        steps = int(round(t_end / dt))
+        if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
+            raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
+        out = np.empty((steps + 1, 2 * n))
+        counts = np.zeros(3, dtype=np.int64)
+        status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
+                     counts.ctypes.data)
+        if status:
+            _fail(system, status, float("nan"), y, method)
+        t = np.arange(steps + 1) * dt
+        if t_eval is not None:
+            out, t = _hermite(system, t, out, t_eval, tau_arr), np.asarray(t_eval)
+        stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
+        return t, out, stats, time.perf_counter() - started
+    state = np.array([0.0, 0.0])
+    f = np.empty(2 * n)
+    counts = np.zeros(3, dtype=np.int64)
+    i_out = np.zeros(1, dtype=np.int64)
+    n_steps = np.zeros(1, dtype=np.int64)
+    if t_eval is not None:
+        t_out = np.ascontiguousarray(t_eval, dtype=float)
+        y_out = np.empty((len(t_out), 2 * n))
+        start = 0
+        if len(t_out) and t_out[0] == 0.0:
+            y_out[0] = y
+            i_out[0] = start = 1
+        status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                     rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
+                     None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status:
+            _fail(system, status, state[0], y, method)
+        times, values = t_out, y_out
+    else:
+        chunks_t, chunks_y = [np.zeros(1)], [y[None, :].copy()]
+        cap = 256
+        while True:
+            t_steps = np.empty(cap)
+            y_steps = np.empty((cap, 2 * n))
+            n_steps[0] = 0
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                         rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
+                         y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
+            chunks_t.append(t_steps[: n_steps[0]])
+            chunks_y.append(y_steps[: n_steps[0]])
+            if status == BUFFER_FULL:
+                cap = min(cap * 4, 1 << 20)
+                continue
+            if status:
+                _fail(system, status, state[0], y, method)
+            break
+        times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
+    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
+    return times, values, stats, time.perf_counter() - started
+
+
+def _hermite(system, t, y, t_eval, tau):
+    """Cubic Hermite interpolation of fixed-step output at ``t_eval``."""
+    n = system.nq
+    f = np.array([np.concatenate((row[n:], system._tree_accelerations(0.0, row[:n], row[n:], tau))) for row in y])
+    idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
+    h = t[idx + 1] - t[idx]
+    s = ((np.asarray(t_eval) - t[idx]) / h)[:, None]
+    h = h[:, None]
+    h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
+    return h00 * y[idx] + h10 * h * f[idx] + h01 * y[idx + 1] + h11 * h * f[idx + 1]
