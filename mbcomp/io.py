@@ -32,8 +32,8 @@ from .components._values import name_of
 from .errors import ModelError
 from .model import Model
 
-__all__ = ["load", "save", "parse_expression", "Expression", "TimeVector", "library_dirs",
-           "library_models", "find_library_model"]
+__all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
+           "library_dirs", "library_models", "find_library_model", "read_description"]
 
 # ----------------------------------------------------------------------------------------------
 # Schema
@@ -565,7 +565,7 @@ def load(path: str | os.PathLike) -> Model:
     return model
 
 
-def _read_model(r: _Reader, data: dict, path: Path) -> Model | None:
+def _read_model(r: _Reader, data: dict, path: Path) -> Model:
     r.keys("", data, TOP_KEYS)
 
     name = data.get("name", path.stem or "model")
