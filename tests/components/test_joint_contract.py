@@ -54,7 +54,7 @@ def _skew_vector(W: np.ndarray) -> np.ndarray:
     return np.array([W[2, 1], W[0, 2], W[1, 0]])
 
 
-def _model(factory, rng):
+def _model(factory):
     """A body on an "xyz" ball joint (the joint's parent, at a random fixed pose) and,
     below it, the child on the joint under test."""
     m = mb.Model("contract", gravity=(0, 0, -9.81))
@@ -104,7 +104,7 @@ class TestJointContract:
 
     def test_compiled_pose_matches_relative_pose(self, cls, factory):
         rng = np.random.default_rng(5)
-        m, joint = _model(factory, rng)
+        m, joint = _model(factory)
         sys = m.compile(backend="python")
         mount = m["mount"]
         for _ in range(3):
@@ -120,7 +120,7 @@ class TestJointContract:
         of the body point at the world origin); the pose differentiated along coordinate k
         must give ``dR/dq_k R^T = [w_k]x`` and ``dp/dq_k = v0_k + w_k x p``."""
         rng = np.random.default_rng(3)
-        m, joint = _model(factory, rng)
+        m, joint = _model(factory)
         sys = m.compile(backend="python")
         mount = m["mount"]
         sl = sys.topology.q_slice["tested"]
@@ -148,7 +148,7 @@ class TestJointContract:
     def test_columns_match_velocity_of_the_child(self, cls, factory):
         """``body_state`` speeds agree with the joint columns times the joint speeds."""
         rng = np.random.default_rng(9)
-        m, joint = _model(factory, rng)
+        m, joint = _model(factory)
         sys = m.compile(backend="python")
         q = rng.uniform(-1.2, 1.2, sys.nq)
         qd = np.zeros(sys.nq)
