@@ -9,6 +9,9 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .system import BodyState, Energy, System
 from .result import Event, Result
 
+# Many simulations at once
+from .batch import sweep
+
 # Errors
 from .errors import CompileError, ModelError, SimulationError
 
@@ -17,7 +20,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load",
+    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]
 
 

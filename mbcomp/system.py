@@ -1,6 +1,7 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
@@ -138,9 +139,16 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     formulation_class = get_formulation(formulation)
     from .formulations.base import analyse
     compiled = CompiledModel(model, cache=cache, backend=backend)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters).
+    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
     system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
     analyse(system._formulation, system)
     return system
+
+
+def _rebuild_system(model, formulation, options, backend, parameters) -> "System":
+    """Unpickle: compile the model again (a cache hit where the cache is shared)."""
+    return compile_model(model, formulation=formulation, backend=backend, **options).with_parameters(parameters)
 
 
 class System:
@@ -158,6 +166,10 @@ class System:
 
     def __setattr__(self, name, value):
         raise AttributeError("System is immutable: use with_parameters() for new parameter values")
+
+    def __reduce__(self):
+        model, formulation, options, backend = self._compiled.recipe
+        return _rebuild_system, (model, formulation, options, backend, self._parameters)
 
     # -- description -----------------------------------------------------------------
     @property
