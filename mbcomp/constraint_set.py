@@ -35,8 +35,14 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
 
 
-def _derivatives(f, t: float, h: float = 1e-3):
-    """Value, first and second derivative of a function of time (5-point stencils, O(h^4))."""
+def _derivatives(f, t: float, h: float = 1e-3, exact=None):
+    """Value, first and second derivative of a function of time: exact when the function
+    provides ``diff()`` (file expressions), else 5-point stencils (error O(h^4))."""
+    if exact is not None:
+        values = [float(f(t)), float(exact[0](t)), float(exact[1](t))]
+        if not np.all(np.isfinite(values)):
+            raise ValueError("non-finite value")
+        return tuple(values)
     values = [float(f(t + k * h)) for k in (-2, -1, 0, 1, 2)]
     fm2, fm1, f0, fp1, fp2 = values
     if not np.all(np.isfinite(values)):
@@ -70,6 +76,12 @@ class ConstraintSet:
         self.position_rows = np.array([not (isinstance(eq, CoordinateEquation) and eq.speed is not None)
                                        for eq in self.equations], dtype=bool)
         self.coordinate_rows = [r for r, eq in enumerate(self.equations) if isinstance(eq, CoordinateEquation)]
+        self.exact_derivatives = {}
+        for r in self.coordinate_rows:
+            position = self.equations[r].position
+            if position is not None and callable(getattr(position, "diff", None)):
+                first = position.diff()
+                self.exact_derivatives[r] = (first, first.diff())
         self.geometric_rows = [r for r in range(self.nc) if r not in set(self.coordinate_rows)]
 
     # -- evaluation -------------------------------------------------------------------------------
@@ -101,7 +113,7 @@ class ConstraintSet:
                 g_t[r] = -eq.speed
             else:
                 try:
-                    s, s1, s2 = _derivatives(eq.position, t)
+                    s, s1, s2 = _derivatives(eq.position, t, exact=self.exact_derivatives.get(r))
                 except Exception as exc:  # the user's callable failed
                     raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
                 g[r] = q[k] - s

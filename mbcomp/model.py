@@ -82,5 +82,10 @@ class Model:
         from .system import compile_model
         return compile_model(self, formulation=formulation, cache=cache, backend=backend, **options)
 
+    def save(self, path) -> None:
+        """Write the model as a declarative TOML file that ``mb.load`` reads back."""
+        from .io import save
+        save(self, path)
+
     def __repr__(self) -> str:
         return f"Model({self.name!r}, {len(self._components) - 1} components)"

@@ -85,8 +85,51 @@ def _parse_what(what: str | Sequence[str]) -> list[str]:
     return list(dict.fromkeys(kinds))       # keep the order, drop repeats
 
 
+def _pieces(t: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` index ranges between repeated sample times (an impact repeats its time
+    with the speeds before and after)."""
+    breaks = np.flatnonzero(np.diff(t) <= 0) + 1
+    return list(zip([0, *breaks], [*breaks, len(t)]))
+
+
+def _smooth_series(result: Any, max_points: int = 3000):
+    """``(t, q, qd)`` refined between the solver's samples, or None when that is not possible.
+
+    Cubic Hermite interpolation: q from the samples' q and qd, qd from qd and the accelerations
+    at the samples (the order of a solver's dense output, so the curves follow the motion
+    instead of straight chords between large steps).  Each piece between impacts is refined
+    on its own, so jumps in qd stay vertical.
+    """
+    from scipy.interpolate import CubicHermiteSpline
+    t = np.asarray(result.t, dtype=float)
+    q, qd = np.asarray(result.q, dtype=float), np.asarray(result.qd, dtype=float)
+    per_step = min(max_points // max(len(t), 1), 12)
+    if len(t) < 2 or per_step < 2 or q.shape[1] == 0:
+        return None
+    system = result.system
+    try:
+        qdd = np.array([system.accelerations(q[i], qd[i], t[i], tau=getattr(result, "tau", None))
+                        for i in range(len(t))])
+    except Exception:                    # noqa: BLE001 - a model we cannot evaluate: plot samples
+        return None
+    if not np.all(np.isfinite(qdd)):
+        return None
+    ts, qs, qds = [], [], []
+    for start, stop in _pieces(t):
+        piece = t[start:stop]
+        if len(piece) == 1:
+            ts.append(piece), qs.append(q[start:stop]), qds.append(qd[start:stop])
+            continue
+        fine = np.concatenate([np.linspace(a, b, per_step, endpoint=False) for a, b in zip(piece[:-1], piece[1:])]
+                              + [piece[-1:]])
+        ts.append(fine)
+        qs.append(CubicHermiteSpline(piece, q[start:stop], qd[start:stop], axis=0)(fine))
+        qds.append(CubicHermiteSpline(piece, qd[start:stop], qdd[start:stop], axis=0)(fine))
+    return np.concatenate(ts), np.concatenate(qs), np.concatenate(qds)
+
+
 def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), *, path: Any = None,
-                figsize: tuple[float, float] | None = None):
+                figsize: tuple[float, float] | None = None, smooth: bool = True):
     """Time histories of a simulation, one subplot per quantity, sharing the time axis.
 
     Parameters
@@ -104,6 +147,12 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
         Save the figure there (the format follows the suffix, e.g. PNG).
     figsize : (width, height), optional
         Inches; by default 8 wide and 2.3 per subplot.
+    smooth : bool
+        Draw q, qd and energy between the solver's samples by cubic Hermite interpolation (q
+        from q and qd, qd from qd and the accelerations), as a solver's dense output would;
+        solvers such as DOP853 take large steps, and straight chords between them misrepresent
+        the motion.  ``False`` draws the samples joined by straight lines.  Drift and reactions
+        are always drawn at the samples.
 
     Returns
     -------
@@ -137,21 +186,29 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
         figsize = (8.0, max(2.3 * len(panels), 3.0))
     fig = _new_figure(figsize=figsize)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    dense = _smooth_series(result) if smooth and any(k in kinds for k in ("q", "qd", "energy")) else None
+    t_line, q_line, qd_line = dense if dense is not None else (t, np.asarray(result.q), np.asarray(result.qd))
     for ax, (kind, unit_kind) in zip(axes, panels):
         if kind in ("q", "qd"):
-            values = result.q if kind == "q" else result.qd
+            values = q_line if kind == "q" else qd_line
             for i, name in enumerate(coords):
                 if coord_kinds[i] == unit_kind:
-                    ax.plot(t, values[:, i], label=name if kind == "q" else f"d{name}/dt")
+                    ax.plot(t_line, values[:, i], label=name if kind == "q" else f"d{name}/dt")
             if kind == "q":
                 ax.set_ylabel("angle (rad)" if unit_kind == "angle" else "position (m)")
             else:
                 ax.set_ylabel("angular speed (rad/s)" if unit_kind == "angle" else "speed (m/s)")
         elif kind == "energy":
-            energy = result.energy()
-            ax.plot(t, energy.kinetic, label="kinetic")
-            ax.plot(t, energy.potential, label="potential")
-            ax.plot(t, energy.total, label="total", color="black", linewidth=1.2)
+            if dense is None:
+                energy = result.energy()
+                kinetic, potential = np.asarray(energy.kinetic), np.asarray(energy.potential)
+            else:
+                values = np.array([(e.kinetic, e.potential) for e in
+                                   (system.energy(qi, qdi, ti) for ti, qi, qdi in zip(t_line, q_line, qd_line))])
+                kinetic, potential = values[:, 0], values[:, 1]
+            ax.plot(t_line, kinetic, label="kinetic")
+            ax.plot(t_line, potential, label="potential")
+            ax.plot(t_line, kinetic + potential, label="total", color="black", linewidth=1.2)
             ax.set_ylabel("energy (J)")
         elif kind == "drift":
             drift = np.asarray(result.constraint_violation(), dtype=float).reshape(-1)
@@ -517,8 +574,7 @@ def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray, qd: np.ndarray | 
     q = np.asarray(q, dtype=float).reshape(len(t), -1)
     times = np.asarray(times, dtype=float)
     out = np.repeat(q[:1], len(times), axis=0)
-    breaks = np.flatnonzero(np.diff(t) <= 0) + 1
-    for start, stop in zip([0, *breaks], [*breaks, len(t)]):
+    for start, stop in _pieces(t):
         piece = t[start:stop]
         inside = (times >= piece[0]) & (times <= piece[-1])   # later pieces win at a shared time
         if not np.any(inside) or q.shape[1] == 0:

@@ -260,13 +260,7 @@ def _loop_coords(system) -> set:
     return {c for j in getattr(system.topology, "cut_joints", ()) for c in j.coords}
 
 
-@pytest.mark.parametrize("formulation", [
-    pytest.param("lagrange", marks=pytest.mark.xfail(strict=True, reason=(
-        "known bug: near t = 0.8 s the lagrange formulation's dependent-coordinate Newton jumps to "
-        "a far solution (theta1 9.19 -> 70.4 rad, theta4 2.33 -> 35.35 rad) and energy is lost; "
-        "remove this mark when fixed"))),
-    "dae",
-])
+@pytest.mark.parametrize("formulation", ["lagrange", "dae"])
 def test_four_bar_over_more_than_a_crank_turn(formulation):
     """The crank makes more than a full turn in 1 s: energy stays conserved and the loop closed."""
     model = load(MODELS["four_bar"])

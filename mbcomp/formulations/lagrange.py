@@ -9,7 +9,7 @@ from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace, independent_rows
 
 #: Re-choose the independent coordinates when the dependent block's condition number
 #: exceeds this (and a fresh choice is clearly better).
-REPARTITION_CONDITION = 1e3
+REPARTITION_CONDITION = 30.0
 
 
 def partition(J: np.ndarray):
@@ -29,7 +29,9 @@ class LagrangeWorkspace(Workspace):
 
     def __init__(self, formulation, system, t0, q0, qd0, tau, contacts=()):
         super().__init__(formulation, system, t0, q0, qd0, tau, contacts)
-        self.q = q0.copy()
+        # Newton starts from the last accepted state, advanced by its speeds: stage values of
+        # rejected steps must not carry the iteration onto another assembly branch.
+        self.t_accepted, self.q_accepted, self.qd_accepted = t0, q0.copy(), qd0.copy()
         self.choose(t0, q0)
         self.y0 = np.concatenate((q0[self.ind], qd0[self.ind]))
 
@@ -39,8 +41,9 @@ class LagrangeWorkspace(Workspace):
         self.dep, self.ind = partition(cv.J[self.rows])
 
     def dependent(self, t, qi):
-        """Full q from the independent coordinates (Newton from the last solution)."""
-        q = self.q.copy()
+        """Full q from the independent coordinates (Newton from the last accepted state,
+        advanced along its velocity)."""
+        q = self.q_accepted + self.qd_accepted * (t - self.t_accepted)
         q[self.ind] = qi
         zero = np.zeros_like(q)
         for _ in range(25):
@@ -57,7 +60,6 @@ class LagrangeWorkspace(Workspace):
             raise SimulationError(f"dependent coordinates did not converge at t = {t:g} (residual "
                                   f"{np.max(np.abs(g)):.3g}): constraints "
                                   f"{self.formulation.row_names(self.rows, self.contacts)}")
-        self.q = q
         return q, cv
 
     def full_state(self, t, y):
@@ -79,9 +81,10 @@ class LagrangeWorkspace(Workspace):
         return np.concatenate((qd[self.ind], qdd[self.ind]))
 
     def after_step(self, t, y):
+        q, qd = self.full_state(t, y)
+        self.t_accepted, self.q_accepted, self.qd_accepted = t, q, qd
         if not len(self.dep):
             return None
-        q, qd = self.full_state(t, y)
         cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
         condition = np.linalg.cond(cv.J[np.ix_(self.rows, self.dep)])
         if condition < REPARTITION_CONDITION:
@@ -91,7 +94,7 @@ class LagrangeWorkspace(Workspace):
         if np.array_equal(dep, self.dep) and np.array_equal(rows, self.rows):
             return None
         if np.linalg.cond(cv.J[np.ix_(rows, dep)]) > 0.5 * condition:
-            return None
+            return None  # no clearly better choice
         self.rows, self.dep, self.ind = rows, dep, ind
         return np.concatenate((q[ind], qd[ind]))
 
