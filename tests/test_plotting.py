@@ -106,13 +106,24 @@ class TestPlotResult:
         first = fig.axes[0]
         assert all(first.get_shared_x_axes().joined(first, ax) for ax in fig.axes[1:])
 
-    def test_lines_are_the_result_series(self, dp_result):
-        fig = plot_result(dp_result, ("q", "energy"))
+    def test_unsmoothed_lines_are_the_result_series(self, dp_result):
+        fig = plot_result(dp_result, ("q", "energy"), smooth=False)
         line = fig.axes[0].get_lines()[1]
         np.testing.assert_array_equal(line.get_xdata(), dp_result.t)
         np.testing.assert_array_equal(line.get_ydata(), dp_result["j2"])
         total = [ln for ln in fig.axes[1].get_lines() if ln.get_label() == "total"][0]
         np.testing.assert_allclose(total.get_ydata(), dp_result.energy().total)
+
+    def test_smoothed_lines_pass_through_the_samples_and_follow_the_motion(self, dp_result):
+        fig = plot_result(dp_result, ("q", "qd", "energy"))
+        line = fig.axes[0].get_lines()[1]
+        t, y = np.asarray(line.get_xdata()), np.asarray(line.get_ydata())
+        assert len(t) > 2 * len(dp_result.t)
+        np.testing.assert_allclose(np.interp(dp_result.t, t, y), dp_result["j2"], atol=1e-9)
+        # Between the samples too the curves are the motion: energy stays conserved.
+        total = [ln for ln in fig.axes[2].get_lines() if ln.get_label() == "total"][0]
+        energy = np.asarray(total.get_ydata())
+        assert np.ptp(energy) < 1e-3 * np.ptp(dp_result.energy().kinetic)
 
     def test_lengths_and_angles_get_their_own_units(self, cart_result):
         fig = plot_result(cart_result)
