@@ -46,3 +46,8 @@ class SimulationError(RuntimeError):
         prefix = describe(component)
         super().__init__(f"{prefix}: {message}" if prefix else message)
         self.component = component
+
+
+def format_state(values) -> str:
+    """A coordinate vector for messages: 6 significant digits, small values kept visible."""
+    return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"

@@ -146,7 +146,7 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
     path : str or Path, optional
         Save the figure there (the format follows the suffix, e.g. PNG).
     figsize : (width, height), optional
-        Inches; by default 8 wide and 2.3 per subplot.
+        Inches; by default 9 wide and 2.3 per subplot.
     smooth : bool
         Draw q, qd and energy between the solver's samples by cubic Hermite interpolation (q
         from q and qd, qd from qd and the accelerations), as a solver's dense output would;
@@ -183,7 +183,7 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
         raise ValueError("plot_result: nothing to plot (the system has no coordinates)")
 
     if figsize is None:
-        figsize = (8.0, max(2.3 * len(panels), 3.0))
+        figsize = (9.0, max(2.3 * len(panels), 3.0))
     fig = _new_figure(figsize=figsize)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     dense = _smooth_series(result) if smooth and any(k in kinds for k in ("q", "qd", "energy")) else None
@@ -236,7 +236,10 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
             ax.axvline(float(event.time), color="gray", linestyle=":", linewidth=0.8)
         ax.grid(True, alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="upper right", fontsize="small", ncol=min(4, len(ax.get_lines())))
+            # Outside, right of the panel: a legend inside would hide the curves somewhere.
+            entries = len(ax.get_legend_handles_labels()[0])
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, frameon=False,
+                      fontsize="small" if entries <= 12 else "x-small", ncol=1 + (entries - 1) // 15)
     axes[-1].set_xlabel("time (s)")
     model_name = getattr(getattr(system, "_compiled", None), "model_name", None)
     if model_name:

@@ -15,7 +15,7 @@ from .constraint_set import cross
 from .components._values import name_of
 from .equations import (KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout,
                         parameter_values)
-from .errors import ModelError, SimulationError, describe
+from .errors import format_state, ModelError, SimulationError, describe
 from .topology import build_topology
 
 
@@ -323,7 +323,7 @@ class System:
                     if np.linalg.norm(pb - pa) < 1e-12:
                         springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
-            raise SimulationError(f"{what} is not finite at q = {np.round(q, 6).tolist()}: {reason}")
+            raise SimulationError(f"{what} is not finite at q = {format_state(q)}: {reason}")
         return values
 
     def _tree_accelerations(self, t, q, qd, tau) -> np.ndarray:
@@ -354,7 +354,7 @@ class System:
             L = None
         scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
         if L is None or np.min(np.diag(L)) ** 2 < 1e-13 * scale:
-            raise SimulationError(f"mass matrix is singular at q = {np.round(q, 6).tolist()}: {self._diagnose(q)}")
+            raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {self._diagnose(q)}")
         y = np.linalg.solve(L, f)
         return np.linalg.solve(L.T, y)
 

@@ -7,7 +7,7 @@ import numpy as np
 import scipy.linalg
 
 from ..constraint_set import ConstraintValues
-from ..errors import ModelError, SimulationError
+from ..errors import format_state, ModelError, SimulationError
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
 #: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of
@@ -128,7 +128,7 @@ class Formulation:
             factor = None
         scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
         if factor is None or np.min(np.abs(np.diag(factor[0]))) ** 2 < 1e-13 * scale:
-            raise SimulationError(f"mass matrix is singular at q = {np.round(q, 6).tolist()}: {system._diagnose(q)}")
+            raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {system._diagnose(q)}")
         return factor
 
     def _tree(self, system, t, q, qd, tau):
@@ -164,7 +164,7 @@ class Formulation:
         if nominal is not None and not contacts and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
             raise SimulationError(
-                f"the constraint Jacobian loses rank at q = {np.round(q, 6).tolist()} (t = {t:g}) with the "
+                f"the constraint Jacobian loses rank at q = {format_state(q)} (t = {t:g}) with the "
                 f"mechanism at rest: a dead point/bifurcation where the motion is not determined; constraints "
                 f"involved: {self.row_names(lost, contacts)}")
 
@@ -210,7 +210,7 @@ class Formulation:
             worst = np.argsort(-np.abs(g))
             bad = [self.constraints.labels[r] for r in worst if abs(g[r]) > 1e-9][:6]
             raise SimulationError(f"cannot assemble: constraints {bad} cannot be met near q = "
-                                  f"{np.round(q, 6).tolist()} (largest residual {np.max(np.abs(g)):.3g})")
+                                  f"{format_state(q)} (largest residual {np.max(np.abs(g)):.3g})")
         return q, self.project_velocity(system, q, qd, t, offsets)
 
     def project_velocity(self, system, q, qd, t=0.0, offsets=None):

@@ -1,0 +1,98 @@
+"""Compiled integration loops: identical to scipy's DOP853, RK4 of order 4, clear failures."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mbcomp as mb
+from conftest import pendulum_chain
+
+
+@pytest.fixture(scope="module")
+def chain():
+    system = pendulum_chain(4).compile()
+    if system.backend != "c":
+        pytest.skip("no C compiler: the compiled loops need the C backend")
+    return system
+
+
+Q0, QD0 = np.full(4, 0.3), np.zeros(4)
+
+
+class TestCompiledDop853:
+    @pytest.mark.parametrize("tol", [1e-6, 1e-9])
+    def test_takes_the_same_steps_as_scipy(self, chain, tol):
+        """Same algorithm: the same number of steps and evaluations.  Step sizes agree only to
+        ~1e-9 because the error estimate cancels many digits, so rounding differences of the
+        stage sums (numpy's dot vs a C loop) move them slightly."""
+        compiled = chain.simulate(3.0, Q0, QD0, rtol=tol, atol=tol)
+        stepped = chain.simulate(3.0, Q0, QD0, rtol=tol, atol=tol, integrator="scipy")
+        assert compiled.stats["integrator"] == "compiled" and stepped.stats["integrator"] == "scipy"
+        assert compiled.stats["nfev"] == stepped.stats["nfev"]
+        np.testing.assert_allclose(compiled.t, stepped.t, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(compiled.q, stepped.q, rtol=0, atol=10 * tol)
+
+    def test_dense_output_at_t_eval_matches_scipy(self, chain):
+        t_eval = np.linspace(0.0, 3.0, 37)
+        compiled = chain.simulate(3.0, Q0, QD0, rtol=1e-9, atol=1e-9, t_eval=t_eval)
+        stepped = chain.simulate(3.0, Q0, QD0, rtol=1e-9, atol=1e-9, t_eval=t_eval, integrator="scipy")
+        np.testing.assert_array_equal(compiled.t, t_eval)
+        np.testing.assert_allclose(compiled.q, stepped.q, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(compiled.qd, stepped.qd, rtol=0, atol=1e-8)
+
+    def test_constant_tau_is_applied(self, chain):
+        tau = np.array([0.5, 0.0, -0.2, 0.1])
+        compiled = chain.simulate(1.0, Q0, QD0, tau=tau)
+        stepped = chain.simulate(1.0, Q0, QD0, tau=tau, integrator="scipy")
+        free = chain.simulate(1.0, Q0, QD0)
+        np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-10)
+        assert np.abs(compiled.q[-1] - free.q[-1]).max() > 1e-3
+
+    def test_long_runs_grow_the_step_buffer(self, chain):
+        result = chain.simulate(60.0, Q0, QD0, rtol=1e-10, atol=1e-10)
+        assert len(result.t) > 256  # more steps than the first buffer holds
+        assert np.all(np.diff(result.t) > 0)
+        energy = result.energy().total
+        assert np.ptp(energy) < 1e-7 * np.abs(energy).max()
+
+
+class TestRK4:
+    def test_fourth_order_convergence(self, chain):
+        reference = chain.simulate(1.0, Q0, QD0, rtol=1e-12, atol=1e-12).q[-1]
+        errors = [np.abs(chain.simulate(1.0, Q0, QD0, method="RK4", dt=dt).q[-1] - reference).max()
+                  for dt in (0.01, 0.005)]
+        assert 2 ** 3.7 < errors[0] / errors[1] < 2 ** 4.3
+
+    def test_t_eval_by_hermite_interpolation(self, chain):
+        t_eval = np.linspace(0, 1.0, 7)
+        result = chain.simulate(1.0, Q0, QD0, method="RK4", dt=1e-3, t_eval=t_eval)
+        reference = chain.simulate(1.0, Q0, QD0, rtol=1e-12, atol=1e-12, t_eval=t_eval)
+        np.testing.assert_allclose(result.q, reference.q, atol=1e-9)
+
+    def test_needs_dt_that_divides_t_end(self, chain):
+        with pytest.raises(mb.ModelError, match="dt"):
+            chain.simulate(1.0, Q0, QD0, method="RK4")
+        with pytest.raises(mb.ModelError, match="whole number of steps"):
+            chain.simulate(1.0, Q0, QD0, method="RK4", dt=0.3)
+
+    def test_rk4_refused_where_no_compiled_loop_runs(self, chain):
+        with pytest.raises(mb.ModelError, match="RK4"):
+            chain.simulate(1.0, Q0, QD0, method="RK4", dt=0.01, tau=lambda t, q, qd: np.zeros(4))
+
+
+class TestWhenCompiledLoopsApply:
+    def test_callable_inputs_fall_back_to_scipy(self, chain):
+        result = chain.simulate(0.5, Q0, QD0, tau=lambda t, q, qd: np.zeros(4))
+        assert result.stats["integrator"] == "scipy"
+
+    def test_insisting_on_compiled_says_why_not(self, chain):
+        with pytest.raises(mb.ModelError, match="callable"):
+            chain.simulate(0.5, Q0, QD0, tau=lambda t, q, qd: np.zeros(4), integrator="compiled")
+
+    def test_singular_mass_matrix_is_reported_from_the_compiled_loop(self):
+        m = mb.Model("gimbal", gravity=(0, 0, -9.81))
+        body = m.add(mb.Body("top", mass=1.0, com=(0, 0, 0.1), inertia=(0.01, 0.01, 0.02)))
+        m.add(mb.Spherical("pivot", m.ground, body, sequence="zxz"))
+        system = m.compile()
+        with pytest.raises(mb.SimulationError, match="Spherical 'pivot'.*singularity"):
+            system.simulate(1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 10.0])
