@@ -28,13 +28,19 @@ class PythonFunctions:
 
     name = "python"
 
-    def __init__(self, source: str, key: str):
+    def __init__(self, source: str, key: str, sizes: dict | None = None):
         self.source = source
+        self.sizes = sizes or {}
         ns = codegen.load_python(source, key)
         self._fns = {name: ns[name] for name in FUNCTIONS}
 
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
-        return np.array(self._fns[name](q.tolist(), qd.tolist(), p.tolist(), u.tolist()), dtype=float)
+        try:
+            return np.array(self._fns[name](q.tolist(), qd.tolist(), p.tolist(), u.tolist()), dtype=float)
+        except (ZeroDivisionError, OverflowError, ValueError):
+            # Python raises where C gives inf/NaN (1/0, sqrt of a negative): behave like C
+            # so that the System's checks name the cause.
+            return np.full(self.sizes[name], np.nan)
 
     accelerations = None  # the System solves M qdd = f with numpy
 
@@ -97,10 +103,11 @@ class CFunctions:
                                    None if tau is None else tau.ctypes.data, out.ctypes.data, work.ctypes.data)
 
 
-def build_c_library(source: str, key: str) -> Path | None:
-    """Compile C source into the cache (atomically); None when no compiler works."""
-    target = codegen.cache_dir() / f"{key}.so"
-    if target.exists():
+def build_c_library(source: str, key: str, cache: bool = True) -> Path | None:
+    """Compile C source into the cache (atomically), or into a private temporary
+    directory with ``cache=False``; None when no compiler works."""
+    target = codegen.cache_dir() / f"{key}.so" if cache else Path(tempfile.mkdtemp(prefix="mbcomp-")) / "model.so"
+    if cache and target.exists():
         return target
     compiler = c_compiler()
     if compiler is None:

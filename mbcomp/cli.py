@@ -208,7 +208,7 @@ def _write(action, path: str) -> None:
         action()
     except OSError as exc:
         raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
-    except (ImportError, NotImplementedError) as exc:
+    except (ImportError, NotImplementedError, RuntimeError, ValueError) as exc:
         raise CommandError(f"cannot write {path}: {exc}") from None
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from .constraint_set import ConstraintValues
 from .errors import ModelError, SimulationError
@@ -60,7 +59,7 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
     formulation = system._formulation
     contacts = system.topology.contacts
     M, _ = system._dynamics(t, q, np.zeros_like(q))
-    factor = formulation._factor(system, M, q)
+    Minv = formulation._inverse(formulation._factor(system, M, q))
     bilateral = formulation.constraint_values(system, t, q, np.zeros_like(q), offsets, tuple(persistent))
     gaps = contact_values(system, q, qd)
     def coefficient(i):
@@ -77,7 +76,7 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
         P = np.zeros(J.shape[0])
         if rows.size:
             Jr = J[rows]
-            Minv_JT = scipy.linalg.cho_solve(factor, Jr.T, check_finite=False)
+            Minv_JT = Minv @ Jr.T
             try:
                 P[rows] = np.linalg.solve(Jr @ Minv_JT, target[rows] - Jr @ qd)
             except np.linalg.LinAlgError:

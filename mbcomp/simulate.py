@@ -243,6 +243,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             counts[key] += getattr(solver, key, 0)
 
     started = time.perf_counter()
+    if workspace.y0.size == 0 and watch is None:
+        return _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started)
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
@@ -310,3 +312,23 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     events = watch.events if watch else []
     return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
                   events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [])
+
+
+def _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:
+    """No degree of freedom left (every coordinate driven or dependent): nothing to
+    integrate; the motion follows from the constraints at each output time (Newton,
+    continued from the previous time)."""
+    if t_eval is None:
+        count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
+        t_eval = np.linspace(0.0, t_end, count + 1)
+    qs, qds = [], []
+    for t in t_eval:
+        q, qd = workspace.full_state(t, np.zeros(0))
+        workspace.after_step(t, np.zeros(0))
+        qs.append(q)
+        qds.append(qd)
+    stats = {"method": "prescribed", "integrator": "none", "nfev": 0, "njev": 0, "nlu": 0, "steps": len(t_eval) - 1,
+             "restarts": 0, "status": 0, "message": "No degree of freedom: the motion follows from the constraints.",
+             "success": True, "wall_time": time.perf_counter() - started, "formulation": system.formulation}
+    return Result(system=system, t=np.asarray(t_eval, dtype=float), q=np.array(qs), qd=np.array(qds), stats=stats,
+                  tau=tau, offsets=offsets)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import copy
+import shutil
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
@@ -31,20 +32,36 @@ class Energy:
         return self.kinetic + self.potential
 
 
-@dataclass(frozen=True)
 class BodyState:
     """Pose and motion of a body (at its COM or a given point), all in the world frame.
 
     position (m), velocity (m/s), acceleration (m/s^2), rotation (3x3, body to world),
-    angular_velocity (rad/s), angular_acceleration (rad/s^2).
+    angular_velocity (rad/s), angular_acceleration (rad/s^2).  The accelerations are
+    solved for on first access, so pose and velocity stay available where the
+    dynamics are singular (an Euler-angle joint at gimbal lock).
     """
 
-    position: np.ndarray
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    rotation: np.ndarray
-    angular_velocity: np.ndarray
-    angular_acceleration: np.ndarray
+    def __init__(self, position, velocity, rotation, angular_velocity, accelerations):
+        self.position, self.velocity = position, velocity
+        self.rotation, self.angular_velocity = rotation, angular_velocity
+        self._accelerations = accelerations
+        self._solved = None
+
+    def _solve(self):
+        if self._solved is None:
+            self._solved = self._accelerations()
+        return self._solved
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        return self._solve()[0]
+
+    @property
+    def angular_acceleration(self) -> np.ndarray:
+        return self._solve()[1]
+
+    def __repr__(self) -> str:
+        return f"BodyState(position={self.position}, velocity={self.velocity})"
 
 
 def structure_description(model, topology, layout, inputs) -> str:
@@ -75,6 +92,7 @@ class CompiledModel:
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
+        self.tril = np.tril_indices(self.topology.nq)
         description = structure_description(model, self.topology, self.layout, self.inputs)
         self.key = codegen.structure_key(description)
         self._program = None
@@ -113,9 +131,12 @@ class CompiledModel:
             from .integrators import c_integrators
             source = (codegen.c_source(self.program, FUNCTIONS) + codegen.c_accelerations(self.topology.nq)
                       + c_integrators(self.topology.nq))
-            path = build_c_library(source, self.key if cache else self.key + f"-{id(self)}")
+            path = build_c_library(source, self.key, cache=cache)
             if path is not None:
-                return CFunctions(path, self.sizes)
+                functions = CFunctions(path, self.sizes)
+                if not cache:
+                    shutil.rmtree(path.parent, ignore_errors=True)  # loaded: the file is no longer needed
+                return functions
             if backend == "c":
                 raise ModelError(f"Model {self.model_name!r}", "backend 'c' needs a working C compiler (set $CC)")
         source = codegen.read_cached(self.key, ".py") if cache else None
@@ -125,7 +146,7 @@ class CompiledModel:
             source = codegen.python_source(self.program, FUNCTIONS)
             if cache:
                 codegen.write_cached(self.key, ".py", source)
-        return PythonFunctions(source, self.key)
+        return PythonFunctions(source, self.key, self.sizes)
 
 
 def _as_list(x):
@@ -266,6 +287,8 @@ class System:
         return np.zeros(self.nq) if qd is None else self.state_vector(qd, "qd")
 
     def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        if not self._compiled.n_inputs:
+            return self._compiled.no_inputs
         u = np.zeros(self._compiled.n_inputs)
         for name, (start, size) in self._compiled.inputs.items():
             u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd)
@@ -292,9 +315,10 @@ class System:
         """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f``."""
         n = self.nq
         out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
-        M = np.zeros((n, n))
-        M[np.tril_indices(n)] = out[: n * (n + 1) // 2]
-        M = M + np.tril(M, -1).T
+        M = np.empty((n, n))
+        rows, cols = self._compiled.tril
+        M[rows, cols] = out[: n * (n + 1) // 2]
+        M[cols, rows] = M[rows, cols]
         f = out[n * (n + 1) // 2:]
         if tau is not None:
             f = f + tau
@@ -318,8 +342,8 @@ class System:
             springs = []
             for comp in self.topology.forces:
                 if hasattr(comp, "body_a"):
-                    pa = self.body_state(comp.body_a, q, point=comp.point_a).position
-                    pb = self.body_state(comp.body_b, q, point=comp.point_b).position
+                    pa = self._point_position(comp.body_a, self._parameters[f"{comp.name}.point_a"], q)
+                    pb = self._point_position(comp.body_b, self._parameters[f"{comp.name}.point_b"], q)
                     if np.linalg.norm(pb - pa) < 1e-12:
                         springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
@@ -413,19 +437,31 @@ class System:
             local = np.asarray(self._parameters[f"{name}.com"], dtype=float)
         if comp is self.topology.ground:
             zero = np.zeros(3)
-            return BodyState(local.copy(), zero, zero.copy(), np.eye(3), zero.copy(), zero.copy())
+            return BodyState(local.copy(), zero, np.eye(3), zero.copy(), lambda: (np.zeros(3), np.zeros(3)))
         per_body, columns = self._kinematics(q, qd)
-        index = self.topology.body_index(comp)
-        row = per_body[index]
-        R, origin, V, A = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
-        qdd = self.accelerations(q, qd, t, tau)
-        idx = self.topology.coord_indices_of_body(comp)
-        A = A + columns[idx].T @ qdd[idx]
-        w, v0, alpha, a0 = V[:3], V[3:], A[:3], A[3:]
+        row = per_body[self.topology.body_index(comp)]
+        R, origin, V, A_bias = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
+        w, v0 = V[:3].copy(), V[3:]
         position = origin + R @ local
         velocity = v0 + cross(w, position)
-        acceleration = a0 + cross(alpha, position) + cross(w, velocity)
-        return BodyState(position, velocity, acceleration, R, w.copy(), alpha.copy())
+
+        def accelerations():
+            qdd = self.accelerations(q, qd, t, tau)
+            idx = self.topology.coord_indices_of_body(comp)
+            A = A_bias + columns[idx].T @ qdd[idx]
+            alpha, a0 = A[:3], A[3:]
+            return a0 + cross(alpha, position) + cross(w, velocity), alpha.copy()
+
+        return BodyState(position, velocity, R, w, accelerations)
+
+    def _point_position(self, body: Any, local: Any, q: np.ndarray) -> np.ndarray:
+        """World position of a body point from the kinematics alone (no dynamics)."""
+        comp = self.topology.resolve(body)
+        local = np.asarray(local, dtype=float)
+        if comp is self.topology.ground:
+            return local
+        row = self._kinematics(q, np.zeros(self.nq))[0][self.topology.body_index(comp)]
+        return row[9:12] + row[:9].reshape(3, 3) @ local
 
     def motion_columns(self, q: Any) -> np.ndarray:
         """(nq, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` (the columns of T)."""

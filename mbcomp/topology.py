@@ -80,6 +80,7 @@ def build_topology(model) -> Topology:
     components = dict(model.components)
     ground = model.ground
 
+    broken: set[str] = set()
     for comp in components.values():
         for role, ref in comp.references().items():
             target = components.get(name_of(ref))
@@ -92,10 +93,13 @@ def build_topology(model) -> Topology:
             elif not isinstance(target, wanted):
                 problems.append(f"{describe(comp)}: {role} {name_of(ref)!r} is a {type(target).__name__}, "
                                 f"expected a {wanted.__name__}")
-    if problems:
-        raise CompileError(problems=problems)
+            else:
+                continue
+            broken.add(comp.name)
 
-    joints = [c for c in components.values() if isinstance(c, Joint)]
+    # Components with broken references stay out of the graph; the checks go on so that
+    # every problem is reported at once.
+    joints = [c for c in components.values() if isinstance(c, Joint) and c.name not in broken]
     graph = nx.MultiDiGraph()
     graph.add_nodes_from(c.name for c in components.values() if isinstance(c, Body))
     tree = nx.DiGraph()
@@ -116,7 +120,8 @@ def build_topology(model) -> Topology:
 
     reachable = nx.descendants(tree, ground.name) if ground.name in tree else set()
     for node in graph.nodes:
-        if node != ground.name and node not in reachable:
+        if node != ground.name and node not in reachable and not (broken and graph.degree(node) == 0 and
+                                                                    _mentioned_by_broken(node, broken, components)):
             why = "has no joint" if graph.degree(node) == 0 else "is not connected to the ground by a chain of parent->child joints"
             problems.append(f"{describe(components[node])}: {why}")
 
@@ -138,7 +143,7 @@ def build_topology(model) -> Topology:
         if name in components and not isinstance(components[name], Joint):
             problems.append(f"coordinate name {name!r} is also the name of {describe(components[name])}")
 
-    forces = tuple(c for c in components.values() if isinstance(c, ForceElement))
+    forces = tuple(c for c in components.values() if isinstance(c, ForceElement) and c.name not in broken)
     for comp in forces:
         if hasattr(comp, "bind_joint"):
             joint = components[name_of(comp.joint)]
@@ -162,3 +167,9 @@ def _connected(tree: nx.DiGraph, a: str, b: str) -> bool:
     if a not in tree or b not in tree:
         return False
     return nx.has_path(tree.to_undirected(as_view=True), a, b)
+
+
+def _mentioned_by_broken(body: str, broken: set, components: dict) -> bool:
+    """True when a component left out for a broken reference would have connected ``body``
+    (its 'not connected' report would only repeat that problem)."""
+    return any(name_of(ref) == body for name in broken for ref in components[name].references().values())

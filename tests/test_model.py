@@ -157,8 +157,6 @@ class TestCompileValidation:
         assert len(info.value.problems) == 3
         assert isinstance(info.value, mb.CompileError)
 
-    @pytest.mark.xfail(strict=True, reason="bug: build_topology raises after the reference checks, so an unknown "
-                       "reference hides every graph problem (API.md: compile() reports every structural problem at once)")
     def test_every_structural_problem_is_reported_at_once(self):
         m, a, b = two_bodies()
         m.add(mb.Revolute("ja", m.ground, a, axis="x"))

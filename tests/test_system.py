@@ -406,8 +406,6 @@ class TestSingularities:
         sys = _gimbal_model("zxz")
         assert np.all(np.isfinite(sys.accelerations([0.3, 1e-3, -0.4], [0.0, 0.0, 0.0])))
 
-    @pytest.mark.xfail(strict=True, reason="bug: body_state always solves for accelerations, so pose and velocity "
-                       "are unavailable at an Euler-angle singularity where they are well defined")
     def test_pose_is_available_at_the_singularity(self):
         sys = _gimbal_model("zxz")
         state = sys.body_state("b", [0.3, 0.0, -0.4])
@@ -522,8 +520,6 @@ class TestCache:
         arm_model().compile(backend="python", cache=False)
         assert list(cache.iterdir()) == []
 
-    @pytest.mark.xfail(strict=True, reason="bug: compile(cache=False, backend='c') writes '<key>-<id>.so' into the "
-                       "cache directory (a new file per compile that is never reused or removed)")
     def test_cache_false_with_c_backend_writes_nothing(self, cache):
         arm_model().compile(backend="c", cache=False)
         assert list(cache.iterdir()) == []

@@ -122,14 +122,21 @@ class Formulation:
         return offsets
 
     def _factor(self, system, M, q):
+        """Cholesky factor L of M (lower), or ``SimulationError`` naming why M is singular."""
         try:
-            factor = scipy.linalg.cho_factor(M, lower=True, check_finite=False)
+            L = np.linalg.cholesky(M)
         except np.linalg.LinAlgError:
-            factor = None
+            L = None
         scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
-        if factor is None or np.min(np.abs(np.diag(factor[0]))) ** 2 < 1e-13 * scale:
+        if L is None or (M.size and np.min(np.diag(L)) ** 2 < 1e-13 * scale):
             raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {system._diagnose(q)}")
-        return factor
+        return L
+
+    @staticmethod
+    def _inverse(L):
+        """M^-1 from its Cholesky factor (small dense matrices: cheaper than repeated solves)."""
+        Linv = np.linalg.inv(L)
+        return Linv.T @ Linv
 
     def _tree(self, system, t, q, qd, tau):
         M, f = system._dynamics(t, q, qd, tau)
@@ -137,22 +144,41 @@ class Formulation:
         system._check_finite(f, "generalised forces", q)
         return M, f
 
-    def solve_constrained(self, system, M, f, J, rhs, q, t, contacts=()):
-        """``(qdd, lam)`` of the KKT system on the independent rows of ``J`` (lam 0 elsewhere)."""
-        factor = self._factor(system, M, q)
-        Minv_f = scipy.linalg.cho_solve(factor, f, check_finite=False)
+    def solve_constrained(self, system, M, f, J, rhs, q, t, contacts=(), qd=None):
+        """``(qdd, lam)`` of the KKT system on independent rows of ``J`` (lam 0 elsewhere).
+
+        Fast path: the rows found independent when the model was analysed, accepted when
+        the Schur complement ``J M^-1 J^T`` factors with pivots above ``RANK_TOLERANCE``;
+        otherwise (contacts, redundancy changing, a singular position) the rows come
+        from a pivoted QR and a dead point at rest is reported.
+        """
+        Minv = self._inverse(self._factor(system, M, q))
+        Minv_f = Minv @ f
         lam = np.zeros(J.shape[0])
-        rows = independent_rows(J)
-        if rows.size == 0:
-            return Minv_f, lam
-        Js = J[rows]
-        Minv_JT = scipy.linalg.cho_solve(factor, Js.T, check_finite=False)
-        A = Js @ Minv_JT
-        try:
-            lam_s = scipy.linalg.solve(A, rhs[rows] - Js @ Minv_f, assume_a="pos", check_finite=False)
-        except (np.linalg.LinAlgError, ValueError):
-            raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
-                                  f"{self.row_names(rows, contacts)}") from None
+        rows = self.nominal_rows if not contacts and self.nominal_rows is not None else None
+        for attempt in range(2):
+            if rows is None:
+                if qd is not None:
+                    self.check_dead_point(J, qd, t, q, contacts)
+                rows = independent_rows(J)
+            if rows.size == 0:
+                return Minv_f, lam
+            Js = J[rows]
+            Minv_JT = Minv @ Js.T
+            A = Js @ Minv_JT
+            try:
+                LA = np.linalg.cholesky(A)
+                diag = np.diag(LA)
+                if np.min(diag) > RANK_TOLERANCE * np.max(diag):
+                    break
+            except np.linalg.LinAlgError:
+                pass
+            if attempt:
+                raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
+                                      f"{self.row_names(rows, contacts)}")
+            rows = None
+        LAinv = np.linalg.inv(LA)
+        lam_s = LAinv.T @ (LAinv @ (rhs[rows] - Js @ Minv_f))
         lam[rows] = lam_s
         return Minv_f + Minv_JT @ lam_s, lam
 
@@ -169,6 +195,7 @@ class Formulation:
                 f"involved: {self.row_names(lost, contacts)}")
 
     nominal_rank: int | None = None
+    nominal_rows: np.ndarray | None = None
 
     # -- the public operations ---------------------------------------------------------------------
     def accelerations(self, system, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
@@ -222,8 +249,7 @@ class Formulation:
         J = cv.J[rows]
         violation = J @ qd + cv.g_t[rows]
         M, _ = system._dynamics(t, q, np.zeros_like(qd))
-        factor = self._factor(system, M, q)
-        Minv_JT = scipy.linalg.cho_solve(factor, J.T, check_finite=False)
+        Minv_JT = self._inverse(self._factor(system, M, q)) @ J.T
         correction = Minv_JT @ np.linalg.solve(J @ Minv_JT, violation)
         return qd - correction
 
@@ -268,5 +294,6 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
     cv = formulation.constraint_values(system, 0.0, q, np.zeros(nq))
     rows = independent_rows(cv.J)
     formulation.nominal_rank = int(rows.size)
+    formulation.nominal_rows = rows
     formulation.ndof = nq - int(rows.size)
     formulation.redundant = [formulation.constraints.labels[r] for r in range(cv.J.shape[0]) if r not in set(rows.tolist())]

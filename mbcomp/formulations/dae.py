@@ -60,5 +60,5 @@ class DaeFormulation(Formulation):
         alpha, beta = self.baumgarte
         gdot = cv.J @ qd + cv.g_t
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
-        self.check_dead_point(cv.J, qd, t, q, contacts)
-        return self.solve_constrained(system, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t, contacts)
+        return self.solve_constrained(system, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t,
+                                      contacts, qd)

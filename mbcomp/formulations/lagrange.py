@@ -140,8 +140,7 @@ class LagrangeFormulation(Formulation):
         c[dep] = -X[:, -1]
         if len(ind):
             Mr = B.T @ M @ B
-            factor = self._factor(system, Mr, q)
-            qdd_i = scipy.linalg.cho_solve(factor, B.T @ (f - M @ c), check_finite=False)
+            qdd_i = self._inverse(self._factor(system, Mr, q)) @ (B.T @ (f - M @ c))
             qdd = B @ qdd_i + c
         else:
             qdd = c

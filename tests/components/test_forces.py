@@ -101,8 +101,6 @@ class TestSpring:
         # Length 1 - 0.2 - 0.1 = 0.7: tension 30 * 0.1 pulls a towards +x and b towards -x.
         assert_close(qdd, [3.0 / 1.5, -3.0 / 0.5], name="accelerations")
 
-    @pytest.mark.xfail(strict=True, reason="bug: zero-length spring escapes as ZeroDivisionError (python backend) "
-                       "or RecursionError (C backend: _check_finite -> body_state -> accelerations -> _check_finite)")
     @pytest.mark.parametrize("backend", ["python", "c"])
     def test_coincident_attachment_points_raise_naming_the_spring(self, backend):
         sys = spring_cart(rest_length=0.5).compile(backend=backend)
