@@ -54,7 +54,7 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
             with ThreadPoolExecutor(max_workers=threads) as pool:
                 outputs = list(pool.map(lambda case: _run(system, case), cases))
     else:
-        remote = client.scatter(system, broadcast=True)
+        remote = client.scatter(system, broadcast=True, hash=False)
         futures = [client.submit(_run, remote, case, pure=False) for case in cases]
         outputs = client.gather(futures)
     results = []
