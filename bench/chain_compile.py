@@ -5,7 +5,6 @@ Writes bench/results/chain_compile.csv and prints a table.
 """
 from __future__ import annotations
 
-import csv
 import os
 import sys
 import tempfile
@@ -15,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from models import chain_initial_state, pendulum_chain  # noqa: E402
+from models import chain_initial_state, pendulum_chain, write_csv  # noqa: E402
 
 
 def time_call(fn, repeat: int = 5, number: int = 200) -> float:
@@ -47,12 +46,7 @@ def run(sizes):
                 row[f"accelerations_{backend}_us"] = 1e6 * time_call(lambda: cached.accelerations(q, qd))
             rows.append(row)
             print(", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
-    out = Path(__file__).resolve().parent / "results" / "chain_compile.csv"
-    out.parent.mkdir(exist_ok=True)
-    with open(out, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(rows, "chain_compile.csv")
     return rows
 
 

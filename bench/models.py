@@ -23,3 +23,16 @@ def pendulum_chain(n: int, length: float = 0.5, mass: float = 1.0) -> mb.Model:
 def chain_initial_state(n: int):
     """All angles 0.3 rad, at rest."""
     return np.full(n, 0.3), np.zeros(n)
+
+
+def write_csv(rows: list[dict], name: str):
+    """Write benchmark rows to bench/results/<name> (columns from the first row)."""
+    import csv
+    from pathlib import Path
+    out = Path(__file__).resolve().parent / "results" / name
+    out.parent.mkdir(exist_ok=True)
+    with open(out, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return out

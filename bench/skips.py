@@ -5,7 +5,6 @@ Usage: python bench/skips.py [N]   (default 10).  Writes bench/results/skips.csv
 """
 from __future__ import annotations
 
-import csv
 import ctypes
 import os
 import sys
@@ -17,6 +16,9 @@ import numpy as np
 import sympy as sp
 
 import mbcomp as mb
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import write_csv  # noqa: E402
 
 
 def chain(n: int, *, point_masses=False, planar=False, springs=False, length=0.5) -> mb.Model:
@@ -78,12 +80,7 @@ def run(n: int):
         row["ratio"] = row["per_eval_us"] / reference["per_eval_us"]
         print(f"{row['variant']:40s} {row['statements']:10d} {row['operations']:10d} {row['ops_ratio']:9.2f} "
               f"{row['per_eval_us']:9.2f} {row['ratio']:7.2f}")
-    out = Path(__file__).resolve().parent / "results" / f"skips_N{n}.csv"
-    out.parent.mkdir(exist_ok=True)
-    with open(out, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(rows, f"skips_N{n}.csv")
     return rows
 
 
