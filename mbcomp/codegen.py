@@ -10,7 +10,7 @@ from typing import Callable
 
 import sympy as sp
 
-CODEGEN_VERSION = "5"
+CODEGEN_VERSION = "6"
 
 
 # -- printing ---------------------------------------------------------------------------

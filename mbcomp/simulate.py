@@ -13,7 +13,10 @@ from scipy.optimize import brentq
 
 from .errors import ModelError, SimulationError
 from .impact import GAP_TOLERANCE, contact_values, solve_impact
-from .integrators import run_compiled, why_not_compiled
+from .integrators import compiled_jacobian, run_compiled, why_not_compiled
+
+#: scipy methods that use a Jacobian: given one computed in compiled code when possible.
+IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
 from .result import Event, Result
 
 
@@ -235,8 +238,12 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             raise SimulationError(f"state became non-finite at t = {t:.6g} s")
         return workspace.rhs(t, y)
 
+    options = {}
+    if getattr(cls, "__name__", "") in IMPLICIT_METHODS and why_not_compiled(system, "DOP853", tau) is None:
+        options["jac"] = compiled_jacobian(system, None if tau is None else system._tau(tau, 0.0, q0, qd0))
+
     def make_solver(t0, y0):
-        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step)
+        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, **options)
 
     def add_counts(solver):
         for key in ("nfev", "njev", "nlu"):
