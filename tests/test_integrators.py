@@ -96,3 +96,19 @@ class TestWhenCompiledLoopsApply:
         system = m.compile()
         with pytest.raises(mb.SimulationError, match="Spherical 'pivot'.*singularity"):
             system.simulate(1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 10.0])
+
+
+def test_compiled_jacobian_matches_finite_differences_of_the_accelerations(chain):
+    from mbcomp.integrators import compiled_jacobian
+    jac = compiled_jacobian(chain, None)
+    q, qd = np.array([0.3, -0.2, 0.5, 0.1]), np.array([1.0, 0.0, -2.0, 0.5])
+    y = np.concatenate((q, qd))
+    J = jac(0.0, y)
+
+    def f(y):
+        return np.concatenate((y[4:], chain.accelerations(y[:4], y[4:])))
+
+    h = 1e-6
+    numeric = np.column_stack([(f(y + h * e) - f(y - h * e)) / (2 * h) for e in np.eye(8)])
+    np.testing.assert_allclose(J, numeric, rtol=1e-5, atol=1e-5)
+    np.testing.assert_array_equal(J[:4, 4:], np.eye(4))  # d(q)/dt = qd exactly
