@@ -21,6 +21,8 @@ FUNCTIONS = {
     "constraints": ["constraints"],
     "contacts": ["contacts"],
 }
+#: Called per output sample or step, not per right-hand side: compiled without optimisation.
+COLD_FUNCTIONS = ("energy", "kinematics", "contacts")
 
 
 class PythonFunctions:

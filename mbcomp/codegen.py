@@ -10,7 +10,7 @@ from typing import Callable
 
 import sympy as sp
 
-CODEGEN_VERSION = "6"
+CODEGEN_VERSION = "7"
 
 
 # -- printing ---------------------------------------------------------------------------
@@ -98,14 +98,16 @@ def python_source(prog, functions: dict) -> str:
     return "\n".join(lines)
 
 
-def c_source(prog, functions: dict, chunk: int = 300) -> str:
+def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
     """C source: ``void name(const double *q, const double *qd, const double *p,
     const double *u, double *out)`` per function.
 
     Long programs are split into static functions of about ``chunk`` statements that
     pass only the values crossing a chunk boundary through a workspace array: a
     compiler's register allocation grows faster than linearly with function size,
-    so this keeps compile time proportional to the program.
+    so this keeps compile time proportional to the program.  Functions named in
+    ``cold`` (called per sample, not per step) are compiled without optimisation,
+    which saves compile time where run time does not matter.
     """
     lines = ["#include <math.h>", ""]
     for fname, outputs in functions.items():
@@ -128,8 +130,9 @@ def c_source(prog, functions: dict, chunk: int = 300) -> str:
         names.update({s: f"w[{i}]" for s, i in shared.items()})
         printer = Printer(names, "c")
         args = "const double *q, const double *qd, const double *p, const double *u"
+        attribute = '__attribute__((optimize("O0"))) ' if fname in cold else ""
         for b, block in enumerate(blocks):
-            lines.append(f"static void {fname}_part{b}({args}, double *w) {{")
+            lines.append(f"{attribute}static void {fname}_part{b}({args}, double *w) {{")
             for symbol, expr in block:
                 if symbol in shared:
                     lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
@@ -137,7 +140,7 @@ def c_source(prog, functions: dict, chunk: int = 300) -> str:
                     lines.append(f"    const double {symbol.name} = {printer(expr)};")
             lines.append("}")
             lines.append("")
-        lines.append(f"void {fname}({args}, double *out) {{")
+        lines.append(f"{attribute}void {fname}({args}, double *out) {{")
         lines.append(f"    double w[{max(len(shared), 1)}];")
         for b in range(len(blocks)):
             lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")

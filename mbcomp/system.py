@@ -10,7 +10,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from . import codegen
-from .backend import FUNCTIONS, CFunctions, PythonFunctions, build_c_library
+from .backend import COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, build_c_library
 from .components import Spherical
 from .constraint_set import cross
 from .components._values import name_of
@@ -129,7 +129,8 @@ class CompiledModel:
                 except (OSError, AttributeError):
                     cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
             from .integrators import c_integrators
-            source = (codegen.c_source(self.program, FUNCTIONS) + codegen.c_accelerations(self.topology.nq)
+            source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                      + codegen.c_accelerations(self.topology.nq)
                       + c_integrators(self.topology.nq))
             path = build_c_library(source, self.key, cache=cache)
             if path is not None:
