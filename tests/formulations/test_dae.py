@@ -1,0 +1,148 @@
+"""The ``dae`` formulation: options, the Baumgarte law, drift over long runs, projection."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mbcomp as mb
+from conftest import assert_close
+from mbcomp.formulations.dae import DEFAULT_BAUMGARTE
+
+G = 9.81
+
+
+def bar(name, length, mass=1.0):
+    return mb.Body(name, mass=mass, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
+
+
+def fourbar():
+    """Crank-rocker (0.3, 0.8, 0.6 on a 0.7 base), no damping: conservative."""
+    m = mb.Model("fourbar", gravity=(0, -G, 0))
+    crank, coupler, rocker = m.add(bar("crank", 0.3)), m.add(bar("coupler", 0.8)), m.add(bar("rocker", 0.6))
+    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
+    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(0.3, 0, 0)))
+    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(0.7, 0, 0)))
+    m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(0.8, 0, 0), child_point=(0.6, 0, 0)))
+    return m
+
+
+def slider_crank(y0=0.0):
+    """Crank 0.2 m, rod 0.6 m; the rod end stays on the line y = y0 (Slider 'piston')."""
+    m = mb.Model("slider_crank", gravity=(0, -G, 0))
+    crank, rod = m.add(bar("crank", 0.2)), m.add(bar("rod", 0.6, mass=0.5))
+    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
+    m.add(mb.Revolute("B", crank, rod, axis="z", parent_point=(0.2, 0, 0)))
+    m.add(mb.Slider("piston", rod, point=(0.6, 0, 0), origin=(0, y0, 0), axis="x"))
+    return m
+
+
+class TestOptions:
+    def test_default_gains(self):
+        s = fourbar().compile("dae")
+        assert s.formulation == "dae"
+        assert DEFAULT_BAUMGARTE == (5.0, 5.0)
+
+    @pytest.mark.parametrize("gains", [(-1.0, 5.0), (5.0, float("nan")), (1.0,), "fast"], ids=str)
+    def test_bad_gains_are_rejected(self, gains):
+        with pytest.raises(mb.ModelError, match="baumgarte"):
+            fourbar().compile("dae", baumgarte=gains)
+
+    def test_unknown_option_is_rejected(self):
+        with pytest.raises(mb.ModelError, match="stabilisation"):
+            fourbar().compile("dae", stabilisation=True)
+
+
+class TestBaumgarte:
+    @pytest.mark.parametrize("gains", [(0.0, 0.0), (5.0, 5.0), (10.0, 3.0), (1.0, 20.0)], ids=str)
+    def test_constraint_error_obeys_the_stabilisation_law(self, gains):
+        """Off the constraint, with g = y of the slider point: g'' = -2 alpha g' - beta^2 g.
+        g, g' and g'' are read from body_state (positions, velocities, accelerations of the
+        point), not from the constraint code."""
+        alpha, beta = gains
+        y0 = 0.03
+        s = slider_crank(y0).compile("dae", baumgarte=gains)
+        q, qd = np.array([0.5, -0.6]), np.array([1.5, -0.7])   # not assembled: g and g' nonzero
+        tip = s.body_state("rod", q, qd, point=(0.6, 0, 0))
+        g, gd, gdd = tip.position[1] - y0, tip.velocity[1], tip.acceleration[1]
+        assert abs(g) > 0.005 and abs(gd) > 0.1
+        assert_close(gdd, -2 * alpha * gd - beta ** 2 * g, rtol=1e-9, atol=1e-9, name="g''")
+
+    def test_gains_do_not_change_consistent_accelerations(self):
+        states = fourbar().compile("lagrange").assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
+        reference = fourbar().compile("dae", baumgarte=(0, 0)).accelerations(*states)
+        for gains in ((5, 5), (50, 50)):
+            qdd = fourbar().compile("dae", baumgarte=gains).accelerations(*states)
+            assert_close(qdd, reference, rtol=1e-9, atol=1e-9, name=f"qdd with gains {gains}")
+
+    def test_constraint_error_decays_as_predicted(self):
+        """Started 3 cm off the line and at rest, with (alpha, beta) = (5, 5) the error is
+        critically damped: g(t) = g0 (1 + 5 t) exp(-5 t)."""
+        y0 = 0.03
+        s = slider_crank(y0).compile("dae", baumgarte=(5.0, 5.0))
+        q = np.array([0.5, -0.6])
+        g0 = s.body_state("rod", q, point=(0.6, 0, 0)).position[1] - y0
+        # simulate() assembles its start; follow the law with a hand-rolled RK4 instead.
+        state = np.concatenate((q, np.zeros(2)))
+
+        def rhs(y):
+            return np.concatenate((y[2:], s.accelerations(y[:2], y[2:])))
+
+        h, n = 2e-3, 500
+        for _ in range(n):
+            k1 = rhs(state)
+            k2 = rhs(state + h / 2 * k1)
+            k3 = rhs(state + h / 2 * k2)
+            k4 = rhs(state + h * k3)
+            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        g = s.body_state("rod", state[:2], point=(0.6, 0, 0)).position[1] - y0
+        t = h * n
+        assert_close(g, g0 * (1 + 5 * t) * np.exp(-5 * t), rtol=1e-3, atol=1e-7, name="g(1 s)")
+
+
+def energy_error(res):
+    """max |E(t) - E(0)| relative to the largest kinetic energy of the run."""
+    E = res.energy()
+    return np.max(np.abs(E.total - E.total[0])) / np.max(E.kinetic)
+
+
+class TestDrift:
+    def test_fourbar_over_100_s_with_default_gains(self):
+        """Large swings, no damping, rtol=1e-7: measured max |C| 4.1e-8 and relative energy
+        error 1.8e-6 (about 5 s of wall time on an idle machine; at rtol=1e-8, 3.6e-9 and
+        1.5e-7 in 7 s)."""
+        s = fourbar().compile("dae")
+        q, qd = s.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
+        res = s.simulate(100.0, q, qd, rtol=1e-7, atol=1e-9, t_eval=np.linspace(0, 100, 2001))
+        assert np.max(res.constraint_violation()) < 1e-6
+        assert energy_error(res) < 1e-5
+        assert np.ptp(res["A"]) > 4.0   # large swings through the bottom
+
+    def test_gains_hold_drift_that_grows_without_them(self):
+        s0 = fourbar().compile("dae", baumgarte=(0, 0))
+        s5 = fourbar().compile("dae")
+        q, qd = s0.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
+        free = np.max(s0.simulate(20.0, q, qd, rtol=1e-6, atol=1e-8).constraint_violation())
+        held = np.max(s5.simulate(20.0, q, qd, rtol=1e-6, atol=1e-8).constraint_violation())
+        assert held < free / 100, (held, free)
+
+
+class TestProjection:
+    def test_projection_removes_drift_without_gains(self):
+        """Without Baumgarte terms, projecting after every step keeps |C| at the level of one
+        step's drift instead of letting it accumulate (measured 1.8e-7 against 9.1e-5)."""
+        plain = fourbar().compile("dae", baumgarte=(0, 0))
+        projected = fourbar().compile("dae", baumgarte=(0, 0), projection=True)
+        q, qd = plain.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
+        a = plain.simulate(20.0, q, qd, rtol=1e-6, atol=1e-8)
+        b = projected.simulate(20.0, q, qd, rtol=1e-6, atol=1e-8)
+        assert np.max(b.constraint_violation()) < np.max(a.constraint_violation()) / 100
+        assert energy_error(b) < 1e-4
+        assert_close(b.q[-1], a.q[-1], atol=1e-2, rtol=0, name="same motion")
+
+    @pytest.mark.xfail(strict=True, reason="bug: simulate() records each step's state before after_step() projects "
+                                           "it, so a projected run reports the unprojected drift (1.8e-7 here)")
+    def test_projected_run_reports_projected_states(self):
+        s = fourbar().compile("dae", baumgarte=(0, 0), projection=True)
+        q, qd = s.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
+        res = s.simulate(5.0, q, qd, rtol=1e-6, atol=1e-8)
+        assert np.max(res.constraint_violation()) < 1e-9
