@@ -7,7 +7,7 @@
 - The blocks of one docs page run in order in one fresh namespace (a page reads like a
   session), in a temporary working directory that holds a link to ``library/`` (the pages
   are written as if run from the repository root).  A block whose first line is
-  ``# not run`` is skipped: it needs something the test machine may lack (ffmpeg, a
+  ``# not run`` (optionally followed by the reason) is skipped: it needs something the test machine may lack (ffmpeg, a
   cluster).
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ def python_blocks(text: str) -> list[tuple[int, str]]:
 
 def is_skipped(source: str) -> bool:
     first = next((line.strip() for line in source.splitlines() if line.strip()), "")
-    return first == SKIP_MARK
+    return first.startswith(SKIP_MARK)
 
 
 @pytest.fixture(scope="module")
@@ -81,9 +81,9 @@ def example_runs(tmp_path_factory, cache_dir):
 
 
 def test_the_parser_finds_blocks_and_skip_marks():
-    text = "x\n```python\na = 1\n```\n- item\n\n  ```python\n  # not run\n  b = 2\n  ```\n```text\nc\n```\n"
+    text = "x\n```python\na = 1\n```\n- item\n\n  ```python\n  # not run: needs ffmpeg\n  b = 2\n  ```\n```text\nc\n```\n"
     blocks = python_blocks(text)
-    assert blocks == [(3, "a = 1"), (8, "# not run\nb = 2")]
+    assert blocks == [(3, "a = 1"), (8, "# not run: needs ffmpeg\nb = 2")]
     assert [is_skipped(src) for _, src in blocks] == [False, True]
 
 
