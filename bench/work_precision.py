@@ -19,10 +19,13 @@ Tools (all optional peers skipped when not installed, see peers.py):
   sympy + scipy           Kane's equations, lambdify(cse=True), solve_ivp DOP853 (N = 5;
                           N = 10 with --sympy-n10, ~100 s derivation)
 
-Usage: python bench/work_precision.py [--sizes 5 10] [--sympy-n10] [--quick]
-Writes bench/results/work_precision_N{n}.csv (every point), work_precision_levels_N{n}.csv
-(the table below) and work_precision_N{n}.png, and prints, for error levels 1e-4 .. 1e-10,
-the fastest time of each tool reaching that level and mbcomp_fastest / fastest_peer.
+Usage: python bench/work_precision.py [--sizes 5 10] [--sympy-n10] [--quick] [--rounds 5] [--report]
+Writes bench/results/work_precision_N{n}.csv (every point: wall and process CPU time),
+work_precision_levels_N{n}.csv (the tables below) and work_precision_N{n}.png (wall time),
+and prints, for error levels 1e-4 .. 1e-10, the fastest time of each tool reaching that
+level (log-log interpolation along the tool's Pareto front, see ``time_at``) and
+mbcomp_fastest / fastest_peer, by wall time and again by CPU time (on the oversubscribed
+shared machine, wall time includes waiting for a core; CPU time does not).
 """
 from __future__ import annotations
 
@@ -184,13 +187,14 @@ def time_at(points, level: float) -> float:
     return math.nan
 
 
-def level_table(rows, labels):
-    """``[{level, label: time, ..., mbcomp_fastest, fastest_peer, ratio, ...}]``."""
+def level_table(rows, labels, key: str = "time"):
+    """``[{level, label: time, ..., mbcomp_fastest, fastest_peer, ratio, ...}]`` from the
+    rows' ``key`` ("time": wall, "cpu_time": process CPU time)."""
     table = []
     for level in LEVELS:
         entry = {"level": level}
         for label in labels:
-            entry[label] = time_at([(r["error"], r["time"]) for r in rows if r["label"] == label], level)
+            entry[label] = time_at([(r["error"], r[key]) for r in rows if r["label"] == label], level)
         mb_best = [(entry[l], l) for l in MBCOMP_TOOLS if l in entry and np.isfinite(entry[l])]
         peer_best = [(entry[l], l) for l in PEER_TOOLS if l in entry and np.isfinite(entry[l])]
         entry["mbcomp_fastest"] = min(mb_best)[1] if mb_best else ""
@@ -206,8 +210,8 @@ SHORT = {MB_DOP: "mb DOP853 C", MB_RK4: "mb RK4 C", MB_SCIPY: "mb DOP853 scipy",
          MJ_NSTEP: "MuJoCo nstep", PIN: "Pinocchio", SYMPY: "sympy"}
 
 
-def print_table(n, table, labels, spread):
-    print(f"\nN = {n}: fastest wall time (ms) for 10 s with max |q - q_ref| <= level "
+def print_table(n, table, labels, spread, what="wall time"):
+    print(f"\nN = {n}: fastest {what} (ms) for 10 s with max |q - q_ref| <= level "
           f"(reference uncertainty {spread:.1e} rad)")
     head = f"{'level':>7} | " + " | ".join(f"{SHORT.get(l, l):>15}" for l in labels)
     head += f" | {'mbcomp/peer':>11} | {'mb/MJ nstep':>11} | fastest peer"
@@ -269,16 +273,31 @@ def run(n: int, sympy_n10: bool = False, quick: bool = False, rounds: int = 3):
     labels = list(dict.fromkeys(r["label"] for r in rows))
     table = level_table(rows, labels)
     print_table(n, table, labels, spread)
+    cpu_table = level_table(rows, labels, "cpu_time")
+    print_table(n, cpu_table, labels, spread, "process CPU time")
     RESULTS.mkdir(exist_ok=True)
     write_csv(RESULTS / f"work_precision_N{n}.csv", rows)
     write_csv(RESULTS / f"work_precision_levels_N{n}.csv",
-              [{"N": n, "level": e["level"], **{SHORT.get(l, l): e[l] for l in labels},
+              [{"N": n, "clock": clock, "level": e["level"], **{SHORT.get(l, l): e[l] for l in labels},
                 "mbcomp_fastest": SHORT.get(e["mbcomp_fastest"], ""), "fastest_peer": SHORT.get(e["fastest_peer"], ""),
                 "ratio_mbcomp_over_peer": e["ratio"], "ratio_mbcomp_over_mujoco_nstep": e["ratio_vs_mujoco_nstep"],
-                "reference_uncertainty": spread} for e in table])
+                "reference_uncertainty": spread}
+               for clock, tab in (("wall", table), ("cpu", cpu_table)) for e in tab])
     plot(rows, RESULTS / f"work_precision_N{n}.png",
          f"{n}-link 3D pendulum chain, 10 s (best of >= 3 runs; lower left is better)")
     return rows, table
+
+
+def report(n: int):
+    """Print the tables again from bench/results/work_precision_N{n}.csv (no new timing)."""
+    with open(RESULTS / f"work_precision_N{n}.csv", newline="") as fh:
+        rows = [{**r, "error": float(r["error"]), "time": float(r["time"]), "cpu_time": float(r["cpu_time"])}
+                for r in csv.DictReader(fh)]
+    with open(RESULTS / f"work_precision_levels_N{n}.csv", newline="") as fh:
+        spread = float(next(csv.DictReader(fh))["reference_uncertainty"])
+    labels = list(dict.fromkeys(r["label"] for r in rows))
+    print_table(n, level_table(rows, labels), labels, spread)
+    print_table(n, level_table(rows, labels, "cpu_time"), labels, spread, "process CPU time")
 
 
 def main(argv=None):
@@ -287,7 +306,12 @@ def main(argv=None):
     parser.add_argument("--sympy-n10", action="store_true", help="also derive and run sympy for N = 10 (~100 s)")
     parser.add_argument("--quick", action="store_true", help="a few settings only (a smoke test)")
     parser.add_argument("--rounds", type=int, default=5, help="interleaved timing rounds (best of; >= 3)")
+    parser.add_argument("--report", action="store_true", help="print the tables from the saved CSVs, run nothing")
     args = parser.parse_args(argv)
+    if args.report:
+        for n in args.sizes:
+            report(n)
+        return
     print(time.strftime("%Y-%m-%d %H:%M"), "| mbcomp work-precision benchmark")
     for n in args.sizes:
         run(n, sympy_n10=args.sympy_n10, quick=args.quick, rounds=args.rounds)
