@@ -477,10 +477,15 @@ class TestDeadPoints:
         with pytest.raises(mb.SimulationError, match=r"'C'|\bC\b"):
             s.simulate(0.1, DEAD, [0, 0, 0])
 
-    @pytest.mark.parametrize("formulation", FORMULATIONS)
-    @pytest.mark.xfail(strict=True, reason="bug: independent_rows() tests rank relative to the largest pivot, so a "
-                                           "constraint Jacobian that vanishes entirely (here ~1e-17) counts as full "
-                                           "rank; no dead-point error, and qdd leaves the constraint")
+    @pytest.mark.parametrize("formulation", [
+        pytest.param("lagrange", marks=pytest.mark.xfail(strict=True, reason=(
+            "bug: independent_rows() tests rank relative to the largest pivot, so a constraint Jacobian that "
+            "vanishes entirely (here ~1e-17) counts as full rank; no dead-point error, qdd leaves the constraint"))),
+        pytest.param("dae", marks=pytest.mark.xfail(strict=True, reason=(
+            "bug: dae's solve_constrained fast path keeps the nominal rows when the Schur complement's pivots "
+            "are large relative to each other; with one independent row that always holds, even at ~1e-33, so "
+            "no dead-point error and qdd = (32.6, -21.7) leaves the constraint"))),
+    ])
     def test_folded_slider_crank_at_rest_raises(self, formulation):
         """Crank = rod: at A = 90 deg, B = 180 deg the rod lies folded on the crank with its
         end at the origin; the slider equation's gradient vanishes."""
