@@ -20,6 +20,7 @@ class Impact:
     qd: np.ndarray
     impulses: dict = field(default_factory=dict)
     energy_loss: float = 0.0
+    closed: tuple = ()  #: indices of the contacts that carry an impulse (the final active set)
 
 
 def contact_values(system, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
@@ -46,34 +47,50 @@ def contact_indices(system, contacts) -> list[int]:
     return indices
 
 
+def restitution_of(system, index: int) -> float:
+    """The contact's restitution as currently bound (a parameter, so it can be rebound)."""
+    return float(system._parameters[f"{system.topology.contacts[index].name}.restitution"])
+
+
 def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[int], restitution=None,
                  offsets=None, persistent=()) -> Impact:
     """Newton's impact law on the ``active`` contacts, consistent with every bilateral
-    constraint (and the ``persistent`` contacts, which stay closed)::
+    constraint, with complementarity on every contact involved::
 
-        M (qd+ - qd-) = J^T P,   J_b qd+ = -g_t,   J_c qd+ = -e J_c qd-
+        M (qd+ - qd-) = J^T P,   J_b qd+ = -g_t,   J_c qd+ = -e min(J_c qd-, 0),   P >= 0
 
-    Contacts whose impulse would pull are released and the impact solved again.
+    ``persistent`` (closed, resting) contacts take part with e = 0 and may let go; a closed
+    contact the impact would drive in joins.  A contact whose impulse would pull is
+    released and the impact solved again.  ``restitution``: one value for every contact,
+    or ``{contact index: e}``; by default each contact's own.
     """
-    from .formulations.base import independent_rows
     formulation = system._formulation
     contacts = system.topology.contacts
+    if restitution is not None and not isinstance(restitution, dict) and not 0.0 <= float(restitution) <= 1.0:
+        raise ModelError("impact", f"restitution must lie in [0, 1], got {restitution}")
+    persistent = set(persistent)
+
+    def coefficient(i):
+        if i in persistent:
+            return 0.0
+        if isinstance(restitution, dict):
+            return float(restitution.get(i, restitution_of(system, i)))
+        return restitution_of(system, i) if restitution is None else float(restitution)
+
     M, _ = system._dynamics(t, q, np.zeros_like(q))
     Minv = formulation._inverse(formulation._factor(system, M, q))
-    bilateral = formulation.constraint_values(system, t, q, np.zeros_like(q), offsets, tuple(persistent))
+    bilateral = formulation.constraint_values(system, t, q, np.zeros_like(q), offsets)
     gaps = contact_values(system, q, qd)
-    def coefficient(i):
-        return contacts[i].restitution if restitution is None else float(restitution)
-    if restitution is not None and not 0.0 <= float(restitution) <= 1.0:
-        raise ModelError("impact", f"restitution must lie in [0, 1], got {restitution}")
-    active = [i for i in active if i not in persistent]
-    qd_plus, impulses = qd.copy(), {}
-    for _ in range(2 * len(contacts) + 2):
-        Jc = gaps.J[active]
-        J = np.vstack((bilateral.J, Jc))
-        target = np.concatenate((-bilateral.g_t, [-coefficient(i) * (gaps.J[i] @ qd) for i in active]))
-        rows = independent_rows(J)
+    approach = gaps.J @ qd
+    involved = sorted(set(active) | persistent)
+    nb = bilateral.J.shape[0]
+    seen = set()
+    for _ in range(4 * len(contacts) + 4):
+        J = np.vstack((bilateral.J, gaps.J[involved]))
+        target = np.concatenate((-bilateral.g_t, [-coefficient(i) * min(approach[i], 0.0) for i in involved]))
+        rows = formulation.rows_of(J)
         P = np.zeros(J.shape[0])
+        qd_plus = qd.copy()
         if rows.size:
             Jr = J[rows]
             Minv_JT = Minv @ Jr.T
@@ -82,18 +99,24 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
             except np.linalg.LinAlgError:
                 raise SimulationError(f"impact equations are singular at t = {t:g}") from None
             qd_plus = qd + Minv_JT @ P[rows]
-        else:
-            qd_plus = qd.copy()
-        contact_impulse = P[bilateral.J.shape[0]:]
-        if active and contact_impulse.min() < -1e-12 * max(1.0, np.abs(contact_impulse).max()):
-            active = [i for k, i in enumerate(active) if k != int(np.argmin(contact_impulse))]
+        impulse = P[nb:]
+        scale = max(1.0, float(np.abs(impulse).max(initial=0.0)))
+        if involved and impulse.min() < -1e-12 * scale:
+            involved = [i for k, i in enumerate(involved) if k != int(np.argmin(impulse))]
             continue
-        # A closed contact left out that would now penetrate joins the impact.
-        joining = [i for i in range(len(contacts)) if i not in active and i not in persistent
-                   and gaps.g[i] < GAP_TOLERANCE and gaps.J[i] @ qd_plus < -1e-12]
+        after = gaps.J @ qd_plus
+        joining = [i for i in range(len(contacts)) if i not in involved and gaps.g[i] < GAP_TOLERANCE
+                   and after[i] < -1e-12 * max(1.0, float(np.abs(approach).max(initial=0.0)))]
         if not joining:
-            impulses = {contacts[i].name: float(p) for i, p in zip(active, contact_impulse)}
             break
-        active = active + joining
+        key = (tuple(involved), tuple(joining))
+        if key in seen:
+            raise SimulationError(f"the impact at t = {t:g} has no consistent set of contacts (the contacts "
+                                  f"{[contacts[i].name for i in joining]} keep joining and leaving)")
+        seen.add(key)
+        involved = sorted(set(involved) | set(joining))
+    else:
+        raise SimulationError(f"the impact at t = {t:g} did not settle on a set of contacts")
     loss = 0.5 * (qd @ M @ qd - qd_plus @ M @ qd_plus)
-    return Impact(qd_plus, impulses, float(loss))
+    impulses = {contacts[i].name: float(p) for i, p in zip(involved, impulse)}
+    return Impact(qd_plus, impulses, float(loss), tuple(involved))

@@ -38,6 +38,7 @@ class Result:
     tau: Any = None
     offsets: dict = field(default_factory=dict, repr=False)
     persistent_contacts: list = field(default_factory=list)
+    closed_contacts: list = field(default_factory=list, repr=False)  #: persistent contact indices per sample
     _reactions: dict | None = field(default=None, repr=False)
 
     @property
@@ -66,11 +67,18 @@ class Result:
 
     @property
     def reactions(self) -> dict[str, np.ndarray]:
-        """``{constraint name: (m, k) array}`` of reactions at every sample."""
+        """``{constraint name: (m, k) array}`` of reactions at every sample, and for every
+        contact its normal force (N) while it rests closed (0 while open; impacts are
+        impulses, in ``events``)."""
         if self._reactions is None:
             series: dict[str, list] = {}
-            for t, q, qd in zip(self.t, self.q, self.qd):
-                for name, value in self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets).items():
+            closed = self.closed_contacts or [()] * len(self.t)
+            contacts = [c.name for c in self.system.topology.contacts]
+            for t, q, qd, shut in zip(self.t, self.q, self.qd, closed):
+                values = self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets, contacts=shut)
+                for name in contacts:
+                    values.setdefault(name, 0.0)
+                for name, value in values.items():
                     series.setdefault(name, []).append(np.atleast_1d(value))
             self._reactions = {k: np.array(v) for k, v in series.items()}
         return self._reactions

@@ -9,15 +9,15 @@ import numpy as np
 from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.ivp import METHODS
 
-from scipy.optimize import brentq
-
 from .errors import ModelError, SimulationError
-from .impact import GAP_TOLERANCE, contact_values, solve_impact
+from .events import ContactWatch
+from .formulations.lagrange import TrialStateError
+from .impact import GAP_TOLERANCE
 from .integrators import compiled_jacobian, run_compiled, why_not_compiled
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
-from .result import Event, Result
+from .result import Result
 
 
 class _Progress:
@@ -73,14 +73,17 @@ def check_settings(t_end, rtol, atol, t_eval):
 class _Recorder:
     """Collects output samples: every step, or the requested ``t_eval`` times."""
 
-    def __init__(self, t_eval):
+    def __init__(self, t_eval, closed=lambda: ()):
         self.t_eval = t_eval
+        self.closed_now = closed
+        self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
         self.t: list[float] = []
         self.q: list[np.ndarray] = []
         self.qd: list[np.ndarray] = []
 
     def add(self, t, q, qd):
+        self.closed.append(tuple(self.closed_now()))
         self.t.append(float(t))
         self.q.append(np.array(q, dtype=float))
         self.qd.append(np.array(qd, dtype=float))
@@ -119,80 +122,6 @@ class _Recorder:
             self.next += 1
 
 
-class _ContactWatch:
-    """Watches contact gaps between steps: locates closings, applies impacts, and turns
-    contacts that keep closing with vanishing speed into persistent constraints (released
-    when their reaction would pull)."""
-
-    def __init__(self, system, rest_speed: float, offsets):
-        self.system, self.rest_speed, self.offsets = system, rest_speed, offsets
-        self.names = [c.name for c in system.topology.contacts]
-        self.persistent: tuple = ()
-        self.events: list = []
-
-    def gaps(self, q, qd):
-        return contact_values(self.system, q, qd)
-
-    def check_initial(self, q, qd):
-        values = self.gaps(q, qd)
-        for i, gap in enumerate(values.g):
-            if gap < -GAP_TOLERANCE:
-                raise SimulationError(f"initial state penetrates the contact by {-gap:.3g} m (gap {gap:.3g} m); "
-                                      f"move the body out of contact", self.system.topology.contacts[i])
-        return [i for i in range(len(values.g)) if values.g[i] < GAP_TOLERANCE and values.J[i] @ qd < 0]
-
-    def locate(self, workspace, dense, t_old, t_new, g_old, g_new):
-        """Earliest time in (t_old, t_new] at which a free contact's gap closes, or None."""
-        earliest = None
-        for i in range(len(self.names)):
-            if i in self.persistent or not (g_new[i] < 0.0 <= g_old[i] or g_new[i] < -GAP_TOLERANCE < g_old[i]):
-                continue
-            def gap(s, i=i):
-                q, qd = workspace.full_state(s, dense(s))
-                return self.gaps(q, qd).g[i]
-            a = t_old
-            if gap(a) <= 0.0:
-                te = t_old
-            else:
-                te = brentq(gap, a, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
-            if earliest is None or te < earliest:
-                earliest = te
-        return earliest
-
-    def impact(self, t, q, qd):
-        """Apply the impact of every contact that is closed and closing at ``(t, q, qd)``."""
-        values = self.gaps(q, qd)
-        active = [i for i in range(len(self.names)) if i not in self.persistent
-                  and values.g[i] < GAP_TOLERANCE + 1e-7 and values.J[i] @ qd < 0]
-        if not active:
-            return qd, False
-        result = solve_impact(self.system, t, q, qd, active, offsets=self.offsets, persistent=self.persistent)
-        qd_plus = result.qd
-        after = self.gaps(q, qd_plus)
-        resting = [i for i in active if abs(after.J[i] @ qd_plus) < self.rest_speed]
-        if resting:
-            # Coming to rest: close these contacts for good (a plastic impact on them).
-            self.persistent = tuple(sorted(set(self.persistent) | set(resting)))
-            result2 = solve_impact(self.system, t, q, qd_plus, [], offsets=self.offsets, persistent=self.persistent)
-            qd_plus = result2.qd
-        for name, impulse in result.impulses.items():
-            self.events.append(Event(time=float(t), contact=name, impulse=impulse, energy_loss=result.energy_loss))
-        return qd_plus, True
-
-    def release(self, system, workspace, t, q, qd, tau):
-        """Persistent contacts whose reaction would pull are opened again."""
-        if not self.persistent:
-            return False
-        formulation = system._formulation
-        _, lam = formulation.solve(system, t, q, qd, system._tau(tau, t, q, qd), self.offsets, self.persistent)
-        contact_lam = lam[len(lam) - len(self.persistent):]
-        keep = tuple(i for i, value in zip(self.persistent, contact_lam) if value >= 0.0)
-        if keep == self.persistent:
-            return False
-        self.persistent = keep
-        return True
-
-
 def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
@@ -225,12 +154,14 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     formulation = system._formulation
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
-    watch = _ContactWatch(system, rest_speed, offsets) if system.topology.contacts else None
-    if watch is not None and watch.check_initial(q0, qd0):
-        qd0, _ = watch.impact(0.0, q0, qd0)
+    watch = ContactWatch(system, rest_speed, offsets, tau) if system.topology.contacts else None
+    if watch is not None:
+        qd0 = watch.start(q0, qd0)
     workspace = formulation.start(system, 0.0, q0, qd0, tau, watch.persistent if watch else ())
+    if watch is not None and workspace.y0.size == 0:
+        max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
     bar = _Progress(t_end, progress)
-    recorder = _Recorder(t_eval)
+    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()))
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
 
     def fun(t, y):
@@ -242,8 +173,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     if getattr(cls, "__name__", "") in IMPLICIT_METHODS and why_not_compiled(system, "DOP853", tau) is None:
         options["jac"] = compiled_jacobian(system, None if tau is None else system._tau(tau, 0.0, q0, qd0))
 
-    def make_solver(t0, y0):
-        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, **options)
+    def make_solver(t0, y0, first_step=None):
+        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, first_step=first_step, **options)
 
     def add_counts(solver):
         for key in ("nfev", "njev", "nlu"):
@@ -258,8 +189,22 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     gaps_old = watch.gaps(q0, qd0).g if watch else None
     try:
         solver = make_solver(0.0, workspace.y0)
+        retries = 0
         while True:
-            message = solver.step()
+            try:
+                message = solver.step()
+            except TrialStateError:
+                # Like a rejected step: back to the last accepted state, a quarter of the step.
+                retries += 1
+                if retries > 10:
+                    raise
+                add_counts(solver)
+                counts["restarts"] += 1
+                h = getattr(solver, "h_abs", None) or (t_end / 100)
+                t_back, y_back = workspace.retreat()
+                solver = make_solver(t_back, y_back, first_step=max(h / 4, 1e-12))
+                continue
+            retries = 0
             if solver.status == "failed":
                 raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
             counts["steps"] += 1
@@ -269,17 +214,25 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                 q, qd = workspace.full_state(t, solver.y)
                 gaps_new = watch.gaps(q, qd).g
                 dense = solver.dense_output()
-                te = watch.locate(workspace, dense, t_old, t, gaps_old, gaps_new)
+                t_close = watch.locate_closing(workspace, dense, t_old, t, gaps_old, gaps_new)
+                release = watch.locate_release(workspace, dense, t_old, t, q, qd)
+                t_release = None if release is None else release[0]
+                te = min((x for x in (t_close, t_release) if x is not None), default=None)
                 if te is not None:
                     t = te
                     q, qd = workspace.full_state(te, dense(te) if te != solver.t else solver.y)
                     recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
-                    qd, changed = watch.impact(te, q, qd)
+                    if te == t_close:
+                        qd, changed = watch.impact(te, q, qd)
+                        if not changed:  # closed but not closing: it rests on its surface
+                            closing = [i for i in range(len(watch.names)) if i not in watch.persistent
+                                       and watch.gaps(q, qd).g[i] < GAP_TOLERANCE]
+                            watch.persistent = tuple(sorted(set(watch.persistent) | set(closing)))
+                    else:
+                        watch.open(release[1])
+                        watch.release(te, q, qd)
                     recorder.add_event_state(te, q, qd)
                     restart = (te, q, qd)
-                elif watch.release(system, workspace, t, q, qd, tau):
-                    recorder.record_step(workspace, solver, t_old, t)
-                    restart = (t, q, qd)
                 else:
                     recorder.record_step(workspace, solver, t_old, t)
                 gaps_old = watch.gaps(*(restart[1:] if restart else (q, qd))).g
@@ -318,7 +271,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
              "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
     events = watch.events if watch else []
     return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
-                  events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [])
+                  events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
+                  closed_contacts=recorder.closed)
 
 
 def _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:

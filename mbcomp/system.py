@@ -258,6 +258,8 @@ class System:
                 raise ModelError(f"parameter {key!r}", f"must be finite, got {value!r}")
             if key.endswith(".mass") and float(new) <= 0:
                 raise ModelError(f"parameter {key!r}", f"mass must be positive, got {float(new)}")
+            if key.endswith(".restitution") and not 0.0 <= float(new) <= 1.0:
+                raise ModelError(f"parameter {key!r}", f"restitution must lie in [0, 1], got {float(new)}")
             merged[key] = float(new) if new.ndim == 0 else tuple(new.tolist())
         return System(self._compiled, self._formulation, merged)
 
@@ -395,13 +397,17 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
 
-    def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None
-                  ) -> dict[str, np.ndarray]:
+    def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
+                  contacts: Any = ()) -> dict[str, np.ndarray]:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
-        loop-closing joint's force on its child (N, world x y z) then its torques (N m)."""
+        loop-closing joint's force on its child (N, world x y z) then its torques (N m);
+        and the normal force (N) of each contact in ``contacts`` held closed."""
+        from .impact import contact_indices
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets)
+        closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
+            else tuple(contact_indices(self, contacts)) if contacts else ()
+        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nq,) generalised forces that, applied, hold the system at rest at ``q``

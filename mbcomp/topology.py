@@ -153,8 +153,20 @@ def build_topology(model) -> Topology:
                 problems.append(str(exc))
             if joint in cut_joints:
                 problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinates")
-    constraints = tuple(c for c in components.values() if isinstance(c, Constraint))
-    contacts = tuple(c for c in components.values() if isinstance(c, Contact))
+    constraints = tuple(c for c in components.values() if isinstance(c, Constraint) and c.name not in broken)
+    for comp in constraints:
+        joint = components.get(name_of(comp.joint)) if hasattr(comp, "joint") else None
+        if joint is None:
+            continue
+        if joint.n_coords != 1:
+            problems.append(f"{describe(comp)}: needs a 1-DOF joint, {describe(joint)} has {joint.n_coords} coordinates")
+        elif joint in cut_joints:
+            problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinate to drive; "
+                            f"declare the loop so that the driven joint is part of the tree")
+    contacts = tuple(c for c in components.values() if isinstance(c, Contact) and c.name not in broken)
+    for comp in contacts:
+        if name_of(comp.body) == ground.name:
+            problems.append(f"{describe(comp)}: is on the ground, which never moves; put it on a moving body")
     if problems:
         raise CompileError(problems=problems)
     return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),

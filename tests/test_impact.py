@@ -228,16 +228,12 @@ class TestBouncingBall:
         np.testing.assert_allclose(res["dz"][resting], 0.0, atol=1e-12)
         assert ball(formulation).gaps(res.q[-1])["floor"] == pytest.approx(0.0, abs=1e-12)
 
-    @pytest.mark.xfail(strict=True, reason="bug: the reaction of a persistent contact is not reported "
-                       "(Result.reactions / System.reactions leave contacts out)")
     def test_persistent_contact_carries_the_weight(self, formulation):
         res = ball_run(formulation)
         resting = res.t > res.events[-1].time
         reaction = np.asarray(res.reactions["floor"]).reshape(len(res.t), -1)[resting, 0]
         np.testing.assert_allclose(reaction, 1.0 * G, rtol=1e-9)
 
-    @pytest.mark.xfail(strict=True, reason="bug: the event that brings a contact to rest records the "
-                       "impulse and energy loss of the elastic impact, not of the plastic closing applied")
     def test_the_resting_event_books_the_momentum_and_energy_applied(self, formulation):
         res = ball_run(formulation)
         q, qd_before, qd_after = event_states(res, res.events[-1])
@@ -259,9 +255,6 @@ def test_closing_contact_at_the_start_is_an_impact_at_t0(formulation):
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
-@pytest.mark.xfail(strict=True, reason="bug: starting at rest on a closed contact (gap 0, speed 0) "
-                   "loops forever: the gap closes at t_old, the impact finds nothing closing, the "
-                   "solver restarts at the same time")
 def test_starting_at_rest_on_the_floor(formulation):
     with time_limit(2.0):
         res = ball(formulation, 0.0).simulate(0.5, [0.0], [0.0])
@@ -296,10 +289,6 @@ def lifted_height(t):
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
-@pytest.mark.xfail(strict=True, reason="bug: persistent contacts are released only at the end of an "
-                   "integrator step (no event location on the reaction); with the state at rest the "
-                   "steps are long (dae: released late), and lagrange with every coordinate locked "
-                   "has an empty state that scipy takes to t_end in one step (never released)")
 def test_persistent_contact_is_released_when_its_reaction_would_pull(formulation):
     t = np.linspace(0.0, 0.5, 21)
     res = ball(formulation, 0.0).simulate(0.5, [0.05], [0.0], rtol=1e-10, atol=1e-12, tau=lift_force, t_eval=t)
@@ -689,8 +678,6 @@ def cart_with_pendulum(formulation):
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
-@pytest.mark.xfail(strict=True, reason="bug: a persistent contact is held as a bilateral constraint "
-                   "during another impact, even when its impulse pulls: the cart stays glued to the floor")
 def test_persistent_contact_lets_go_when_another_impact_lifts_it(formulation):
     system = cart_with_pendulum(formulation)
     # Lands plastically at t = 0 (persistent), then the rod swings into the slope.

@@ -6,6 +6,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ModelError
+from ..rotations import unit_axis
 from .base import Component
 from ._values import scalar, vector3
 
@@ -23,11 +24,14 @@ class Contact(Component):
         super().__init__(name)
         self.body = body
         self.point = vector3(point, self, "point")
-        n = np.asarray(vector3(normal, self, "normal"))
-        length = float(np.linalg.norm(n))
-        if length < 1e-12:
-            raise ModelError(self, "normal has zero length")
-        self.normal = tuple(float(v) for v in n / length)
+        if isinstance(normal, str):
+            self.normal = unit_axis(normal, owner=self)
+        else:
+            n = np.asarray(vector3(normal, self, "normal"))
+            length = float(np.linalg.norm(n))
+            if length < 1e-12:
+                raise ModelError(self, "normal has zero length")
+            self.normal = tuple(float(v) for v in n / length)
         self.origin = vector3(origin, self, "origin")
         self.restitution = scalar(restitution, self, "restitution", low=0.0, high=1.0)
 

@@ -5,6 +5,7 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 
 from ..constraint_set import ConstraintValues
 from ..errors import format_state, ModelError, SimulationError
@@ -19,15 +20,20 @@ RANK_TOLERANCE = 1e-9
 ASSEMBLY_TOLERANCE = 1e-12
 
 
-def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE) -> np.ndarray:
-    """Indices of a maximal set of independent rows of ``J`` (pivoted QR of ``J^T``)."""
+def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 0.0) -> np.ndarray:
+    """Indices of a maximal set of independent rows of ``J`` (pivoted QR of ``J^T``).
+
+    A pivot counts when it exceeds ``tol`` times the largest pivot or ``scale`` (the
+    Jacobian's size where the mechanism is regular), so that a Jacobian which vanishes
+    as a whole (a folded mechanism) is not mistaken for a full-rank one.
+    """
     if J.shape[0] == 0 or J.shape[1] == 0:
         return np.arange(0)
     _, R, piv = scipy.linalg.qr(J.T, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
     if diag.size == 0 or diag[0] == 0.0:
         return np.arange(0)
-    rank = int(np.sum(diag > tol * diag[0]))
+    rank = int(np.sum(diag > tol * max(diag[0], scale)))
     return np.sort(piv[:rank])
 
 
@@ -160,7 +166,7 @@ class Formulation:
             if rows is None:
                 if qd is not None:
                     self.check_dead_point(J, qd, t, q, contacts)
-                rows = independent_rows(J)
+                rows = self.rows_of(J)
             if rows.size == 0:
                 return Minv_f, lam
             Js = J[rows]
@@ -169,7 +175,7 @@ class Formulation:
             try:
                 LA = np.linalg.cholesky(A)
                 diag = np.diag(LA)
-                if np.min(diag) > RANK_TOLERANCE * np.max(diag):
+                if np.min(diag) > RANK_TOLERANCE * max(np.max(diag), self.schur_scale):
                     break
             except np.linalg.LinAlgError:
                 pass
@@ -185,7 +191,7 @@ class Formulation:
     def check_dead_point(self, J, qd, t, q, contacts=()):
         """At rest on a configuration where the Jacobian lost rank the motion is not
         determined (a bifurcation): raise naming the constraints involved."""
-        rows = independent_rows(J)
+        rows = self.rows_of(J)
         nominal = self.nominal_rank
         if nominal is not None and not contacts and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
@@ -196,15 +202,27 @@ class Formulation:
 
     nominal_rank: int | None = None
     nominal_rows: np.ndarray | None = None
+    jacobian_scale: float = 0.0
+    schur_scale: float = 0.0
+
+    def rows_of(self, J: np.ndarray) -> np.ndarray:
+        """Independent rows of a constraint Jacobian of this model (see ``independent_rows``)."""
+        return independent_rows(J, scale=self.jacobian_scale)
 
     # -- the public operations ---------------------------------------------------------------------
     def accelerations(self, system, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
         return self.solve(system, t, q, qd, tau, offsets, contacts=contacts)[0]
 
-    def reactions(self, system, t, q, qd, tau, offsets=None) -> dict[str, np.ndarray]:
-        if self.constraints is None:
+    def reactions(self, system, t, q, qd, tau, offsets=None, contacts=()) -> dict[str, np.ndarray]:
+        """Multipliers by constraint name, then each closed contact's normal force (N)."""
+        if self.constraints is None and not contacts:
             return {}
-        return self.constraints.split_reactions(self.solve(system, t, q, qd, tau, offsets)[1])
+        lam = self.solve(system, t, q, qd, tau, offsets, contacts=contacts)[1]
+        nc = 0 if self.constraints is None else self.constraints.nc
+        out = {} if self.constraints is None else self.constraints.split_reactions(lam[:nc])
+        names = [c.name for c in system.topology.contacts]
+        out.update({names[i]: float(value) for i, value in zip(contacts, lam[nc:])})
+        return out
 
     def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
@@ -215,23 +233,31 @@ class Formulation:
         (mass-orthogonal projection).  ``SimulationError`` naming the constraints that fail."""
         if self.constraints is None:
             return q.copy(), qd.copy()
-        q = q.copy()
         zero = np.zeros_like(qd)
-        residual = np.inf
-        for _ in range(60):
+
+        def residual(x):
+            g = self.constraint_values(system, t, x, zero, offsets).g
+            return np.where(np.isfinite(g), g, 0.0)
+
+        def jacobian(x):
+            cv = self.constraint_values(system, t, x, zero, offsets)
+            return np.where(np.isfinite(cv.g)[:, None], cv.J, 0.0)
+
+        q = q.copy()
+        if float(np.max(np.abs(residual(q)), initial=0.0)) > 1e-6:
+            # Far from the constraints: a trust-region least-squares solve, robust where
+            # plain Newton steps explode (near-singular Jacobians off the solution set).
+            solution = scipy.optimize.least_squares(residual, q, jac=jacobian, method="trf", xtol=1e-14,
+                                                    ftol=1e-14, gtol=1e-14, max_nfev=400)
+            q = solution.x
+        for _ in range(20):  # Newton polish with minimum-norm steps
             cv = self.constraint_values(system, t, q, zero, offsets)
             rows = np.isfinite(cv.g)
-            g = cv.g[rows]
-            new_residual = float(np.max(np.abs(g), initial=0.0))
-            if new_residual < ASSEMBLY_TOLERANCE:
+            if float(np.max(np.abs(cv.g[rows]), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
-            if new_residual > residual and new_residual > 1e-3:
-                break  # diverging from a poor guess
-            residual = new_residual
-            step, *_ = np.linalg.lstsq(cv.J[rows], -g, rcond=1e-12)
+            step, *_ = np.linalg.lstsq(cv.J[rows], -cv.g[rows], rcond=1e-10)
             q = q + step
-        else:
-            cv = self.constraint_values(system, t, q, zero, offsets)
+        cv = self.constraint_values(system, t, q, zero, offsets)
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
         if float(np.max(np.abs(g), initial=0.0)) > 1e-9:
             worst = np.argsort(-np.abs(g))
@@ -243,7 +269,7 @@ class Formulation:
     def project_velocity(self, system, q, qd, t=0.0, offsets=None):
         """The speeds closest to ``qd`` in the kinetic-energy norm with ``J qd + g_t = 0``."""
         cv = self.constraint_values(system, t, q, np.zeros_like(qd), offsets)
-        rows = independent_rows(cv.J)
+        rows = self.rows_of(cv.J)
         if rows.size == 0:
             return qd.copy()
         J = cv.J[rows]
@@ -279,21 +305,39 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
         return
     rng = np.random.default_rng(seed)
     guesses = [np.zeros(nq)] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
-    last_error = None
+    last_error, best = None, None
+    consistent = 0
     for guess in guesses:
         try:
             q, _ = formulation.assemble(system, guess, np.zeros(nq))
-            break
         except SimulationError as exc:
             last_error = exc
-    else:
+            continue
+        consistent += 1
+        J = formulation.constraint_values(system, 0.0, q, np.zeros(nq)).J
+        rows = independent_rows(J)
+        # The generic rank is the largest found: a configuration may be singular (a
+        # parallelogram built collinear), never more regular than the mechanism.
+        if best is None or rows.size > best[0].size:
+            pivots = np.abs(np.diag(scipy.linalg.qr(J.T, mode="economic", pivoting=True)[1]))
+            best = (rows, J.shape[0], float(pivots[0]) if pivots.size else 0.0, q)
+        if consistent >= 3:
+            break
+    if best is None:
         nc = formulation.constraints.nc
         count = f"{nq} coordinates and {nc} constraint equations ({nq - nc} degrees of freedom by count)"
         raise ModelError(None, f"the constraints cannot all be met (they conflict, or leave fewer than zero "
                                f"degrees of freedom): {count}; {last_error}")
-    cv = formulation.constraint_values(system, 0.0, q, np.zeros(nq))
-    rows = independent_rows(cv.J)
+    rows, nc, scale, q_best = best
+    if rows.size:
+        # Size of the Schur complement's Cholesky pivots where the mechanism is regular: the
+        # fast path in solve_constrained must not accept rows whose pivots all collapsed.
+        J = formulation.constraint_values(system, 0.0, q_best, np.zeros(nq)).J[rows]
+        M, _ = system._dynamics(0.0, q_best, np.zeros(nq))
+        A = J @ np.linalg.solve(M, J.T)
+        formulation.schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
     formulation.nominal_rank = int(rows.size)
     formulation.nominal_rows = rows
+    formulation.jacobian_scale = scale
     formulation.ndof = nq - int(rows.size)
-    formulation.redundant = [formulation.constraints.labels[r] for r in range(cv.J.shape[0]) if r not in set(rows.tolist())]
+    formulation.redundant = [formulation.constraints.labels[r] for r in range(nc) if r not in set(rows.tolist())]

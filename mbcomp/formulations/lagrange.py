@@ -5,7 +5,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import SimulationError
-from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace, independent_rows
+from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 
 #: Re-choose the independent coordinates when the dependent block's condition number
 #: exceeds this (and a fresh choice is clearly better).
@@ -24,6 +24,11 @@ def partition(J: np.ndarray):
     return dep, ind
 
 
+class TrialStateError(SimulationError):
+    """The dependent coordinates cannot be found for a trial state of the integrator
+    (Newton fails far from the last accepted state): the step is to be retried shorter."""
+
+
 class LagrangeWorkspace(Workspace):
     """State ``[q_ind, qd_ind]``; dependent coordinates by warm-started Newton."""
 
@@ -37,7 +42,8 @@ class LagrangeWorkspace(Workspace):
 
     def choose(self, t, q):
         cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
-        self.rows = independent_rows(cv.J)
+        self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts)
+        self.rows = self.formulation.rows_of(cv.J)
         self.dep, self.ind = partition(cv.J[self.rows])
 
     def dependent(self, t, qi):
@@ -54,13 +60,18 @@ class LagrangeWorkspace(Workspace):
             try:
                 q[self.dep] -= np.linalg.solve(cv.J[np.ix_(self.rows, self.dep)], g)
             except np.linalg.LinAlgError:
-                raise SimulationError(f"dependent coordinates are singular at t = {t:g}: constraints "
+                raise TrialStateError(f"dependent coordinates are singular at t = {t:g}: constraints "
                                       f"{self.formulation.row_names(self.rows, self.contacts)}") from None
         else:
-            raise SimulationError(f"dependent coordinates did not converge at t = {t:g} (residual "
+            raise TrialStateError(f"dependent coordinates did not converge at t = {t:g} (residual "
                                   f"{np.max(np.abs(g)):.3g}): constraints "
                                   f"{self.formulation.row_names(self.rows, self.contacts)}")
         return q, cv
+
+    def retreat(self):
+        """``(t, y)`` of the last accepted state, with the coordinates chosen afresh there."""
+        self.choose(self.t_accepted, self.q_accepted)
+        return self.t_accepted, np.concatenate((self.q_accepted[self.ind], self.qd_accepted[self.ind]))
 
     def full_state(self, t, y):
         k = len(self.ind)
@@ -89,7 +100,7 @@ class LagrangeWorkspace(Workspace):
         condition = np.linalg.cond(cv.J[np.ix_(self.rows, self.dep)])
         if condition < REPARTITION_CONDITION:
             return None
-        rows = independent_rows(cv.J)
+        rows = self.formulation.rows_of(cv.J)
         dep, ind = partition(cv.J[rows])
         if np.array_equal(dep, self.dep) and np.array_equal(rows, self.rows):
             return None
@@ -119,7 +130,7 @@ class LagrangeFormulation(Formulation):
         cv = self.constraint_values(system, t, q, qd, offsets, contacts)
         if partition_hint is None:
             self.check_dead_point(cv.J, qd, t, q, contacts)
-            rows = independent_rows(cv.J)
+            rows = self.rows_of(cv.J)
             dep, ind = partition(cv.J[rows])
         else:
             rows, dep, ind = partition_hint

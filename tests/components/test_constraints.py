@@ -115,8 +115,6 @@ class TestBadInput:
         with pytest.raises(mb.ModelError, match="Slider 'guide'.*axis"):
             mb.Slider("guide", "bar1", point=(1, 0, 0), axis=(0, 0, 0))
 
-    @pytest.mark.xfail(strict=True, reason="bug: a Motor on a 3-DOF Spherical joint compiles (it silently "
-                                           "drives the first Euler angle); topology does not check n_coords == 1")
     def test_motor_on_a_three_dof_joint_is_rejected(self):
         m = mb.Model("ball", gravity=(0, -G, 0))
         b = m.add(bar("bar", 1.0))
@@ -133,8 +131,6 @@ class TestBadInput:
         with pytest.raises(mb.ModelError, match="Motor 'mot'.*nojoint"):
             double_pendulum(mb.Motor("mot", "nojoint", speed=1.0)).compile()
 
-    @pytest.mark.xfail(strict=True, reason="bug: a Motor on a loop-closing joint (no coordinate) raises a "
-                                           "bare KeyError('C') at compile instead of a ModelError")
     def test_motor_on_a_loop_closing_joint_is_rejected(self):
         m = fourbar()
         m.add(mb.Motor("mot", "C", speed=1.0))
@@ -342,9 +338,6 @@ class TestRedundantConstraints:
         assert s.ndof == 1
         assert len(s.redundant_constraints) == 3
 
-    @pytest.mark.xfail(strict=True, reason="bug: analyse() takes the rank at the first consistent configuration, "
-                                           "q = 0, which for a parallelogram built along x is its singular "
-                                           "(collinear) position: ndof 2 and C.x reported redundant")
     def test_ndof_is_the_generic_rank_even_when_q0_is_singular(self):
         s = fourbar(0.3, 0.7, 0.3, 0.7, name="parallelogram_x").compile("dae")
         assert s.ndof == 1
@@ -372,9 +365,6 @@ class TestRedundantConstraints:
         assert s.constraint_violation(q) < 1e-10
         assert_close(q[[2, 4, 3]], q[[0, 0, 1]], atol=1e-8, name="on the symmetric branch")
 
-    @pytest.mark.xfail(strict=True, reason="bug: Newton assembly takes minimum-norm lstsq steps with rcond=1e-12; "
-                                           "off the Bricard curve J has a ~1e-3 singular value, the step explodes "
-                                           "and 3 of 30 guesses within 0.05 rad fail")
     def test_bricard_assembles_from_random_guesses_within_5_centiradians(self):
         s = bricard_model().compile("dae")
         rng = np.random.default_rng(1)
@@ -420,9 +410,6 @@ class TestAssembly:
         assert abs(qd @ M @ (qd - qd_guess)) < 1e-10 * (1 + abs(qd_guess @ M @ qd_guess))
         assert np.linalg.norm(qd) > 0.1
 
-    @pytest.mark.xfail(strict=True, reason="bug: assembly Newton has no step control (it stops when the residual "
-                                           "grows): 5 of 50 guesses within 0.5 rad of a four-bar solution fail, "
-                                           "39 of 100 uniform guesses fail, e.g. [2.5, 1, -1]")
     def test_fourbar_from_guesses_within_half_a_radian(self):
         s = fourbar().compile("dae")
         q0, _ = s.assemble([1.0, -0.5, 1.5])
@@ -467,25 +454,13 @@ class TestDeadPoints:
             with pytest.raises(mb.SimulationError, match=r"'C'|\bC\b"):
                 call()
 
-    @pytest.mark.parametrize("formulation", [
-        pytest.param("lagrange", marks=pytest.mark.xfail(strict=True, reason=(
-            "bug: lagrange simulate() from the dead point at rest skips the dead-point check (rhs passes a "
-            "partition hint) and returns a run whose constraint violation reaches 1.7e-4"))),
-        "dae"])
+    @pytest.mark.parametrize("formulation", ["lagrange", "dae"])
     def test_simulating_from_the_dead_point_at_rest_raises(self, formulation):
         s = parallelogram().compile(formulation)
         with pytest.raises(mb.SimulationError, match=r"'C'|\bC\b"):
             s.simulate(0.1, DEAD, [0, 0, 0])
 
-    @pytest.mark.parametrize("formulation", [
-        pytest.param("lagrange", marks=pytest.mark.xfail(strict=True, reason=(
-            "bug: independent_rows() tests rank relative to the largest pivot, so a constraint Jacobian that "
-            "vanishes entirely (here ~1e-17) counts as full rank; no dead-point error, qdd leaves the constraint"))),
-        pytest.param("dae", marks=pytest.mark.xfail(strict=True, reason=(
-            "bug: dae's solve_constrained fast path keeps the nominal rows when the Schur complement's pivots "
-            "are large relative to each other; with one independent row that always holds, even at ~1e-33, so "
-            "no dead-point error and qdd = (32.6, -21.7) leaves the constraint"))),
-    ])
+    @pytest.mark.parametrize("formulation", ["lagrange", "dae"])
     def test_folded_slider_crank_at_rest_raises(self, formulation):
         """Crank = rod: at A = 90 deg, B = 180 deg the rod lies folded on the crank with its
         end at the origin; the slider equation's gradient vanishes."""

@@ -196,8 +196,6 @@ class TestImpactInterface:
         with pytest.raises(mb.ModelError, match="length"):
             slide().impact([0.0, 1.0], [-1.0])
 
-    @pytest.mark.xfail(strict=True, reason="bug: solve_impact reads Contact.restitution from the model "
-                       "component, ignoring the 'floor.restitution' parameter of the System")
     def test_restitution_is_a_parameter(self):
         system = slide(e=0.5)
         changed = system.with_parameters({"floor.restitution": 0.2})
@@ -206,7 +204,6 @@ class TestImpactInterface:
         res = system.simulate(0.2, [0.0], [-1.0], parameters={"floor.restitution": 0.2})
         assert res.events[0].impulse == pytest.approx(2.0 * 1.2, rel=1e-12)
 
-    @pytest.mark.xfail(strict=True, reason="bug: with_parameters accepts a restitution outside [0, 1]")
     @pytest.mark.parametrize("e", [-0.1, 2.0])
     def test_restitution_parameter_out_of_range_is_refused(self, e):
         with pytest.raises(mb.ModelError, match="restitution"):

@@ -76,12 +76,6 @@ class TestDependentCoordinates:
         assert energy_error(res) < 1e-5
         assert np.ptp(res["A"]) > 1.0
 
-    @pytest.mark.xfail(strict=True, raises=mb.SimulationError, reason=(
-        "bug: 'dependent coordinates did not converge' on a regular four-bar (no singular position on the "
-        "way): a trial stage moves the independent coordinate B where Newton from the extrapolated last "
-        "accepted state diverges, and the failure aborts the run instead of rejecting the step. Which case "
-        "fails depends on the assembled start (e.g. speed 1, rtol 1e-8 at t = 3.37 s; speed 4, rtol 1e-6 at "
-        "t = 1.37 s; speed 0, rtol 1e-7 at t = 3.49 s)"))
     def test_large_swings_complete(self):
         """5 s of large swings and full turns from (1.0, -0.5, 1.5) with the crank at several
         speeds and tolerances: every run completes, on the constraint, without jumps in q."""
