@@ -106,20 +106,23 @@ class _Recorder:
             self.add(t, q, qd)
             self.next += 1
 
-    def record_step(self, workspace, solver, t_old, t_new):
+    def record_interior(self, workspace, solver, t_new):
+        """Requested samples strictly inside the step just taken (its dense output)."""
         if self.t_eval is None:
-            q, qd = workspace.full_state(t_new, solver.y)
-            self.add(t_new, q, qd)
             return
         dense = None
-        while self.next < len(self.t_eval) and self.t_eval[self.next] <= t_new:
+        while self.next < len(self.t_eval) and self.t_eval[self.next] < t_new:
             ts = self.t_eval[self.next]
-            if dense is None:
-                dense = solver.dense_output()
-            y = dense(ts) if ts != t_new else solver.y
-            q, qd = workspace.full_state(ts, y)
-            self.add(ts, q, qd)
+            dense = dense or solver.dense_output()
+            self.add(ts, *workspace.full_state(ts, dense(ts)))
             self.next += 1
+
+    def record_end(self, workspace, t_new, y_end):
+        """The state at the end of a step (after any projection), when it is a sample."""
+        if self.t_eval is None or (self.next < len(self.t_eval) and self.t_eval[self.next] == t_new):
+            self.add(t_new, *workspace.full_state(t_new, y_end))
+            if self.t_eval is not None:
+                self.next += 1
 
 
 def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
@@ -234,15 +237,20 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                     recorder.add_event_state(te, q, qd)
                     restart = (te, q, qd)
                 else:
-                    recorder.record_step(workspace, solver, t_old, t)
+                    recorder.record_interior(workspace, solver, t)
+                    corrected = workspace.after_step(t, solver.y)
+                    recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
                 gaps_old = watch.gaps(*(restart[1:] if restart else (q, qd))).g
             else:
-                recorder.record_step(workspace, solver, t_old, t)
+                # Samples inside the step come from its dense output, in the coordinates it was
+                # taken in; the end sample comes after the correction (projection, new partition).
+                recorder.record_interior(workspace, solver, t)
+                corrected = workspace.after_step(t, solver.y)
+                recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
             bar.update(t)
             if restart is None and solver.status == "finished":
                 break
             if restart is None:
-                corrected = workspace.after_step(t, solver.y)
                 if corrected is not None:
                     add_counts(solver)
                     counts["restarts"] += 1

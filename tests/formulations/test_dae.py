@@ -139,8 +139,6 @@ class TestProjection:
         assert energy_error(b) < 1e-4
         assert_close(b.q[-1], a.q[-1], atol=1e-2, rtol=0, name="same motion")
 
-    @pytest.mark.xfail(strict=True, reason="bug: simulate() records each step's state before after_step() projects "
-                                           "it, so a projected run reports the unprojected drift (1.8e-7 here)")
     def test_projected_run_reports_projected_states(self):
         s = fourbar().compile("dae", baumgarte=(0, 0), projection=True)
         q, qd = s.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
