@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ..errors import SimulationError
+from ..errors import SimulationError, format_state
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 
 #: Re-choose the independent coordinates when the dependent block's condition number
@@ -97,17 +97,33 @@ class LagrangeWorkspace(Workspace):
         if not len(self.dep):
             return None
         cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
-        condition = np.linalg.cond(cv.J[np.ix_(self.rows, self.dep)])
+        condition = self.condition(cv.J, self.rows, self.dep)
         if condition < REPARTITION_CONDITION:
             return None
         rows = self.formulation.rows_of(cv.J)
+        nominal = self.formulation.nominal_rank
+        if nominal is not None and not self.contacts and rows.size < nominal:
+            lost = sorted(set(range(cv.J.shape[0])) - set(rows.tolist()))
+            raise SimulationError(
+                f"the mechanism reaches a singular position at t = {t:g} (q = {format_state(q)}): the constraint "
+                f"Jacobian loses rank, so no set of independent coordinates exists there; constraints involved: "
+                f"{self.formulation.row_names(lost)}. The dae formulation can pass such positions in motion.")
         dep, ind = partition(cv.J[rows])
         if np.array_equal(dep, self.dep) and np.array_equal(rows, self.rows):
             return None
-        if np.linalg.cond(cv.J[np.ix_(rows, dep)]) > 0.5 * condition:
+        if self.condition(cv.J, rows, dep) > 0.5 * condition:
             return None  # no clearly better choice
         self.rows, self.dep, self.ind = rows, dep, ind
         return np.concatenate((q[ind], qd[ind]))
+
+    def condition(self, J, rows, dep) -> float:
+        """How close the dependent block is to singular, against the Jacobian's regular size:
+        largest singular value of J (or its size where the mechanism is regular) over the
+        smallest of J_d.  Scale-aware, so a 1 x 1 block that shrinks counts too."""
+        block = J[np.ix_(rows, dep)]
+        smallest = np.linalg.svd(block, compute_uv=False).min() if block.size else np.inf
+        largest = max(np.linalg.norm(J, 2) if J.size else 0.0, self.formulation.jacobian_scale)
+        return largest / smallest if smallest > 0 else np.inf
 
 
 class LagrangeFormulation(Formulation):
