@@ -3,7 +3,7 @@
 From Python, one call (microseconds, best of several timeit repeats):
   mbcomp System.accelerations(q, qd)                 the public API (argument checks included)
   mbcomp raw compiled call                           system._compiled.functions.accelerations(
-                                                     q, qd, p, u, None, out, work), preallocated arrays
+                                                     q, qd, p, u, None): thread-local bound buffers
   mbcomp ctypes direct                               the C function through ctypes with raw addresses
                                                      (the floor of any call from Python)
   Pinocchio pin.aba(model, data, q, v, tau)
@@ -30,6 +30,8 @@ import sys
 import time
 import timeit
 from pathlib import Path
+
+import ctypes
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -82,15 +84,14 @@ def setup(n: int, loop_time: float = 2.0, dt: float = 1e-4):
     calls["mbcomp_accelerations"] = lambda: system.accelerations(q, qd)
     fns = system._compiled.functions
     raw = fns.accelerations
-    p, u = system._p, system._compiled.no_inputs
+    p, u = fns.bind_parameters(system._p), system._compiled.no_inputs
     out = np.empty(n)
     work = np.empty(n * (n + 1) // 2 + n)
-    raw(q, qd, p, u, None, out, work)
-    assert np.allclose(out, system.accelerations(q, qd), rtol=1e-12, atol=1e-12)
-    calls["mbcomp_raw"] = lambda: raw(q, qd, p, u, None, out, work)
+    assert np.allclose(raw(q, qd, p, u, None)[1], system.accelerations(q, qd), rtol=1e-12, atol=1e-12)
+    calls["mbcomp_raw"] = lambda: raw(q, qd, p, u, None)
     c_fn = fns._accelerations
-    args = (q.ctypes.data, qd.ctypes.data, p.ctypes.data, fns._empty.ctypes.data, None, out.ctypes.data,
-            work.ctypes.data)
+    args = tuple(ctypes.c_void_p(a.ctypes.data) for a in (q, qd, system._p, fns._empty)) + (None,) + tuple(
+        ctypes.c_void_p(a.ctypes.data) for a in (out, work))
     calls["mbcomp_ctypes"] = lambda: c_fn(*args)
 
     q0, qd0 = chain_initial_state(n)

@@ -100,7 +100,7 @@ class CompiledModel:
         self.cache_hit = False
         nq, nb = self.topology.nq, len(self.topology.bodies)
         ng = len(self.geometric_rows)
-        self.sizes = {"dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
+        self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
                       "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
                       "contacts": len(self.topology.contacts) * (nq + 2)}
         self.functions = self._load(cache, backend)
@@ -185,6 +185,7 @@ class System:
         object.__setattr__(self, "_formulation", formulation)
         object.__setattr__(self, "_parameters", dict(parameters))
         object.__setattr__(self, "_p", compiled.layout.pack(parameters))
+        object.__setattr__(self, "_p_pointer", None)  # bound on first compiled call
 
     def __setattr__(self, name, value):
         raise AttributeError("System is immutable: use with_parameters() for new parameter values")
@@ -267,6 +268,10 @@ class System:
     def state_vector(self, values: Any, what: str = "q") -> np.ndarray:
         """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq."""
         coords = self.coords
+        if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (len(coords),):
+            total = float(values.sum())  # fast path: a finite sum means finite entries
+            if total - total == 0.0:
+                return values
         if isinstance(values, Mapping):
             unknown = [k for k in values if k not in coords]
             if unknown:
@@ -361,12 +366,12 @@ class System:
             self._check_finite(M, "mass matrix", q)
             self._check_finite(f, "generalised forces", q)
             return self._solve_tree(M, f, q)
-        n = self.nq
-        out = np.empty(n)
-        work = np.empty(n * (n + 1) // 2 + n)
         u = self._inputs(t, q, qd) if self._compiled.n_inputs else self._compiled.no_inputs
-        status = functions.accelerations(q, qd, self._p, u, tau, out, work)
-        if status or not np.all(np.isfinite(out)):
+        if self._p_pointer is None:
+            object.__setattr__(self, "_p_pointer", functions.bind_parameters(self._p))
+        status, out = functions.accelerations(q, qd, self._p_pointer, u, tau)
+        total = float(out.sum())
+        if status or total - total != 0.0:  # NaN or inf somewhere
             M, f = self._dynamics(t, q, qd, tau)
             self._check_finite(M, "mass matrix", q)
             self._check_finite(f, "generalised forces", q)

@@ -179,8 +179,8 @@ class TestGeneratedPrograms:
             M = M + np.tril(M, -1).T
             f = out[nq * (nq + 1) // 2:]
             for tau in (None, rng.normal(size=nq)):
-                qdd, work = np.empty(nq), np.empty(nq * (nq + 1) // 2 + nq)
-                assert c.accelerations(q, qd, p, u, tau, qdd, work) == 0
+                status, qdd = c.accelerations(q, qd, c.bind_parameters(p), u, tau)
+                assert status == 0
                 expected = np.linalg.solve(M, f if tau is None else f + tau)
                 assert_close(qdd, expected, rtol=1e-11, atol=1e-12, name="C accelerations")
 
@@ -195,10 +195,10 @@ class TestGeneratedPrograms:
         source = codegen.c_source(compiled.program, FUNCTIONS) + codegen.c_accelerations(3)
         c = CFunctions(build_c_library(source, "test-singular"), compiled.sizes)
         p = compiled.layout.pack(compiled.default_parameters)
-        qdd, work = np.empty(3), np.empty(9)
-        status = c.accelerations(np.array([0.3, 0.0, -0.4]), np.zeros(3), p, np.zeros(0), None, qdd, work)
+        pointer = c.bind_parameters(p)
+        status, _ = c.accelerations(np.array([0.3, 0.0, -0.4]), np.zeros(3), pointer, np.zeros(0), None)
         assert status == 3                       # pivot 3: the third axis repeats the first
-        assert c.accelerations(np.array([0.3, 0.5, -0.4]), np.zeros(3), p, np.zeros(0), None, qdd, work) == 0
+        assert c.accelerations(np.array([0.3, 0.5, -0.4]), np.zeros(3), pointer, np.zeros(0), None)[0] == 0
 
     def test_python_program_matches_the_symbolic_outputs(self, compiled):
         """The generated function evaluates the straight-line program exactly as sympy does."""
