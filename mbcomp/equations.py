@@ -145,13 +145,20 @@ class Program:
         keep.reverse()
         return keep
 
-    def expand(self, expr: Any) -> sp.Expr:
-        """``expr`` with every intermediate substituted back (small models only)."""
-        expr = sp.sympify(expr)
+    def expand(self, exprs: list) -> list:
+        """``exprs`` with every intermediate substituted back (for display of small models):
+        each needed intermediate is expanded once, in order, from the ones before it."""
+        exprs = [sp.sympify(e) for e in exprs]
+        wanted = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
+        needed = []
         for symbol, value in reversed(self.assignments):
-            if symbol in expr.free_symbols:
-                expr = expr.xreplace({symbol: value})
-        return expr
+            if symbol in wanted:
+                needed.append((symbol, value))
+                wanted |= value.free_symbols
+        expanded: dict = {}
+        for symbol, value in reversed(needed):
+            expanded[symbol] = value.xreplace(expanded)
+        return [e.xreplace(expanded) for e in exprs]
 
 
 class SpatialInertia:

@@ -407,12 +407,15 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
 
 
 def _hermite(system, t, y, t_eval, tau):
-    """Cubic Hermite interpolation of fixed-step output at ``t_eval``."""
+    """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
+    the steps that bracket a requested time)."""
     n = system.nq
-    f = np.array([np.concatenate((row[n:], system._tree_accelerations(0.0, row[:n], row[n:], tau))) for row in y])
+    t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
-    h = t[idx + 1] - t[idx]
-    s = ((np.asarray(t_eval) - t[idx]) / h)[:, None]
-    h = h[:, None]
+    needed = np.unique(np.concatenate((idx, idx + 1)))
+    f = {i: np.concatenate((y[i, n:], system._tree_accelerations(0.0, y[i, :n], y[i, n:], tau))) for i in needed}
+    f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
+    h = (t[idx + 1] - t[idx])[:, None]
+    s = (t_eval - t[idx])[:, None] / h
     h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    return h00 * y[idx] + h10 * h * f[idx] + h01 * y[idx + 1] + h11 * h * f[idx + 1]
+    return h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1

@@ -539,14 +539,15 @@ class System:
         import sympy as sp
         prog = self._compiled.program
         n = self.nq
-        M = sp.zeros(n, n)
         tri = prog.outputs["mass_matrix"]
+        values = prog.expand(list(tri) + list(prog.outputs["forces"]))
+        M = sp.zeros(n, n)
         k = 0
         for i in range(n):
             for j in range(i + 1):
-                M[i, j] = M[j, i] = prog.expand(tri[k])
+                M[i, j] = M[j, i] = values[k]
                 k += 1
-        f = sp.Matrix([prog.expand(e) for e in prog.outputs["forces"]])
+        f = sp.Matrix(values[len(tri):])
         names = {s: sp.Symbol(c) for s, c in zip(prog.q, self.coords)}
         names.update({s: sp.Symbol(f"\\dot{{{c}}}") for s, c in zip(prog.qd, self.coords)})
         return M.xreplace(names), f.xreplace(names)

@@ -262,8 +262,10 @@ class Formulation:
         if float(np.max(np.abs(g), initial=0.0)) > 1e-9:
             worst = np.argsort(-np.abs(g))
             bad = [self.constraints.labels[r] for r in worst if abs(g[r]) > 1e-9][:6]
-            raise SimulationError(f"cannot assemble: constraints {bad} cannot be met near q = "
-                                  f"{format_state(q)} (largest residual {np.max(np.abs(g)):.3g})")
+            error = SimulationError(f"cannot assemble: constraints {bad} cannot be met near q = "
+                                    f"{format_state(q)} (largest residual {np.max(np.abs(g)):.3g})")
+            error.residual = float(np.max(np.abs(g)))
+            raise error
         return q, self.project_velocity(system, q, qd, t, offsets)
 
     def project_velocity(self, system, q, qd, t=0.0, offsets=None):
@@ -306,12 +308,15 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
     rng = np.random.default_rng(seed)
     guesses = [np.zeros(nq)] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
     last_error, best = None, None
+    closest = np.inf
     consistent = 0
     for guess in guesses:
         try:
             q, _ = formulation.assemble(system, guess, np.zeros(nq))
         except SimulationError as exc:
-            last_error = exc
+            residual = getattr(exc, "residual", np.inf)
+            if residual < closest:
+                closest, last_error = residual, exc
             continue
         consistent += 1
         J = formulation.constraint_values(system, 0.0, q, np.zeros(nq)).J
@@ -324,10 +329,9 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
         if consistent >= 3:
             break
     if best is None:
-        nc = formulation.constraints.nc
-        count = f"{nq} coordinates and {nc} constraint equations ({nq - nc} degrees of freedom by count)"
-        raise ModelError(None, f"the constraints cannot all be met (they conflict, or leave fewer than zero "
-                               f"degrees of freedom): {count}; {last_error}")
+        raise ModelError(None, f"the constraints cannot all be met: no configuration satisfies them (they "
+                               f"conflict, or remove more freedom than the {nq} coordinates have); from "
+                               f"{len(guesses)} starting guesses, the closest: {last_error}")
     rows, nc, scale, q_best = best
     if rows.size:
         # Size of the Schur complement's Cholesky pivots where the mechanism is regular: the
