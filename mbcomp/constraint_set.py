@@ -134,6 +134,3 @@ class ConstraintSet:
             value = lam[self.slices[name]]
             out[name] = float(value[0]) if len(eqs) == 1 else value.copy()
         return out
-
-    def names_of_rows(self, rows) -> list[str]:
-        return sorted({self.owner[r] for r in rows})

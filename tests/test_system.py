@@ -527,3 +527,31 @@ class TestCache:
     def test_cache_directory_follows_the_environment(self, cache):
         arm_model().compile(backend="python")
         assert any(path.suffix == ".py" for path in cache.iterdir())
+
+
+class TestSymbolicDisplay:
+    """``equations()`` gives M and f that evaluate to the numeric ones; LaTeX for small models."""
+
+    def test_equations_evaluate_to_the_numeric_mass_matrix_and_forces(self, double_pendulum):
+        import sympy as sp
+        sys = double_pendulum.compile()
+        M, f = sys.equations()
+        q, qd = np.array([0.4, -0.7]), np.array([1.2, -0.3])
+        values = {}
+        for key, value in sys.parameters.items():
+            if np.ndim(value):
+                values.update({sp.Symbol(f"{key}[{i}]"): v for i, v in enumerate(value)})
+            else:
+                values[sp.Symbol(key)] = value
+        values.update({sp.Symbol(c): v for c, v in zip(sys.coords, q)})
+        values.update({sp.Symbol(f"\\dot{{{c}}}"): v for c, v in zip(sys.coords, qd)})
+        M_num = np.array(M.xreplace(values).evalf(), dtype=float)
+        f_num = np.array(f.xreplace(values).evalf(), dtype=float).reshape(-1)
+        assert_close(M_num, sys.mass_matrix(q), rtol=1e-12, name="symbolic M")
+        assert_close(np.linalg.solve(M_num, f_num), sys.accelerations(q, qd), rtol=1e-10, name="symbolic f")
+
+    def test_latex_for_small_models_only(self, double_pendulum):
+        sys = double_pendulum.compile()
+        latex = sys._repr_latex_()
+        assert latex.startswith("$") and "\\ddot{j1}" in latex
+        assert pendulum_chain(5).compile()._repr_latex_() is None

@@ -153,9 +153,3 @@ class Fixed(Joint):
 
     def _screws(self):
         return []
-
-
-def check_joint_is_one_dof(joint: Any, owner: Any) -> None:
-    """``ModelError`` naming ``owner`` unless ``joint`` has exactly one coordinate."""
-    if isinstance(joint, Joint) and joint.n_coords != 1:
-        raise ModelError(owner, f"needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}")
