@@ -92,7 +92,8 @@ def setup(n: int, loop_time: float = 2.0, dt: float = 1e-4):
     c_fn = fns._accelerations
     args = tuple(ctypes.c_void_p(a.ctypes.data) for a in (q, qd, system._p, fns._empty)) + (None,) + tuple(
         ctypes.c_void_p(a.ctypes.data) for a in (out, work))
-    calls["mbcomp_ctypes"] = lambda: c_fn(*args)
+    # The arrays behind the raw pointers must outlive the call: keep them in the closure.
+    calls["mbcomp_ctypes"] = lambda keep=(q, qd, out, work): c_fn(*args)
 
     q0, qd0 = chain_initial_state(n)
     steps = int(round(loop_time / dt))
