@@ -361,6 +361,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     print(f"degrees of freedom  {system.ndof}")
+    if system.constraint_names:
+        print(f"constraint equations  {', '.join(system.constraint_names)}"
+              + (f" (loop closures: {', '.join(cut)})" if cut else ""))
+        print(f"redundant    {', '.join(system.redundant_constraints) or 'none'}"
+              + (" (dependent on the others, found by rank and left out)" if system.redundant_constraints else ""))
     constraints = [c for c in model.components.values() if type(c).__name__ in ("Slider", "Motor")]
     if not args.equations:
         return EXIT_OK

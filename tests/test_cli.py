@@ -238,3 +238,13 @@ def test_help(main):
     assert proc.returncode == 0
     for command in ("run", "info", "library"):
         assert command in proc.stdout
+
+
+def test_info_names_the_constraints_and_the_redundant_equations(main):
+    """A planar four-bar closed by a 3D revolute: 3 of the loop's 5 equations are redundant."""
+    proc = main("info", "four_bar")
+    assert proc.returncode == 0, proc.stderr
+    assert "degrees of freedom  1" in proc.stdout
+    assert "loop closures: C" in proc.stdout
+    redundant = next(line for line in proc.stdout.splitlines() if line.startswith("redundant"))
+    assert sorted(redundant.split()[1:4]) == ["C.t1,", "C.t2,", "C.z"]
