@@ -36,7 +36,7 @@ def run(sizes):
             row = {"N": n}
             for backend in ("c", "python"):
                 start = time.perf_counter()
-                system = pendulum_chain(n).compile(backend=backend)
+                pendulum_chain(n).compile(backend=backend)
                 row[f"cold_{backend}_s"] = time.perf_counter() - start
                 start = time.perf_counter()
                 cached = pendulum_chain(n).compile(backend=backend)

@@ -374,7 +374,6 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"equations of motion: {system.nq} coordinates are too many to print legibly; in Python:\n"
               f"  M, f = mbcomp.load({str(path)!r}).compile().equations()   # M qdd = f (sympy)")
         return EXIT_OK
-    import sympy as sp
     M, f = numeric_equations(system, simplify=args.simplify)
     width = shutil.get_terminal_size((100, 24)).columns
     qdd = ", ".join(f"{c}''" for c in system.coords)

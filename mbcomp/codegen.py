@@ -121,7 +121,6 @@ def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
                 for s in expr.free_symbols:
                     if block_of.get(s, b) != b and s not in shared:
                         shared[s] = len(shared)
-        final = len(blocks)
         for e in results:
             for s in e.free_symbols:
                 if s in block_of and s not in shared:

@@ -19,9 +19,8 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from .components import Body, Force, Joint, JointTorque
+from .components import Body
 from .components._values import name_of
-from .errors import ModelError, describe
 
 
 def exact(value: float) -> sp.Expr:

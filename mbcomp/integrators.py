@@ -373,10 +373,9 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
     if t_eval is not None:
         t_out = np.ascontiguousarray(t_eval, dtype=float)
         y_out = np.empty((len(t_out), 2 * n))
-        start = 0
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = y
-            i_out[0] = start = 1
+            i_out[0] = 1
         status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)

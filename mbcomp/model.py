@@ -79,7 +79,7 @@ class Model:
             ``"python"``.
         options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
         """
-        from .system import compile_model
+        from .compiler import compile_model
         return compile_model(self, formulation=formulation, cache=cache, backend=backend, **options)
 
     def save(self, path) -> None:

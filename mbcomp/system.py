@@ -1,23 +1,16 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
-import copy
-import shutil
-import time
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
-from . import codegen
-from .backend import COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, build_c_library
 from .components import Spherical
 from .constraint_set import cross
 from .components._values import name_of
-from .equations import (KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout,
-                        parameter_values)
+from .equations import KINEMATICS_PER_BODY
 from .errors import format_state, ModelError, SimulationError, describe
-from .topology import build_topology
 
 
 @dataclass(frozen=True)
@@ -64,115 +57,6 @@ class BodyState:
         return f"BodyState(position={self.position}, velocity={self.velocity})"
 
 
-def structure_description(model, topology, layout, inputs) -> str:
-    """Everything that decides the generated code, as text (names included)."""
-    parts = [f"gravity|{len(topology.coords)}"]
-    for comp in topology.components.values():
-        refs = sorted((role, name_of(ref)) for role, ref in comp.references().items())
-        parts.append(f"{type(comp).__name__}|{comp.name}|{refs}|{comp.structure()}")
-    parts.append("order|" + ",".join(b.name for b in topology.bodies))
-    parts.append("coords|" + ",".join(topology.coords))
-    parts.append("params|" + ",".join(f"{k}:{v}" for k, v in layout.entries.items()))
-    parts.append("inputs|" + ",".join(f"{k}:{v}" for k, v in inputs.items()))
-    return "\n".join(parts)
-
-
-class CompiledModel:
-    """What compilation produces and every ``System`` of the same structure shares:
-    topology, layouts, generated functions (and, lazily, the symbolic program)."""
-
-    def __init__(self, model, *, cache: bool, backend: str):
-        self.model_name = model.name
-        self.topology = build_topology(model)
-        self.default_parameters = parameter_values(model)
-        self.layout = parameter_layout(self.default_parameters)
-        self.inputs = input_layout(self.topology)
-        from .constraint_set import ConstraintSet
-        self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
-        self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
-        self.n_inputs = sum(size for _, size in self.inputs.values())
-        self.no_inputs = np.zeros(0)
-        self.tril = np.tril_indices(self.topology.nq)
-        description = structure_description(model, self.topology, self.layout, self.inputs)
-        self.key = codegen.structure_key(description)
-        self._program = None
-        started = time.perf_counter()
-        self.cache_hit = False
-        nq, nb = self.topology.nq, len(self.topology.bodies)
-        ng = len(self.geometric_rows)
-        self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
-                      "contacts": len(self.topology.contacts) * (nq + 2)}
-        self.functions = self._load(cache, backend)
-        self.compile_time = time.perf_counter() - started
-
-    @property
-    def program(self):
-        """The symbolic straight-line program (built on demand when code came from the cache)."""
-        if self._program is None:
-            equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations)
-            self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
-        return self._program
-
-    def _load(self, cache: bool, backend: str):
-        if backend not in ("auto", "c", "python"):
-            raise ModelError(f"Model {self.model_name!r}", f"backend must be 'auto', 'c' or 'python', got {backend!r}")
-        if backend in ("auto", "c"):
-            source = None
-            cached = codegen.cache_dir() / f"{self.key}.so"
-            if cache and cached.exists():
-                try:
-                    functions = CFunctions(cached, self.sizes)
-                    self.cache_hit = True
-                    return functions
-                except (OSError, AttributeError):
-                    cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
-            from .integrators import c_integrators
-            source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
-                      + codegen.c_accelerations(self.topology.nq)
-                      + c_integrators(self.topology.nq))
-            path = build_c_library(source, self.key, cache=cache)
-            if path is not None:
-                functions = CFunctions(path, self.sizes)
-                if not cache:
-                    shutil.rmtree(path.parent, ignore_errors=True)  # loaded: the file is no longer needed
-                return functions
-            if backend == "c":
-                raise ModelError(f"Model {self.model_name!r}", "backend 'c' needs a working C compiler (set $CC)")
-        source = codegen.read_cached(self.key, ".py") if cache else None
-        if source is not None:
-            self.cache_hit = True
-        else:
-            source = codegen.python_source(self.program, FUNCTIONS)
-            if cache:
-                codegen.write_cached(self.key, ".py", source)
-        return PythonFunctions(source, self.key, self.sizes)
-
-
-def _as_list(x):
-    return x if isinstance(x, list) else [x]
-
-
-def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
-                  **options: Any) -> "System":
-    """Model -> System (see ``Model.compile``)."""
-    from .formulations import get_formulation
-    formulation_class = get_formulation(formulation)
-    from .formulations.base import analyse
-    compiled = CompiledModel(model, cache=cache, backend=backend)
-    # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
-    analyse(system._formulation, system)
-    return system
-
-
-def _rebuild_system(model, formulation, options, backend, parameters) -> "System":
-    """Unpickle: compile the model again (a cache hit where the cache is shared)."""
-    return compile_model(model, formulation=formulation, backend=backend, **options).with_parameters(parameters)
-
-
 class System:
     """A compiled model: the numeric API of API.md.  Never modified by any call.
 
@@ -180,7 +64,7 @@ class System:
     ``tau`` adds generalised forces (array of ``len(coords)`` or callable ``(t, q, qd)``).
     """
 
-    def __init__(self, compiled: CompiledModel, formulation, parameters: dict):
+    def __init__(self, compiled, formulation, parameters: dict):
         object.__setattr__(self, "_compiled", compiled)
         object.__setattr__(self, "_formulation", formulation)
         object.__setattr__(self, "_parameters", dict(parameters))
@@ -192,7 +76,8 @@ class System:
 
     def __reduce__(self):
         model, formulation, options, backend = self._compiled.recipe
-        return _rebuild_system, (model, formulation, options, backend, self._parameters)
+        from .compiler import rebuild_system
+        return rebuild_system, (model, formulation, options, backend, self._parameters)
 
     # -- description -----------------------------------------------------------------
     @property
@@ -441,7 +326,7 @@ class System:
         rotation, angular velocity and acceleration, all in the world frame."""
         name = name_of(body)
         if name not in self.topology.components or not hasattr(self.topology.components[name], "mass"):
-            raise ModelError(f"body {name!r}", f"is not a body of this model")
+            raise ModelError(f"body {name!r}", "is not a body of this model")
         q, qd = self.state_vector(q), self._velocity(qd)
         comp = self.topology.components[name]
         local = np.asarray(comp.com if point is None else point, dtype=float)

@@ -3,10 +3,8 @@ from __future__ import annotations
 
 import ctypes
 import math
-import os
 import subprocess
 import sys as _sys
-from pathlib import Path
 
 import numpy as np
 import pytest

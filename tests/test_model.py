@@ -1,7 +1,6 @@
 """Model: composition, name resolution and the structural validation done by compile()."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import mbcomp as mb

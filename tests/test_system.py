@@ -2,7 +2,6 @@
 immutability, singularities, backends and the code cache."""
 from __future__ import annotations
 
-import os
 
 import numpy as np
 import pytest
