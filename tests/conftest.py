@@ -65,3 +65,29 @@ def double_pendulum():
     m.add(mb.Revolute("j1", m.ground, b1, axis="z"))
     m.add(mb.Revolute("j2", b1, b2, axis="z", parent_point=(1, 0, 0)))
     return m
+
+
+G = 9.81
+
+
+def bar(name: str, length: float, mass: float = 1.0, along: str = "x") -> mb.Body:
+    """A uniform slender bar from the body origin along its x (or y) axis."""
+    if along == "x":
+        return mb.Body(name, mass=mass, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
+    return mb.Body(name, mass=mass, com=(0, length / 2, 0), inertia=(length ** 2 / 12, 1e-4, length ** 2 / 12))
+
+
+def fourbar(L1=0.3, L2=0.8, L3=0.6, d=0.7, *, closed=True, name="fourbar", motor=None) -> mb.Model:
+    """Planar crank-rocker four-bar in x-y (gravity -y, no damping): crank A at the origin,
+    rocker D at (d, 0, 0), closed by the revolute C between the coupler end and the rocker
+    end; ``motor`` (a Motor component) is added when given."""
+    m = mb.Model(name, gravity=(0, -G, 0))
+    crank, coupler, rocker = (m.add(bar(n, L)) for n, L in (("crank", L1), ("coupler", L2), ("rocker", L3)))
+    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
+    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(L1, 0, 0)))
+    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(d, 0, 0)))
+    if closed:
+        m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(L2, 0, 0), child_point=(L3, 0, 0)))
+    if motor is not None:
+        m.add(motor)
+    return m

@@ -11,7 +11,7 @@ import pytest
 import scipy.optimize
 
 import mbcomp as mb
-from conftest import assert_close
+from conftest import assert_close, bar, fourbar
 from mbcomp.components.constraints import normals
 
 FORMULATIONS = ("lagrange", "dae")
@@ -19,24 +19,6 @@ G = 9.81
 
 
 # -- models --------------------------------------------------------------------------------------
-def bar(name, length, mass=1.0, along="x"):
-    """A uniform slender bar from the body origin along its x (or y) axis."""
-    if along == "x":
-        return mb.Body(name, mass=mass, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
-    return mb.Body(name, mass=mass, com=(0, length / 2, 0), inertia=(length ** 2 / 12, 1e-4, length ** 2 / 12))
-
-
-def fourbar(L1=0.3, L2=0.8, L3=0.6, d=0.7, *, closed=True, name="fourbar"):
-    """Planar four-bar in x-y (gravity -y): crank A at the origin, rocker D at (d, 0, 0),
-    closed by the revolute C between the coupler end and the rocker end."""
-    m = mb.Model(name, gravity=(0, -G, 0))
-    crank, coupler, rocker = (m.add(bar(n, L)) for n, L in (("crank", L1), ("coupler", L2), ("rocker", L3)))
-    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
-    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(L1, 0, 0)))
-    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(d, 0, 0)))
-    if closed:
-        m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(L2, 0, 0), child_point=(L3, 0, 0)))
-    return m
 
 
 def parallelogram(L=0.3, d=0.7, name="parallelogram"):

@@ -12,24 +12,9 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from conftest import assert_close
+from conftest import assert_close, bar, fourbar
 
 G = 9.81
-
-
-def bar(name, length, mass=1.0):
-    return mb.Body(name, mass=mass, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
-
-
-def fourbar():
-    """Crank-rocker (0.3, 0.8, 0.6 on a 0.7 base) closed by the revolute C."""
-    m = mb.Model("fourbar", gravity=(0, -G, 0))
-    crank, coupler, rocker = m.add(bar("crank", 0.3)), m.add(bar("coupler", 0.8)), m.add(bar("rocker", 0.6))
-    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
-    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(0.3, 0, 0)))
-    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(0.7, 0, 0)))
-    m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(0.8, 0, 0), child_point=(0.6, 0, 0)))
-    return m
 
 
 def slider_crank():

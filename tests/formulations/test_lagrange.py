@@ -6,27 +6,10 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from conftest import assert_close
+from conftest import assert_close, bar, fourbar
 
 G = 9.81
 L1, L2, L3, D = 0.3, 0.8, 0.6, 0.7   # crank, coupler, rocker, base
-
-
-def bar(name, length, mass=1.0):
-    return mb.Body(name, mass=mass, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
-
-
-def fourbar(motor=None, name="fourbar"):
-    """Crank-rocker in x-y (gravity -y), closed by the revolute C; no damping."""
-    m = mb.Model(name, gravity=(0, -G, 0))
-    crank, coupler, rocker = m.add(bar("crank", L1)), m.add(bar("coupler", L2)), m.add(bar("rocker", L3))
-    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
-    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(L1, 0, 0)))
-    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(D, 0, 0)))
-    m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(L2, 0, 0), child_point=(L3, 0, 0)))
-    if motor is not None:
-        m.add(motor)
-    return m
 
 
 def slider_crank():
@@ -106,7 +89,7 @@ class TestMotorsInLoops:
         """ndof = 0: the rocker follows the closed-form four-bar position for the
         prescribed crank angle."""
         crank = lambda t: 1.0 + 0.8 * np.sin(3 * t)
-        s = fourbar(mb.Motor("drive", "A", position=crank)).compile("lagrange")
+        s = fourbar(motor=mb.Motor("drive", "A", position=crank)).compile("lagrange")
         assert s.ndof == 0
         q, qd = s.assemble([1.0, -0.5, 1.5])
         res = s.simulate(2.0, q, qd, t_eval=np.linspace(0, 2, 41))
@@ -123,7 +106,7 @@ class TestMotorsInLoops:
     def test_speed_motor_work_equals_energy_change(self, formulation):
         """The crank driven at 3 rad/s through full turns: the motor's work (trapezoid of
         torque * speed) equals the change of the mechanism's energy."""
-        s = fourbar(mb.Motor("drive", "A", speed=3.0)).compile(formulation)
+        s = fourbar(motor=mb.Motor("drive", "A", speed=3.0)).compile(formulation)
         q, qd = s.assemble([1.0, -0.5, 1.5])
         res = s.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12, t_eval=np.linspace(0, 3, 3001))
         assert_close(res["A"], q[0] + 3.0 * res.t, atol=1e-8, name="crank angle")
@@ -134,8 +117,8 @@ class TestMotorsInLoops:
         assert np.max(np.abs(work - (E - E[0]))) < 1e-5 * np.max(np.abs(work))
 
     def test_motor_torque_agrees_between_formulations(self):
-        lagrange = fourbar(mb.Motor("drive", "A", speed=3.0)).compile("lagrange")
-        dae = fourbar(mb.Motor("drive", "A", speed=3.0)).compile("dae")
+        lagrange = fourbar(motor=mb.Motor("drive", "A", speed=3.0)).compile("lagrange")
+        dae = fourbar(motor=mb.Motor("drive", "A", speed=3.0)).compile("dae")
         for guess in ([1.0, -0.5, 1.5], [-1.0, 2.0, 3.0]):
             q, qd = lagrange.assemble(guess)
             ra, rb = lagrange.reactions(q, qd), dae.reactions(q, qd)
