@@ -212,36 +212,9 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             if solver.status == "failed":
                 raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
             counts["steps"] += 1
-            t_old, t = solver.t_old, solver.t
-            restart = None
+            t, restart = solver.t, None
             if watch is not None:
-                q, qd = workspace.full_state(t, solver.y)
-                gaps_new = watch.gaps(q, qd).g
-                dense = solver.dense_output()
-                t_close = watch.locate_closing(workspace, dense, t_old, t, gaps_old, gaps_new)
-                release = watch.locate_release(workspace, dense, t_old, t, q, qd)
-                t_release = None if release is None else release[0]
-                te = min((x for x in (t_close, t_release) if x is not None), default=None)
-                if te is not None:
-                    t = te
-                    q, qd = workspace.full_state(te, dense(te) if te != solver.t else solver.y)
-                    recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
-                    if te == t_close:
-                        qd, changed = watch.impact(te, q, qd)
-                        if not changed:  # closed but not closing: it rests on its surface
-                            closing = [i for i in range(len(watch.names)) if i not in watch.persistent
-                                       and watch.gaps(q, qd).g[i] < GAP_TOLERANCE]
-                            watch.persistent = tuple(sorted(set(watch.persistent) | set(closing)))
-                    else:
-                        watch.open(release[1])
-                        watch.release(te, q, qd)
-                    recorder.add_event_state(te, q, qd)
-                    restart = (te, q, qd)
-                else:
-                    recorder.record_interior(workspace, solver, t)
-                    corrected = workspace.after_step(t, solver.y)
-                    recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
-                gaps_old = watch.gaps(*(restart[1:] if restart else (q, qd))).g
+                t, restart, corrected, gaps_old = _contact_step(watch, workspace, solver, recorder, gaps_old)
             else:
                 # Samples inside the step come from its dense output, in the coordinates it was
                 # taken in; the end sample comes after the correction (projection, new partition).
@@ -282,6 +255,38 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
                   events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
                   closed_contacts=recorder.closed)
+
+
+def _contact_step(watch, workspace, solver, recorder, gaps_old):
+    """Finish an accepted step with contacts watched: locate the first closing or lift-off
+    in it, record up to there and apply the event.  Returns ``(t, restart, corrected,
+    gaps)``: the time reached, ``(t, q, qd)`` to restart from after an event (else None),
+    a corrected end state (else None) and the gaps there."""
+    t_old, t = solver.t_old, solver.t
+    q, qd = workspace.full_state(t, solver.y)
+    dense = solver.dense_output()
+    t_close = watch.locate_closing(workspace, dense, t_old, t, gaps_old, watch.gaps(q, qd).g)
+    release = watch.locate_release(workspace, dense, t_old, t, q, qd)
+    t_release = None if release is None else release[0]
+    te = min((x for x in (t_close, t_release) if x is not None), default=None)
+    if te is None:
+        recorder.record_interior(workspace, solver, t)
+        corrected = workspace.after_step(t, solver.y)
+        recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
+        return t, None, corrected, watch.gaps(q, qd).g
+    q, qd = workspace.full_state(te, dense(te) if te != t else solver.y)
+    recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
+    if te == t_close:
+        qd, changed = watch.impact(te, q, qd)
+        if not changed:  # closed but not closing: it rests on its surface
+            gaps = watch.gaps(q, qd).g
+            closing = [i for i in range(len(watch.names)) if i not in watch.persistent and gaps[i] < GAP_TOLERANCE]
+            watch.persistent = tuple(sorted(set(watch.persistent) | set(closing)))
+    else:
+        watch.open(release[1])
+        watch.release(te, q, qd)
+    recorder.add_event_state(te, q, qd)
+    return te, (te, q, qd), None, watch.gaps(q, qd).g
 
 
 def _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:
