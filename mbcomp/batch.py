@@ -35,6 +35,11 @@ def _run(system, case: dict):
     return result.t, result.q, result.qd, result.stats, result.events
 
 
+def _run_many(system, cases: list) -> list:
+    """Several simulations in one task."""
+    return [_run(system, case) for case in cases]
+
+
 def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, threads: int | None = None,
           **defaults: Any) -> list[Result]:
     """Simulate ``system`` once per case and return the Results in case order.
@@ -54,9 +59,14 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
             with ThreadPoolExecutor(max_workers=threads) as pool:
                 outputs = list(pool.map(lambda case: _run(system, case), cases))
     else:
+        # Cases go to the workers in chunks (a few per worker): scheduling a task costs
+        # milliseconds, more than a short compiled simulation.
+        workers = max(len(client.scheduler_info().get("workers", {})), 1)
+        size = max(1, -(-len(cases) // (4 * workers)))
+        chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
         remote = client.scatter(system, broadcast=True, hash=False)
-        futures = [client.submit(_run, remote, case, pure=False) for case in cases]
-        outputs = client.gather(futures)
+        futures = [client.submit(_run_many, remote, chunk, pure=False) for chunk in chunks]
+        outputs = [output for chunk in client.gather(futures) for output in chunk]
     results = []
     for case, (t, q, qd, stats, events) in zip(cases, outputs):
         parameters = case.get("parameters")
