@@ -83,6 +83,7 @@ class CompiledModel:
             from .integrators import c_integrators
             source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
                       + codegen.c_accelerations(self.topology.nq)
+                      + codegen.c_dae_accelerations(self.topology.nq, len(self.geometric_rows))
                       + c_integrators(self.topology.nq))
             path = build_c_library(source, self.key, cache=cache)
             if path is not None:

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
-FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE = 0, 1, -1, -2, -3
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST = 0, 1, -1, -2, -3, -5
 
 
 def _array(name: str, values) -> str:
@@ -28,7 +28,7 @@ def c_integrators(nq: int) -> str:
         "#include <string.h>",
         "#include <float.h>",
         f"#define NY {2 * nq}",
-        f"#define NWORK {nq * (nq + 1) // 2 + nq}",
+        f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
         _C_BODY,
@@ -37,11 +37,20 @@ def c_integrators(nq: int) -> str:
 
 _C_BODY = r"""
 static double dummy_input[1];
+/* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank). */
+#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = rs_ == -5 ? -5 : -2; goto done; } } while (0)
 
-/* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status. */
+/* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status (the dae formulation's
+   when this thread configured it, -5 when its constraint rows lost rank). */
 static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
     for (int i = 0; i < NY / 2; ++i) f[i] = y[NY / 2 + i];
+#if NG > 0
+    if (dae_nr >= 0) {
+        int status = dae_accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+        return status == 2 ? -5 : status;
+    }
+#endif
     return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
 }
 
@@ -101,7 +110,7 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
     double t = state[0], h_abs = state[1];
     if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
     if (h_abs <= 0) {
-        if (rhs(t, y, f, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
         counts[0] += 1;
         h_abs = initial_step(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
     }
@@ -125,14 +134,14 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
                     for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
                     y_stage[i] = y[i] + h * acc;
                 }
-                if (rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work)) { status = -2; goto done; }
+                RHS_OR_FAIL(rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work));
             }
             for (int i = 0; i < NY; ++i) {
                 double acc = 0.0;
                 for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * NY + i];
                 y_new[i] = y[i] + h * acc;
             }
-            if (rhs(t_new, y_new, K + 12 * NY, p, tau, work)) { status = -2; goto done; }
+            RHS_OR_FAIL(rhs(t_new, y_new, K + 12 * NY, p, tau, work));
             counts[0] += 12;
             if (!all_finite(y_new, NY) || !all_finite(K + 12 * NY, NY)) { status = -3; goto done; }
             double e5 = 0.0, e3 = 0.0;
@@ -165,7 +174,7 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
                     for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
                     y_stage[i] = y[i] + h * acc;
                 }
-                if (rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work)) { status = -2; goto done; }
+                RHS_OR_FAIL(rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work));
             }
             counts[0] += 3;
             for (int i = 0; i < NY; ++i) {
@@ -216,12 +225,12 @@ int rhs_jacobian(const double *p, const double *tau, double t, const double *y, 
     double *yp = malloc(sizeof(double) * NY), *work = malloc(sizeof(double) * NWORK);
     int status = 0;
     if (!f0 || !f1 || !yp || !work) { status = -4; goto done; }
-    if (rhs(t, y, f0, p, tau, work)) { status = -2; goto done; }
+    RHS_OR_FAIL(rhs(t, y, f0, p, tau, work));
     memcpy(yp, y, sizeof(double) * NY);
     for (int j = 0; j < NY; ++j) {
         const double h = sqrt(DBL_EPSILON) * (fabs(y[j]) > 1.0 ? fabs(y[j]) : 1.0);
         yp[j] = y[j] + h;
-        if (rhs(t, yp, f1, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t, yp, f1, p, tau, work));
         for (int i = 0; i < NY; ++i) J[i * NY + j] = (f1[i] - f0[i]) / (yp[j] - y[j]);
         yp[j] = y[j];
     }
@@ -241,13 +250,13 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
     for (long s = 0; s < n; ++s) {
         const double *y = y_out + s * NY;
         double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
-        if (rhs(t, y, k, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
-        if (rhs(t + 0.5 * dt, stage, k + NY, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
-        if (rhs(t + 0.5 * dt, stage, k + 2 * NY, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + 2 * NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + dt * k[2 * NY + i];
-        if (rhs(t + dt, stage, k + 3 * NY, p, tau, work)) { status = -2; goto done; }
+        RHS_OR_FAIL(rhs(t + dt, stage, k + 3 * NY, p, tau, work));
         for (int i = 0; i < NY; ++i)
             next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
         counts[0] += 4;
@@ -278,7 +287,15 @@ def why_not_compiled(system, method, tau) -> str | None:
     if system.backend != "c":
         return "the model was compiled without a C compiler (backend 'python')"
     if topology.cut_joints or topology.constraints:
-        return "the model has constraints"
+        formulation = system._formulation
+        if formulation.name != "dae":
+            return "the lagrange formulation of a constrained model steps in Python (use formulation='dae')"
+        if formulation.projection:
+            return "projection=True steps in Python"
+        if formulation.constraints.coordinate_rows:
+            return "motors step in Python"
+        if formulation.nominal_rows is None:
+            return "no consistent configuration was found at compile time"
     if topology.contacts:
         return "the model has contacts"
     if system._compiled.n_inputs:
@@ -326,6 +343,8 @@ def compiled_jacobian(system, tau):
 
 def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     n = system.nq
+    if status == RANK_LOST:
+        raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
@@ -337,10 +356,30 @@ def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
 
 
+class RankLost(Exception):
+    """The compiled dae path met a singular position: the caller falls back to Python stepping."""
+
+
 def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
                  atol: float, t_eval, tau, max_step: float, dt: float | None):
-    """Integrate a tree model entirely in compiled code; returns ``(t, y, stats)``."""
+    """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
+    compiled code; returns ``(t, y, stats, wall)``."""
     lib = system._compiled.functions.lib
+    formulation = system._formulation
+    if formulation.constraints is None:
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+    configure = lib.dae_configure
+    configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+    rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
+    alpha, beta = formulation.baumgarte
+    configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale)  # this thread only
+    try:
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+    finally:
+        configure(-1, None, 0.0, 0.0, 0.0)
+
+
+def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
     n = system.nq
     p = system._p

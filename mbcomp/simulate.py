@@ -13,7 +13,7 @@ from .errors import ModelError, SimulationError
 from .events import ContactWatch
 from .formulations.lagrange import TrialStateError
 from .impact import GAP_TOLERANCE
-from .integrators import compiled_jacobian, run_compiled, why_not_compiled
+from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
@@ -142,16 +142,25 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     reason = why_not_compiled(system, method, tau) if integrator != "scipy" else "integrator='scipy'"
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
+    compiled = None
     if reason is None and not progress:
-        times, values, counts, wall = run_compiled(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol,
-                                                   t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
+        q_start, qd_start = system._formulation.assemble(system, q0, qd0, 0.0)
+        try:
+            compiled = run_compiled(system, t_end, q_start, qd_start, method=method, rtol=rtol, atol=atol,
+                                    t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
+        except RankLost:
+            if method == "RK4" or integrator == "compiled":
+                raise SimulationError(f"compiled {method} met a singular position of the constraints; "
+                                      f"use integrator='scipy', which handles it") from None
+    if compiled is not None:
+        times, values, counts, wall = compiled
         n = system.nq
         stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
         return Result(system=system, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
                       qd=values[:, n:].copy(), stats=stats, tau=tau)
-    if integrator == "compiled":
+    if integrator == "compiled" and reason is not None or integrator == "compiled" and progress:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason or 'progress=True'}")
     cls = solver_class(method)
     formulation = system._formulation
@@ -174,7 +183,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         return workspace.rhs(t, y)
 
     options = {}
-    if getattr(cls, "__name__", "") in IMPLICIT_METHODS and why_not_compiled(system, "DOP853", tau) is None:
+    if (getattr(cls, "__name__", "") in IMPLICIT_METHODS and formulation.constraints is None
+            and why_not_compiled(system, "DOP853", tau) is None):
         options["jac"] = compiled_jacobian(system, None if tau is None else system._tau(tau, 0.0, q0, qd0))
 
     def make_solver(t0, y0, first_step=None):
