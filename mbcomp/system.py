@@ -387,7 +387,8 @@ class System:
         a contact closing slower than ``rest_speed`` (m/s) stays closed until its
         reaction would pull.  ``integrator="auto"`` runs ``"DOP853"`` (and the fixed-step
         ``"RK4"`` with step ``dt``) entirely in compiled code when the model allows it
-        (C backend, a tree without constraints, contacts or callable inputs); ``"scipy"``
+        (C backend; a tree, or a ``dae`` model whose constraints are all loops and sliders; no
+        contacts, motors or callable inputs); ``"scipy"``
         forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
         """
         from .simulate import simulate
