@@ -10,7 +10,7 @@ from typing import Callable
 
 import sympy as sp
 
-CODEGEN_VERSION = "8"
+CODEGEN_VERSION = "9"
 
 
 # -- printing ---------------------------------------------------------------------------
@@ -160,14 +160,11 @@ def c_accelerations(nq: int) -> str:
     return f"""
 #define NQ {nq}
 #define IDX(i, j) ((i) * ((i) + 1) / 2 + (j))
-int accelerations(const double *q, const double *qd, const double *p, const double *u,
-                  const double *tau, double *qdd, double *work) {{
-    double *L = work, *f = work + NQ * (NQ + 1) / 2, scale = 1e-300;
-    dynamics(q, qd, p, u, work);
-    for (int i = 0; i < NQ; ++i) {{
-        qdd[i] = f[i] + (tau ? tau[i] : 0.0);
-        if (fabs(L[IDX(i, i)]) > scale) scale = fabs(L[IDX(i, i)]);
-    }}
+/* M = L L^T in place on the packed lower triangle; 0, or k + 1 when pivot k is not
+   positive against the largest diagonal entry. */
+static int mass_cholesky(double *L) {{
+    double scale = 1e-300;
+    for (int i = 0; i < NQ; ++i) if (fabs(L[IDX(i, i)]) > scale) scale = fabs(L[IDX(i, i)]);
     for (int j = 0; j < NQ; ++j) {{
         double s = L[IDX(j, j)];
         for (int k = 0; k < j; ++k) s -= L[IDX(j, k)] * L[IDX(j, k)];
@@ -180,16 +177,35 @@ int accelerations(const double *q, const double *qd, const double *p, const doub
             L[IDX(i, j)] = t / d;
         }}
     }}
+    return 0;
+}}
+
+/* b <- L^-1 b and b <- L^-T b with the packed factor. */
+static void lower_solve(const double *L, double *b) {{
     for (int i = 0; i < NQ; ++i) {{
-        double s = qdd[i];
-        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * qdd[k];
-        qdd[i] = s / L[IDX(i, i)];
+        double s = b[i];
+        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * b[k];
+        b[i] = s / L[IDX(i, i)];
     }}
+}}
+
+static void upper_solve(const double *L, double *b) {{
     for (int i = NQ - 1; i >= 0; --i) {{
-        double s = qdd[i];
-        for (int k = i + 1; k < NQ; ++k) s -= L[IDX(k, i)] * qdd[k];
-        qdd[i] = s / L[IDX(i, i)];
+        double s = b[i];
+        for (int k = i + 1; k < NQ; ++k) s -= L[IDX(k, i)] * b[k];
+        b[i] = s / L[IDX(i, i)];
     }}
+}}
+
+int accelerations(const double *q, const double *qd, const double *p, const double *u,
+                  const double *tau, double *qdd, double *work) {{
+    double *L = work, *f = work + NQ * (NQ + 1) / 2;
+    dynamics(q, qd, p, u, work);
+    for (int i = 0; i < NQ; ++i) qdd[i] = f[i] + (tau ? tau[i] : 0.0);
+    const int status = mass_cholesky(L);
+    if (status) return status;
+    lower_solve(L, qdd);
+    upper_solve(L, qdd);
     return 0;
 }}
 """
@@ -224,32 +240,13 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
                       const double *tau, double *qdd, double *work) {{
     const int n = NQ, nr = dae_nr;
     double *L = work, *f = work + {ntri}, *c = f + n, *Y = c + NG * (NQ + 2), *A = Y + n * NG;
-    double *r = A + NG * NG, *lam = r + NG, *z = lam + NG, *uvec = z + NG;
-    double scale = 1e-300;
+    double *r = A + NG * NG, *lam = r + NG, *uvec = lam + NG;
     dynamics(q, qd, p, u, work);
     constraints(q, qd, p, u, c);
     const double *g = c, *J = c + NG, *bias = c + NG + NG * NQ;
-    for (int i = 0; i < n; ++i) {{
-        uvec[i] = f[i] + (tau ? tau[i] : 0.0);
-        if (fabs(L[IDX(i, i)]) > scale) scale = fabs(L[IDX(i, i)]);
-    }}
-    for (int j = 0; j < n; ++j) {{  /* M = L L^T in place */
-        double s = L[IDX(j, j)];
-        for (int k = 0; k < j; ++k) s -= L[IDX(j, k)] * L[IDX(j, k)];
-        if (!(s > 1e-13 * scale)) return 1;
-        const double d = sqrt(s);
-        L[IDX(j, j)] = d;
-        for (int i = j + 1; i < n; ++i) {{
-            double t = L[IDX(i, j)];
-            for (int k = 0; k < j; ++k) t -= L[IDX(i, k)] * L[IDX(j, k)];
-            L[IDX(i, j)] = t / d;
-        }}
-    }}
-    for (int i = 0; i < n; ++i) {{  /* uvec <- L^-1 (f + tau) */
-        double s = uvec[i];
-        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * uvec[k];
-        uvec[i] = s / L[IDX(i, i)];
-    }}
+    for (int i = 0; i < n; ++i) uvec[i] = f[i] + (tau ? tau[i] : 0.0);
+    if (mass_cholesky(L)) return 1;
+    lower_solve(L, uvec);  /* uvec <- L^-1 (f + tau) */
     for (int col = 0; col < nr; ++col) {{  /* Y[:, col] = L^-1 J_row^T; rhs of the row */
         const double *Jr = J + dae_rows[col] * NQ;
         double gdot = 0.0;
@@ -294,16 +291,12 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
         for (int k = i + 1; k < nr; ++k) s -= A[k * NG + i] * lam[k];
         lam[i] = s / A[i * NG + i];
     }}
-    for (int i = 0; i < n; ++i) {{  /* z = uvec + Y lam; qdd = L^-T z */
+    for (int i = 0; i < n; ++i) {{  /* qdd = L^-T (uvec + Y lam) */
         double s = uvec[i];
         for (int k = 0; k < nr; ++k) s += Y[i * NG + k] * lam[k];
-        z[i] = s;
+        qdd[i] = s;
     }}
-    for (int i = n - 1; i >= 0; --i) {{
-        double s = z[i];
-        for (int k = i + 1; k < n; ++k) s -= L[IDX(k, i)] * qdd[k];
-        qdd[i] = s / L[IDX(i, i)];
-    }}
+    upper_solve(L, qdd);
     return 0;
 }}
 """
