@@ -2,8 +2,8 @@
 
 # Composing a model
 from .model import Model
-from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
-                         Slider, Spherical, Spring, TorsionSpring)
+from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
+                         Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 
 # The compiled system and its results
 from .system import BodyState, Energy, System
@@ -18,7 +18,7 @@ from .errors import CompileError, ModelError, SimulationError
 __version__ = "0.1.0"
 
 __all__ = [
-    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
+    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]

@@ -25,8 +25,10 @@ class Event:
 class Result:
     """Simulated time series.
 
-    ``t`` (m,) s; ``q``, ``qd`` (m, nq) in ``coords`` order; ``res["name"]`` a coordinate's
-    series; ``stats`` holds the solver counters and wall time.
+    ``t`` (m,) s; ``q`` (m, nq) in ``coords`` order; ``qd`` (m, nv) in ``speeds`` order (a
+    screw coordinate's speed is its rate; a ball has 4 coordinates, 3 speeds);
+    ``res["name"]`` a coordinate's or a speed's series; ``stats`` holds the solver
+    counters and wall time.
     """
 
     system: Any
@@ -45,15 +47,23 @@ class Result:
     def coords(self) -> tuple[str, ...]:
         return self.system.coords
 
+    @property
+    def speeds(self) -> tuple[str, ...]:
+        """Names of the columns of ``qd`` (equal to ``coords`` without ball joints)."""
+        return getattr(self.system, "speeds", self.system.coords)
+
     def __getitem__(self, name: str) -> np.ndarray:
-        """The series of coordinate ``name`` (or ``name_d`` / ``"d" + name`` for its speed)."""
-        coords = list(self.coords)
+        """The series of coordinate ``name``, of a speed that is not a coordinate's rate (a
+        ball's ``NAME_wx``), or ``name_d`` / ``"d" + name`` for a coordinate's speed."""
+        coords, speeds = list(self.coords), list(self.speeds)
         if name in coords:
             return self.q[:, coords.index(name)]
+        if name in speeds:
+            return self.qd[:, speeds.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
-            if speed in coords:
-                return self.qd[:, coords.index(speed)]
-        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}")
+            if speed in speeds:
+                return self.qd[:, speeds.index(speed)]
+        raise KeyError(f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}")
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
@@ -86,7 +96,8 @@ class Result:
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
-        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + ["kinetic", "potential", "total"]
+        header = (["t"] + list(self.coords) + [f"{c}_d" if c in self.coords else c for c in self.speeds]
+                  + ["kinetic", "potential", "total"])
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
@@ -101,7 +112,7 @@ class Result:
         except ImportError as exc:  # pragma: no cover - optional dependency
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
-        data.update({f"{c}_d": self.qd[:, i] for i, c in enumerate(self.coords)})
+        data.update({f"{c}_d" if c in self.coords else c: self.qd[:, i] for i, c in enumerate(self.speeds)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 
     def plot(self, *args: Any, **kwargs: Any):
