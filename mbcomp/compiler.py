@@ -114,6 +114,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from .system import System
     formulation_class = get_formulation(formulation)
     from .formulations.base import analyse
+    model = model.flat() if hasattr(model, "flat") else model
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
