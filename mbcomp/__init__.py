@@ -4,10 +4,11 @@
 from .model import Model
 from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
                          Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
+from .components.frame import Frame, rpy
 
 # The compiled system and its results
-from .system import BodyState, Energy, System
-from .result import Event, Result
+from .result import Energy, Event, Result
+from .system import BodyState, System
 
 # Many simulations at once
 from .batch import sweep
@@ -15,12 +16,20 @@ from .batch import sweep
 # Errors
 from .errors import CompileError, ModelError, SimulationError
 
+# Operations of the model layer implemented above it (see services.py)
+from . import services as _services
+from .io import save as _save
+from .system import compile_model as _compile_model
+
+_services.provide("compile", _compile_model)
+_services.provide("save", _save)
+
 __version__ = "0.1.0"
 
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]
 
 

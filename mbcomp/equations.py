@@ -362,6 +362,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         pos = prog.lets([o + r for o, r in zip(kin.origin[parent], matvec(R, kin.param(joint, "parent_point")))])
         V, A = kin.V[parent], kin.A[parent]
         q0, v0 = topology.q_slice[joint.name].start, topology.v_slice[joint.name].start
+        R = _rotate_frame(prog, R, getattr(joint, "parent_rotation", None))
         for kind, axis, sq, sv in joint._walk():
             if kind == "B":
                 R, V, A = _ball_segment(prog, kin, prog.q[q0 + sq.start:q0 + sq.stop], v0 + sv.start, R, pos, V, A)
@@ -379,6 +380,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
             kin.S[k] = S
             A = prog.lets([a + b * prog.qd[k] for a, b in zip(A, motion_cross(V, S))])
             V = prog.lets([a + b * prog.qd[k] for a, b in zip(V, S)])
+        R = _rotate_frame(prog, R, getattr(joint, "child_rotation", None), transpose=True)
         kin.R[body.name] = R
         kin.origin[body.name] = prog.lets([x - r for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
         kin.V[body.name], kin.A[body.name] = V, A
@@ -490,6 +492,15 @@ def _ball_segment(prog: Program, kin: Kinematics, quat: list, k0: int, R, pos, V
     A = prog.lets([a + b for a, b in zip(A, motion_cross(V, Sw))])
     V = prog.lets([a + b for a, b in zip(V, Sw)])
     return R, V, A
+
+
+def _rotate_frame(prog: Program, R, rotation, transpose: bool = False):
+    """``R @ rotation`` (or ``R @ rotation^T``) for a joint's constant frame rotation
+    (rotated ``Frame``s); ``None`` (identity) leaves ``R`` and the program untouched."""
+    if rotation is None:
+        return R
+    C = [[exact(rotation[j][i] if transpose else rotation[i][j]) for j in range(3)] for i in range(3)]
+    return [[prog.let(dot(R[r], [C[m][col] for m in range(3)])) for col in range(3)] for r in range(3)]
 
 
 def _body_inertia_symbols(body: Body, kin: Kinematics):

@@ -28,6 +28,7 @@ from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_
                          quat_normalize, quat_rate, unit_axis)
 from .base import Component
 from ._values import vector3
+from .frame import split_frame
 
 #: (coordinates, speeds) of each segment kind.
 SEGMENT_SIZES = {"R": (1, 1), "P": (1, 1), "B": (4, 3)}
@@ -39,9 +40,12 @@ class Joint(Component):
 
     Parameters
     ----------
-    parent, child : Body or str
-    parent_point : (3,) m, joint location in the parent body frame
-    child_point : (3,) m, joint location in the child body frame
+    parent, child : Body, str or Frame.  A ``Frame`` carries the joint location and
+        may be rotated: the axis is then in the parent frame's rotated axes, and at
+        zero coordinates the child frame coincides with the parent frame
+        (``R_child = R_parent R_pf R_joint(q) R_cf^T``).
+    parent_point : (3,) m, joint location in the parent body frame (with a body)
+    child_point : (3,) m, joint location in the child body frame (with a body)
     coords : str or sequence of str, names of the joint coordinates (default from the
         joint name)
     speeds : sequence of str, names of the joint speeds (only joints with a rotation
@@ -55,11 +59,11 @@ class Joint(Component):
     n_coords: ClassVar[int] = 0
     parameters = ("parent_point", "child_point")
 
-    def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = (0.0, 0.0, 0.0),
-                 child_point: Any = (0.0, 0.0, 0.0), coords: Any = None, speeds: Any = None):
+    def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
+                 child_point: Any = None, coords: Any = None, speeds: Any = None):
         super().__init__(name)
-        self.parent = parent
-        self.child = child
+        self.parent, parent_point, self.parent_rotation = split_frame(parent, parent_point, self, "parent")
+        self.child, child_point, self.child_rotation = split_frame(child, child_point, self, "child")
         self.parent_point = vector3(parent_point, self, "parent_point")
         self.child_point = vector3(child_point, self, "child_point")
         self.coords = self._coord_names(coords)
@@ -111,7 +115,20 @@ class Joint(Component):
         return {"parent": self.parent, "child": self.child}
 
     def structure(self) -> tuple:
-        return tuple(self._segments())
+        screws = tuple(self._segments())
+        if self.parent_rotation is None and self.child_rotation is None:
+            return screws
+        return screws + (("frames", self.parent_rotation, self.child_rotation),)
+
+    @property
+    def parent_frame_rotation(self) -> np.ndarray:
+        """(3, 3) rotation of the joint's parent frame in the parent body frame."""
+        return np.eye(3) if self.parent_rotation is None else np.array(self.parent_rotation)
+
+    @property
+    def child_frame_rotation(self) -> np.ndarray:
+        """(3, 3) rotation of the joint's child frame in the child body frame."""
+        return np.eye(3) if self.child_rotation is None else np.array(self.child_rotation)
 
     def _walk(self):
         """``(kind, axis, q slice, v slice)`` of each segment, local to the joint."""
@@ -168,12 +185,13 @@ class Joint(Component):
         return q
 
     def relative_pose(self, q: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-        """``(R_PC, p_PC)``: child frame rotation and origin in the parent frame at ``q``.
+        """``(R_PC, p_PC)``: child body frame rotation and origin in the parent body frame.
 
-        ``p_PC = parent_point + translation(q) - R_PC child_point`` (m, parent frame).
+        ``R_PC = R_pf R_joint(q) R_cf^T`` and ``p_PC = parent_point + R_pf translation(q)
+        - R_PC child_point`` (m, parent body frame).
         """
         q = self._checked(q, self.nq, "coordinate(s)")
-        rotation = np.eye(3)
+        rotation = self.parent_frame_rotation
         translation = np.zeros(3)
         for kind, axis, sq, _ in self._walk():
             if kind == "R":
@@ -182,6 +200,7 @@ class Joint(Component):
                 translation = translation + rotation @ (np.asarray(axis) * q[sq][0])
             else:
                 rotation = rotation @ np.array(quat_matrix(q[sq]), dtype=float)
+        rotation = rotation @ self.child_frame_rotation.T
         origin = np.asarray(self.parent_point) + translation - rotation @ np.asarray(self.child_point)
         return rotation, origin
 
@@ -189,7 +208,7 @@ class Joint(Component):
         """``(w, u)``: the child's angular velocity (rad/s) and the velocity (m/s) of its frame
         origin relative to the parent, both in the parent frame (the parent at rest)."""
         q, v = self._checked(q, self.nq, "coordinate(s)"), self._checked(v, self.nv, "speed(s)")
-        rotation = np.eye(3)
+        rotation = self.parent_frame_rotation
         translation = np.zeros(3)
         w = np.zeros(3)
         u = np.zeros(3)  # velocity of the moving joint point
@@ -204,6 +223,7 @@ class Joint(Component):
             else:
                 rotation = rotation @ np.array(quat_matrix(q[sq]), dtype=float)
                 w = w + rotation @ v[sv]
+        rotation = rotation @ self.child_frame_rotation.T
         point = np.asarray(self.child_point)
         return w, u + np.cross(w, -rotation @ point)
 
