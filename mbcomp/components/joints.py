@@ -130,8 +130,8 @@ class Joint(Component):
         """(3, 3) rotation of the joint's child frame in the child body frame."""
         return np.eye(3) if self.child_rotation is None else np.array(self.child_rotation)
 
-    def _walk(self):
-        """``(kind, axis, q slice, v slice)`` of each segment, local to the joint."""
+    def walk(self):
+        """``(kind, axis, q slice, v slice)`` of each segment (see the module docstring), local to the joint."""
         iq = iv = 0
         for kind, axis in self._segments():
             nq, nv = SEGMENT_SIZES[kind]
@@ -148,7 +148,7 @@ class Joint(Component):
         """Coordinate rates ``q' = G(q) v`` (quaternion rates ``q (0, w) / 2``)."""
         q, v = self._checked(q, self.nq, "coordinate(s)"), self._checked(v, self.nv, "speed(s)")
         out = np.empty(self.nq)
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             out[sq] = quat_rate(q[sq], v[sv]) if kind == "B" else v[sv]
         return out
 
@@ -157,7 +157,7 @@ class Joint(Component):
         vector, child frame, for a ball segment); ``q + dv`` for a screw joint."""
         q, dv = self._checked(q, self.nq, "coordinate(s)"), self._checked(dv, self.nv, "speed(s)")
         out = q.copy()
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind == "B":
                 out[sq] = quat_normalize(quat_multiply(q[sq], quat_exp(dv[sv])), self)
             else:
@@ -168,7 +168,7 @@ class Joint(Component):
         """The step ``dv`` with ``integrate(q0, dv) = q1`` (the shorter rotation for a ball)."""
         q0, q1 = self._checked(q0, self.nq, "coordinate(s)"), self._checked(q1, self.nq, "coordinate(s)")
         out = np.empty(self.nv)
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind == "B":
                 a = quat_normalize(q0[sq], self)
                 out[sv] = quat_log(quat_multiply([a[0], -a[1], -a[2], -a[3]], quat_normalize(q1[sq], self)))
@@ -179,7 +179,7 @@ class Joint(Component):
     def normalize(self, q: Sequence[float]) -> np.ndarray:
         """``q`` with each quaternion scaled to unit length (``ModelError`` for a zero one)."""
         q = self._checked(q, self.nq, "coordinate(s)").copy()
-        for kind, _, sq, _ in self._walk():
+        for kind, _, sq, _ in self.walk():
             if kind == "B":
                 q[sq] = quat_normalize(q[sq], self)
         return q
@@ -193,7 +193,7 @@ class Joint(Component):
         q = self._checked(q, self.nq, "coordinate(s)")
         rotation = self.parent_frame_rotation
         translation = np.zeros(3)
-        for kind, axis, sq, _ in self._walk():
+        for kind, axis, sq, _ in self.walk():
             if kind == "R":
                 rotation = rotation @ axis_angle(axis, q[sq][0])
             elif kind == "P":
@@ -212,7 +212,7 @@ class Joint(Component):
         translation = np.zeros(3)
         w = np.zeros(3)
         u = np.zeros(3)  # velocity of the moving joint point
-        for kind, axis, sq, sv in self._walk():
+        for kind, axis, sq, sv in self.walk():
             if kind == "R":
                 w = w + rotation @ np.asarray(axis) * v[sv][0]
                 rotation = rotation @ axis_angle(axis, q[sq][0])
@@ -237,13 +237,19 @@ class Joint(Component):
             raise ModelError(self, f"coords {names} repeat a name")
         return names
 
-    def _speed_names(self, speeds: Any) -> tuple[str, ...]:
+    @property
+    def default_speeds(self) -> tuple[str, ...]:
+        """The speed names given no ``speeds``: a screw coordinate's name, ``NAME_wx`` .. for a ball."""
         default: list[str] = []
-        for kind, _, sq, _ in self._walk():
+        for kind, _, sq, _ in self.walk():
             if kind == "B":
                 default.extend(f"{self.name}_{s}" for s in self.speed_suffixes)
             else:
                 default.append(self.coords[sq.start])
+        return tuple(default)
+
+    def _speed_names(self, speeds: Any) -> tuple[str, ...]:
+        default = self.default_speeds
         if speeds is None:
             return tuple(default)
         names = (speeds,) if isinstance(speeds, str) else tuple(speeds)
@@ -251,11 +257,11 @@ class Joint(Component):
             raise ModelError(self, f"speeds must be {len(default)} non-empty name(s), got {speeds!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"speeds {names} repeat a name")
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind != "B" and names[sv.start] != self.coords[sq.start]:
                 raise ModelError(self, f"speed {names[sv.start]!r} must be named like its coordinate "
                                        f"{self.coords[sq.start]!r} (a screw coordinate's speed is its rate)")
-        clash = {names[i] for kind, _, _, sv in self._walk() if kind == "B"
+        clash = {names[i] for kind, _, _, sv in self.walk() if kind == "B"
                  for i in range(sv.start, sv.stop) if names[i] in self.coords}
         if clash:
             raise ModelError(self, f"speed name(s) {sorted(clash)} are also coordinate names")
