@@ -6,6 +6,13 @@ from typing import Any
 from .components import Body, Component, Ground
 from .components._values import vector3
 from .errors import ModelError, describe
+from .services import service
+
+
+def _plain(body: Any) -> str:
+    """A body's name made fit for a component name."""
+    from .components._values import name_of
+    return name_of(body).replace(".", "_")
 
 
 class Model:
@@ -46,6 +53,31 @@ class Model:
             self._components[comp.name] = comp
         return components[0]
 
+    def connect(self, a: Any, b: Any, name: str | None = None) -> Component:
+        """Weld two frames together: adds (and returns) a ``Fixed`` joint from ``a`` to ``b``,
+        named ``"weld_<body a>_<body b>"`` unless ``name`` is given.  Either frame may be
+        the one already connected to the ground: the compiler orients the joint."""
+        from .components import Fixed
+        from .components.frame import Frame
+        for role, frame in (("a", a), ("b", b)):
+            if not isinstance(frame, Frame):
+                raise ModelError(f"Model {self.name!r}", f"connect() takes two Frames (body.frame(...)); {role} is {frame!r}")
+        if name is None:
+            name = f"weld_{_plain(a.body)}_{_plain(b.body)}"
+        return self.add(Fixed(name, a, b))
+
+    def flat(self) -> "Model":
+        """The model the compiler reads: joints oriented along the spanning tree (the model
+        itself when nothing changes)."""
+        from .flatten import orient_joints
+        components = orient_joints(self._components, self.ground.name)
+        if components is self._components:
+            return self
+        flat = Model.__new__(Model)
+        flat.name, flat.gravity, flat.ground = self.name, self.gravity, self.ground
+        flat._components = components
+        return flat
+
     def __getitem__(self, name: str) -> Component:
         try:
             return self._components[name]
@@ -79,13 +111,11 @@ class Model:
             ``"python"``.
         options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
         """
-        from .compiler import compile_model
-        return compile_model(self, formulation=formulation, cache=cache, backend=backend, **options)
+        return service("compile")(self, formulation=formulation, cache=cache, backend=backend, **options)
 
     def save(self, path) -> None:
         """Write the model as a declarative TOML file that ``mb.load`` reads back."""
-        from .io import save
-        save(self, path)
+        service("save")(self, path)
 
     def __repr__(self) -> str:
         return f"Model({self.name!r}, {len(self._components) - 1} components)"

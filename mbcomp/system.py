@@ -1,7 +1,6 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -11,19 +10,8 @@ from .constraint_set import cross
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY
 from .errors import format_state, ModelError, SimulationError, describe
+from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 from .params import validate
-
-
-@dataclass(frozen=True)
-class Energy:
-    """Kinetic, potential (gravity + springs) and total energy, J."""
-
-    kinetic: Any
-    potential: Any
-
-    @property
-    def total(self):
-        return self.kinetic + self.potential
 
 
 class BodyState:
@@ -77,7 +65,6 @@ class System:
 
     def __reduce__(self):
         model, formulation, options, backend = self._compiled.recipe
-        from .compiler import rebuild_system
         return rebuild_system, (model, formulation, options, backend, self._parameters)
 
     # -- description -----------------------------------------------------------------
@@ -369,9 +356,10 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.assemble(self, q, qd, t)
 
-    def constraint_violation(self, q: Any, t: float = 0.0) -> float:
-        """max |g(q, t)| over the position-level constraint equations."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q))
+    def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
+        """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
+        values of speed motors, as a ``Result`` records them)."""
+        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
@@ -447,3 +435,24 @@ class System:
     def __repr__(self) -> str:
         return (f"System({self._compiled.model_name!r}, coords={list(self.coords)}, ndof={self.ndof}, "
                 f"formulation={self.formulation!r}, backend={self.backend!r})")
+
+
+def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
+                  **options: Any) -> System:
+    """Model -> System (see ``Model.compile``)."""
+    from .compiler import CompiledModel
+    from .formulations import get_formulation
+    from .formulations.base import analyse
+    formulation_class = get_formulation(formulation)
+    model = model.flat()  # sub-models expanded, joints oriented along the tree
+    compiled = CompiledModel(model, cache=cache, backend=backend)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters).
+    compiled.recipe = (compiled.flat_model, formulation, dict(options), backend)
+    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    analyse(system._formulation, system)
+    return system
+
+
+def rebuild_system(model, formulation, options, backend, parameters) -> System:
+    """Unpickle: compile the model again (a cache hit where the cache is shared)."""
+    return compile_model(model, formulation=formulation, backend=backend, **options).with_parameters(parameters)

@@ -5,6 +5,7 @@ from typing import Any
 
 from ..params import ParameterSpec, in_range, unit_vector
 from .base import Component
+from .frame import split_frame
 
 
 class Contact(Component):
@@ -22,10 +23,10 @@ class Contact(Component):
               ParameterSpec("restitution", (), "", in_range(0.0, 1.0), default=0.0,
                             doc="Newton's coefficient of restitution"))
 
-    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), normal: Any = (0.0, 0.0, 1.0),
+    def __init__(self, name: str, body: Any, point: Any = None, normal: Any = (0.0, 0.0, 1.0),
                  origin: Any = (0.0, 0.0, 0.0), restitution: float = 0.0):
         super().__init__(name)
-        self.body = body
+        self.body, point, _ = split_frame(body, point, self, "body")
         self.point = point
         self.normal = normal
         self.origin = origin

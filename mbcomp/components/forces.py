@@ -15,10 +15,13 @@ import sympy as sp
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, nonnegative
 from .base import ForceElement
+from .frame import Frame, split_frame
 
 
 def _attachment(value: Any, owner: Any, role: str) -> tuple[Any, tuple[float, float, float]]:
-    """``(body, point)`` from ``(body, point)`` or a bare body (point = origin)."""
+    """``(body, point)`` from ``(body, point)``, a ``Frame`` or a bare body (point = origin)."""
+    if isinstance(value, Frame):
+        return value.body, value.point
     if isinstance(value, (tuple, list)) and len(value) == 2 and not isinstance(value[0], (int, float)):
         return value[0], value[1]
     if isinstance(value, (tuple, list)):
@@ -139,9 +142,9 @@ class Force(ForceElement):
               ParameterSpec("force", (3,), "N", default=(0.0, 0.0, 0.0), time_input=True,
                             doc="world-frame force, or a callable (t, q, qd) -> (3,)"))
 
-    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), force: Any = (0.0, 0.0, 0.0)):
+    def __init__(self, name: str, body: Any, point: Any = None, force: Any = (0.0, 0.0, 0.0)):
         super().__init__(name)
-        self.body = body
+        self.body, point, _ = split_frame(body, point, self, "body")
         self.point = point
         self.force = force
 
