@@ -137,5 +137,5 @@ def flatten(model: Any) -> FlatModel:
     copies = copy.deepcopy(components, memo)
     ground = copies.get(model.ground.name, copy.deepcopy(model.ground, memo))
     for comp in list(copies.values()) + [ground]:
-        comp._freeze()
+        comp.freeze()
     return FlatModel(model.name, tuple(float(g) for g in model.gravity), ground, copies)

@@ -77,7 +77,7 @@ class Component:
                              "make a new component instead")
         object.__setattr__(self, attr, value)
 
-    def _freeze(self) -> None:
+    def freeze(self) -> None:
         """Make this component read-only (the compiler's copies; see ``mbcomp.flatten``)."""
         object.__setattr__(self, "_frozen", True)
 
