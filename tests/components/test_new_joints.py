@@ -216,3 +216,27 @@ def test_cli_info_and_run_on_the_ball_top(capsys, tmp_path):
     out = capsys.readouterr().out
     assert "pivot_wz" in out and "pivot_qw" in out
     assert "pivot_wz" in csv.read_text().splitlines()[0]
+
+
+def test_state_map_of_a_tree_matches_its_joints():
+    """The whole-tree ``q' = G(q) v``, ``integrate`` and ``difference`` agree with each
+    joint's own, and ``difference`` undoes ``integrate``."""
+    m = mb.Model("mixed")
+    a = m.add(mb.Body("a", mass=1.0, inertia=(0.1, 0.2, 0.25)))
+    b = m.add(mb.Body("b", mass=1.0, inertia=(0.1, 0.2, 0.25)))
+    c = m.add(mb.Body("c", mass=1.0, inertia=(0.1, 0.2, 0.25)))
+    m.add(mb.Free("f", m.ground, a))
+    m.add(mb.Revolute("r", a, b, axis="y"))
+    m.add(mb.Ball("k", b, c))
+    system = m.compile(backend="python")
+    state_map = system.topology.state_map
+    rng = np.random.default_rng(2)
+    q = system.state_vector(rng.uniform(-1, 1, system.nq))
+    v, dv = rng.normal(size=system.nv), rng.uniform(-0.5, 0.5, system.nv)
+    q1 = state_map.integrate(q, dv)
+    np.testing.assert_allclose(state_map.difference(q, q1), dv, atol=1e-12)
+    for joint in system.topology.tree_joints:
+        sq, sv = system.topology.q_slice[joint.name], system.topology.v_slice[joint.name]
+        np.testing.assert_allclose(state_map.qdot(q, v)[sq], joint.qdot(q[sq], v[sv]), atol=1e-15)
+        np.testing.assert_allclose(q1[sq], joint.integrate(q[sq], dv[sv]), atol=1e-15)
+    np.testing.assert_allclose(state_map.neutral(), [0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0])
