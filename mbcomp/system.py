@@ -117,6 +117,13 @@ class System:
         """A new System with some parameter values replaced (shares the compiled code)."""
         if not values:
             return self
+        derivation = getattr(self._compiled, "derivation", None)
+        if derivation is not None and any(key in derivation.parameters for key in values):
+            # Sub-model parameters: every component value derived from them follows (as a
+            # fresh build would give it); component values given in the same call win.
+            changes = {k: v for k, v in values.items() if k in derivation.parameters}
+            values = {**derivation.apply(self._parameters, changes),
+                      **{k: v for k, v in values.items() if k not in changes}}
         merged = dict(self._parameters)
         for key, value in values.items():
             if key not in merged:
@@ -450,7 +457,11 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    compiled.derivation = getattr(model, "_derivation", None)
+    parameters = dict(compiled.default_parameters)
+    if compiled.derivation is not None:
+        parameters.update(compiled.derivation.values())  # sub-model parameters, by path
+    system = System(compiled, formulation_class(compiled, **options), parameters)
     analyse(system._formulation, system)
     return system
 

@@ -17,6 +17,16 @@ class Component:
 
     parameters: ClassVar[tuple[str, ...]] = ()
 
+    def __new__(cls, *args: Any, **kwargs: Any):
+        # Arguments holding sub-model parameter expressions are kept, so that a run-time
+        # parameter change can rebuild this component's values (mbcomp.compose).
+        obj = super().__new__(cls)
+        if args or kwargs:
+            from .expr import contains_expr
+            if contains_expr(args) or contains_expr(kwargs):
+                object.__setattr__(obj, "_expression_args", (args, kwargs))
+        return obj
+
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():
             raise ModelError(type(self).__name__, f"name must be a non-empty string, got {name!r}")
