@@ -184,7 +184,9 @@ class Submodel:
         """The full instance path (``"left_leg.thigh"``); set once the instance is added."""
         return self._path if self._path is not None else self.name
 
-    def _instantiate(self, prefix: str, registry: Registry, outer: dict | None = None) -> None:
+    def instantiate(self, prefix: str, registry: Registry, outer: dict | None = None) -> None:
+        """Fix the path (``prefix + name``), apply the ``outer`` modifiers (they win), resolve
+        parameters and options, and run ``build`` (called by ``Model.add``/``Submodel.add``)."""
         if self._path is not None:
             raise ModelError(f"{type(self).__name__} {self.name!r}", "was already added to a model")
         if outer:
@@ -227,7 +229,7 @@ class Submodel:
             self._scope[item.name] = item
             if isinstance(item, Submodel):
                 inner = self._modifiers.get(item.name)
-                item._instantiate(f"{self.path}.", self._registry, inner if isinstance(inner, dict) else None)
+                item.instantiate(f"{self.path}.", self._registry, inner if isinstance(inner, dict) else None)
             else:
                 full = f"{self.path}.{item.name}"
                 self._registry.components.append((full, item, self.path))
@@ -240,8 +242,8 @@ class Submodel:
         for role, frame in (("a", a), ("b", b)):
             if not isinstance(frame, Frame):
                 raise ModelError(f"{type(self).__name__} {self.path!r}", f"connect() takes two Frames; {role} is {frame!r}")
-        from .components._values import name_of
-        return self.add(Fixed(name or f"weld_{name_of(a.body)}_{name_of(b.body)}", a, b))
+        names = [getattr(f.body, "name", f.body) for f in (a, b)]
+        return self.add(Fixed(name or f"weld_{names[0]}_{names[1]}", a, b))
 
     # -- access -----------------------------------------------------------------------------------
     def __getitem__(self, name: str):
@@ -274,6 +276,10 @@ class Submodel:
 
     def option_values(self) -> dict[str, Any]:
         return {k: v for k, v in self._values.items() if not isinstance(v, Expr)}
+
+    def members(self) -> dict[str, Any]:
+        """Components and inner instances added by ``build``, by local name, in order."""
+        return dict(self._scope)
 
     def instances(self) -> list["Submodel"]:
         return [v for v in self._scope.values() if isinstance(v, Submodel)]

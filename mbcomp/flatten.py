@@ -99,7 +99,7 @@ def _walk(instance) -> list:
     """``(full name, component, scope path)`` of an instance's components, in build order."""
     from .compose import Submodel
     out = []
-    for item in instance._scope.values():
+    for item in instance.members().values():
         if isinstance(item, Submodel):
             out += _walk(item)
         else:
@@ -113,7 +113,7 @@ def flatten_instances(model) -> tuple[dict, "Derivation"]:
     scope first), joint coordinates prefixed with the instance path."""
     from .compose import Submodel
     entries = [("ground", model.ground, "")]
-    for item in model._entries:
+    for item in model.entries:
         entries += _walk(item) if isinstance(item, Submodel) else [(item.name, item, "")]
     full_of = {id(comp): full for full, comp, _ in entries}
     names = {full for full, _, _ in entries}
@@ -140,9 +140,9 @@ def flatten_instances(model) -> tuple[dict, "Derivation"]:
         else:
             new = comp
         components[full] = new
-        if getattr(comp, "_expression_args", None) is not None:
+        if getattr(comp, "expression_args", None) is not None:
             expressions.append((full, comp))
-    registry = model._registry
+    registry = model.registry
     return components, Derivation(dict(registry.parameters), expressions)
 
 
@@ -179,7 +179,7 @@ class Derivation:
         for full, comp, deps in self.components:
             if not deps & touched:
                 continue
-            args, kwargs = comp._expression_args
+            args, kwargs = comp.expression_args
             try:
                 new = type(comp)(*substitute(args, env), **substitute(kwargs, env))
             except ModelError as exc:
@@ -207,5 +207,5 @@ def _dependencies(comp) -> set:
                 visit(v)
         elif type(value).__name__ == "Frame":
             visit(value.point)
-    visit(comp._expression_args)
+    visit(comp.expression_args)
     return found

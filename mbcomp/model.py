@@ -34,6 +34,8 @@ class Model:
         self._instances: dict[str, Any] = {}      # top-level sub-model instances by name
         self._entries: list = []                  # components and instances in the order added
         self._registry = None                     # what the instances produced (mbcomp.compose)
+        #: On a flattened model: how component values follow sub-model parameters.
+        self.derivation = None
 
     # -- composition ----------------------------------------------------------
     def add(self, *components: Component) -> Component:
@@ -51,7 +53,7 @@ class Model:
                                      f"in model {self.name!r}")
                 if self._registry is None:
                     self._registry = Registry(names={id(self.ground): "ground"})
-                comp._instantiate("", self._registry)
+                comp.instantiate("", self._registry)
                 self._instances[comp.name] = comp
                 self._entries.append(comp)
                 continue
@@ -89,7 +91,7 @@ class Model:
         dotted names, joints oriented along the spanning tree (the model itself when
         nothing changes).  The user's components are never modified."""
         from .flatten import flatten_instances, orient_joints
-        components, derivation = self._components, getattr(self, "_derivation", None)
+        components, derivation = self._components, self.derivation
         if self._instances:
             components, derivation = flatten_instances(self)
         components = orient_joints(components, self.ground.name)
@@ -98,8 +100,18 @@ class Model:
         flat = Model.__new__(Model)
         flat.name, flat.gravity, flat.ground = self.name, self.gravity, self.ground
         flat._components, flat._instances, flat._entries, flat._registry = components, {}, list(components.values())[1:], None
-        flat._derivation = derivation
+        flat.derivation = derivation
         return flat
+
+    @property
+    def entries(self) -> list:
+        """Top-level components and sub-model instances in the order they were added."""
+        return list(self._entries)
+
+    @property
+    def registry(self):
+        """What the sub-model instances of this model produced (``None`` without any)."""
+        return self._registry
 
     def tree(self):
         """The instance tree: every sub-model instance with its parameters and options, and

@@ -458,7 +458,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    compiled.derivation = getattr(model, "_derivation", None)
+    compiled.derivation = getattr(model, "derivation", None)
     parameters = dict(compiled.default_parameters)
     if compiled.derivation is not None:
         parameters.update(compiled.derivation.values())  # sub-model parameters, by path

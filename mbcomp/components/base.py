@@ -24,8 +24,12 @@ class Component:
         if args or kwargs:
             from .expr import contains_expr
             if contains_expr(args) or contains_expr(kwargs):
-                object.__setattr__(obj, "_expression_args", (args, kwargs))
+                object.__setattr__(obj, "expression_args", (args, kwargs))
         return obj
+
+    #: ``(args, kwargs)`` of the constructor call when they hold sub-model parameter
+    #: expressions (``None`` otherwise).
+    expression_args: Any = None
 
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():
