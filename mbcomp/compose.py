@@ -24,6 +24,8 @@ from .components.frame import Frame
 from .errors import ModelError
 
 _MISSING = object()
+#: The default of a port that must be bound (``Submodel.port_names``).
+PORT_REQUIRED = _MISSING
 
 
 class Parameter:
@@ -286,6 +288,12 @@ class Submodel:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.path!r})"
+
+
+class FileSubmodel(Submodel):
+    """Base of the sub-model classes made from part files (``[submodels.X] use = ...``)."""
+
+    source = None   # the file the class was read from
 
 
 # -- the instance tree ------------------------------------------------------------------------------
