@@ -12,6 +12,7 @@ parameter), so every value derived from it follows a run-time change.
 """
 from __future__ import annotations
 
+import copy
 import inspect
 from dataclasses import dataclass, field
 from typing import Any
@@ -294,6 +295,22 @@ class FileSubmodel(Submodel):
     """Base of the sub-model classes made from part files (``[submodels.X] use = ...``)."""
 
     source = None   # the file the class was read from
+
+
+def copy_component(comp: Any, name: str, references: dict) -> Any:
+    """A shallow copy of ``comp`` named ``name`` whose reference attributes are replaced
+    by ``references`` (role -> new reference)."""
+    new = copy.copy(comp)
+    roles = comp.references()
+    state = vars(comp)
+    for role, ref in roles.items():
+        if role not in references:
+            continue
+        for attr, value in state.items():
+            if attr != "name" and value is ref:
+                object.__setattr__(new, attr, references[role])
+    object.__setattr__(new, "name", name)
+    return new
 
 
 # -- the instance tree ------------------------------------------------------------------------------

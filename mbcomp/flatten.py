@@ -10,13 +10,13 @@ Two steps, both leaving the user's objects untouched:
 """
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 import numpy as np
 
 from .components import Fixed, Joint, Prismatic, Revolute
 from .components.frame import Frame
+from .compose import copy_component
 from .components._values import name_of
 
 
@@ -76,22 +76,6 @@ def _reachable(components: dict, ground_name: str) -> set:
                 reach.add(child)
                 stack.append(child)
     return reach
-
-
-def copy_component(comp: Any, name: str, references: dict) -> Any:
-    """A shallow copy of ``comp`` named ``name`` whose reference attributes are replaced
-    by ``references`` (role -> new reference)."""
-    new = copy.copy(comp)
-    roles = comp.references()
-    state = vars(comp)
-    for role, ref in roles.items():
-        if role not in references:
-            continue
-        for attr, value in state.items():
-            if attr != "name" and value is ref:
-                object.__setattr__(new, attr, references[role])
-    object.__setattr__(new, "name", name)
-    return new
 
 
 # -- sub-model instances --------------------------------------------------------------------------

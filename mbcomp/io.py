@@ -30,7 +30,7 @@ from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
 from .library import find_library_model, library_dirs, library_models, read_description
 from .model import Model
-from .compose import FileSubmodel, Parameter, Submodel, PORT_REQUIRED as _PORT_REQUIRED
+from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame, rotation_matrix
 
 __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
@@ -1169,7 +1169,6 @@ def _section_lines(components: list, prefix: str) -> list[str]:
 def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[str]:
     """A model with sub-model instances, nested as ``[submodels.NAME...]`` tables: each
     instance's components under their local names, references outside it by full path."""
-    from .flatten import copy_component
     names = model.registry.names
     known = set(names.values())
 
