@@ -28,7 +28,7 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .components._values import name_of
 from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
-from .library import find_library_model, library_dirs, library_models, read_description
+from .library import find_library_model, find_library_part, library_dirs, library_models, library_parts, read_description
 from .model import Model
 from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame, rotation_matrix
@@ -388,6 +388,19 @@ def _read_parts(r: _Reader, data: dict, target: Any, bodies: dict, context: "_Fi
             if scope:
                 bodies[f"{scope}.{comp_name}"] = body   # its full name, for inner parts
 
+    def expose(ports: dict) -> None:
+        for port, spec in ports.items():
+            frame = _port_frame(r, port, spec, bodies)
+            if frame is BAD:
+                continue
+            bodies[port] = frame
+            r.ports.add(port)
+            if not isinstance(target, Model):
+                setattr(target, port, frame)
+
+    # Ports on this file's own bodies first (sub-models may bind to them), the rest after.
+    own = {p: s for p, s in exposed.items() if (s if isinstance(s, str) else s.get("body")) in bodies}
+    expose(own)
     coords_seen: dict[str, str] = {}
     all_joints_read = True
     for comp_name, label, table in named_tables("submodels"):
@@ -410,6 +423,8 @@ def _read_parts(r: _Reader, data: dict, target: Any, bodies: dict, context: "_Fi
         for full, member in _instance_bodies(instance, instance.path):
             bodies[full] = member
             r.ports.add(full)
+        for full, member in _instance_joints(instance, comp_name):
+            joints[full] = member
         for coord in _instance_coords(instance, comp_name):
             coords_seen[coord] = f"[{label}]"
 
@@ -432,10 +447,7 @@ def _read_parts(r: _Reader, data: dict, target: Any, bodies: dict, context: "_Fi
     for comp_name, label, table in named_tables("contacts"):
         _add_component(r, target, _read_contact(r, comp_name, label, table, bodies), label)
 
-    for port, spec in exposed.items():
-        frame = _port_frame(r, port, spec, bodies)
-        if frame is not BAD and not isinstance(target, Model):
-            setattr(target, port, frame)
+    expose({p: s for p, s in exposed.items() if p not in own})
     return coords_seen if all_joints_read else None
 
 
@@ -446,6 +458,17 @@ def _instance_bodies(instance: Any, path: str) -> list:
         if isinstance(member, Submodel):
             out += _instance_bodies(member, f"{path}.{local}")
         elif isinstance(member, Body):
+            out.append((f"{path}.{local}", member))
+    return out
+
+
+def _instance_joints(instance: Any, path: str) -> list:
+    """``(path, joint)`` of every joint inside a sub-model instance (nested ones too)."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_joints(member, f"{path}.{local}")
+        elif isinstance(member, (Revolute, Prismatic, Spherical, Fixed)):
             out.append((f"{path}.{local}", member))
     return out
 
@@ -518,10 +541,10 @@ def _resolve_use(r: _Reader, label: str, use: Any, context: _FileContext) -> Pat
         r.problem(label, "use", f'must be a file name ("part.toml") or "library:NAME", got {_short(use)}')
         return None
     if use.startswith("library:"):
-        found = find_library_model(use[len("library:"):])
+        found = find_library_part(use[len("library:"):])
         if found is None:
-            r.problem(label, "use", f"no library model {use[len('library:'):]!r}; library: "
-                      f"{', '.join(sorted(library_models()))}")
+            r.problem(label, "use", f"no library part or model {use[len('library:'):]!r}; parts: "
+                      f"{', '.join(library_parts())}; models: {', '.join(library_models())}")
         return found
     base = context.path.resolve().parent
     target = (base / use).resolve()
@@ -742,10 +765,13 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
     child = r.reference(label, "child", table["child"], bodies, "body") if "child" in table else BAD
     if child == "ground":
         child = r.problem(label, "child", "the ground cannot be a child (it does not move)")
-    parent_point = (r.vector(label, "parent_point", table["parent_point"]) if "parent_point" in table
-                    else None if isinstance(parent, Frame) else ZERO3)
-    child_point = (r.vector(label, "child_point", table["child_point"]) if "child_point" in table
-                   else None if isinstance(child, Frame) else ZERO3)
+    parent_point = r.vector(label, "parent_point", table["parent_point"]) if "parent_point" in table else ZERO3
+    child_point = r.vector(label, "child_point", table["child_point"]) if "child_point" in table else ZERO3
+    # A port (a Frame): the point is an offset in the port frame's axes.
+    if isinstance(parent, Frame) and parent_point is not BAD:
+        parent, parent_point = _offset_frame(parent, parent_point), None
+    if isinstance(child, Frame) and child_point is not BAD:
+        child, child_point = _offset_frame(child, child_point), None
     values = [parent, child, parent_point, child_point]
     options = {}
     if kind in ("revolute", "prismatic"):
@@ -779,14 +805,30 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
         return None
     if rotations:
         try:
-            parent = Frame(parent, parent_point, rotations.get("parent_rotation"))
-            child = Frame(child, child_point, rotations.get("child_rotation"))
+            parent = _framed(parent, parent_point, rotations.get("parent_rotation"))
+            child = _framed(child, child_point, rotations.get("child_rotation"))
         except ModelError as exc:
             r.problem(label, None, str(exc))
             return None
         return _construct(r, label, factory, name, parent, child, **options)
     return _construct(r, label, factory, name, parent, child, parent_point=parent_point,
                       child_point=child_point, **options)
+
+
+def _framed(end: Any, point: Any, rotation: Any) -> Frame:
+    """A joint end as a Frame: a body with a point and rotation, or a port Frame turned
+    further by ``rotation`` (given in the port frame's axes)."""
+    if isinstance(end, Frame):
+        R = end.rotation_matrix if rotation is None else end.rotation_matrix @ np.asarray(rotation)
+        return Frame(end.body, end.point, R)
+    return Frame(end, ZERO3 if point is None else point, rotation)
+
+
+def _offset_frame(frame: Frame, offset: tuple) -> Frame:
+    """``frame`` moved by ``offset`` (given in the frame's own axes); expressions stay linked."""
+    R = frame.rotation_matrix
+    point = tuple(frame.point[i] + sum(float(R[i][j]) * offset[j] for j in range(3)) for i in range(3))
+    return Frame(frame.body, point, frame.rotation)
 
 
 def _read_rotation(r: _Reader, label: str, key: str, value: Any) -> Any:

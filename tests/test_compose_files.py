@@ -194,3 +194,11 @@ def test_save_writes_nested_models_that_load_reads_back(tmp_path):
         assert_close(value, s1.parameters[key], name=key)
     q = np.linspace(-0.3, 0.4, 5)
     assert_close(s2.accelerations(q, -q), s1.accelerations(q, -q), name="accelerations")
+
+
+def test_info_prints_the_instance_tree(files, capsys):
+    from mbcomp.cli import main
+    assert main(["info", str(files / "double_pendulum.toml"), "--no-equations"]) == 0
+    out = capsys.readouterr().out
+    assert "instances\n  upper (link)  length=0.3, mass=1\n" in out
+    assert "  lower (link)  length=0.2, mass=0.5\n" in out
