@@ -4,6 +4,8 @@
 from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
+from .components import DCMotor, Drive, JointFriction, JointLimit
+from .signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 
 # The compiled system and its results
 from .result import Energy, Event, Result
@@ -29,6 +31,7 @@ __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 
 

@@ -11,11 +11,12 @@ from . import codegen
 from .backend import COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, build_c_library
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
+from .drive_equations import drive_layout
 from .errors import ModelError
 from .topology import build_topology
 
 
-def structure_description(model, topology, layout, inputs) -> str:
+def structure_description(model, topology, layout, inputs, drives=None) -> str:
     """Everything that decides the generated code, as text (names included)."""
     parts = [f"gravity|{len(topology.coords)}"]
     for comp in topology.components.values():
@@ -25,6 +26,8 @@ def structure_description(model, topology, layout, inputs) -> str:
     parts.append("coords|" + ",".join(topology.coords))
     parts.append("params|" + ",".join(f"{k}:{v}" for k, v in layout.entries.items()))
     parts.append("inputs|" + ",".join(f"{k}:{v}" for k, v in inputs.items()))
+    if drives is not None:
+        parts.append(drives.description())
     return "\n".join(parts)
 
 
@@ -38,13 +41,14 @@ class CompiledModel:
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
         self.inputs = input_layout(self.topology)
+        self.drives = drive_layout(self.topology)
         from .constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nq)
-        description = structure_description(model, self.topology, self.layout, self.inputs)
+        description = structure_description(model, self.topology, self.layout, self.inputs, self.drives)
         self.key = codegen.structure_key(description)
         self._program = None
         started = time.perf_counter()
@@ -53,7 +57,7 @@ class CompiledModel:
         ng = len(self.geometric_rows)
         self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
                       "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
-                      "contacts": len(self.topology.contacts) * (nq + 2)}
+                      "contacts": len(self.topology.contacts) * (nq + 2), "drives": nq + self.drives.nz}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -62,7 +66,7 @@ class CompiledModel:
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations)
+            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
 

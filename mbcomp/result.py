@@ -51,6 +51,17 @@ class Result:
     persistent_contacts: list = field(default_factory=list)
     closed_contacts: list = field(default_factory=list, repr=False)  #: persistent contact indices per sample
     _reactions: dict | None = field(default=None, repr=False)
+    z: np.ndarray | None = field(default=None, repr=False)  #: (m, nz) drive-element states
+
+    @property
+    def extra_states(self) -> tuple[str, ...]:
+        """Names of the columns of ``z`` (motor currents, PID integrals)."""
+        return tuple(getattr(self.system, "extra_states", ()))
+
+    def _z(self) -> np.ndarray:
+        if self.z is None or self.z.shape != (len(self.t), len(self.extra_states)):
+            return np.zeros((len(self.t), len(self.extra_states)))
+        return self.z
 
     @property
     def coords(self) -> tuple[str, ...]:
@@ -61,10 +72,13 @@ class Result:
         coords = list(self.coords)
         if name in coords:
             return self.q[:, coords.index(name)]
+        if name in self.extra_states:
+            return self._z()[:, self.extra_states.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
             if speed in coords:
                 return self.qd[:, coords.index(speed)]
-        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}")
+        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}"
+                       + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
@@ -85,8 +99,9 @@ class Result:
             series: dict[str, list] = {}
             closed = self.closed_contacts or [()] * len(self.t)
             contacts = [c.name for c in self.system.topology.contacts]
-            for t, q, qd, shut in zip(self.t, self.q, self.qd, closed):
-                values = self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets, contacts=shut)
+            for t, q, qd, shut, z in zip(self.t, self.q, self.qd, closed, self._z()):
+                values = self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets, contacts=shut,
+                                               **({"states": z} if len(z) else {}))
                 for name in contacts:
                     values.setdefault(name, 0.0)
                 for name, value in values.items():
@@ -97,12 +112,15 @@ class Result:
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
-        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + ["kinetic", "potential", "total"]
+        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + list(self.extra_states) + \
+            ["kinetic", "potential", "total"]
+        z = self._z()
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for i in range(len(self.t)):
-                row = [self.t[i], *self.q[i], *self.qd[i], energy.kinetic[i], energy.potential[i], energy.total[i]]
+                row = [self.t[i], *self.q[i], *self.qd[i], *z[i], energy.kinetic[i], energy.potential[i],
+                       energy.total[i]]
                 writer.writerow([repr(float(v)) for v in row])
 
     def to_dataframe(self):
@@ -113,6 +131,7 @@ class Result:
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
         data.update({f"{c}_d": self.qd[:, i] for i, c in enumerate(self.coords)})
+        data.update({name: self._z()[:, i] for i, name in enumerate(self.extra_states)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 
     def plot(self, *args: Any, **kwargs: Any):

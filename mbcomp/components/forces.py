@@ -165,8 +165,13 @@ class JointTorque(ForceElement):
     def __init__(self, name: str, joint: Any, value: Any = 0.0):
         super().__init__(name)
         self.joint = joint
-        self.is_callable = callable(value)
-        if self.is_callable:
+        from ..signals import Signal
+        self.signal = value if isinstance(value, Signal) else None  # compiled with the drives
+        self.is_callable = callable(value) and self.signal is None
+        if self.signal is not None:
+            self.value = value
+            self.parameters = ()
+        elif self.is_callable:
             self.value = value
             self.parameters = ()
         else:
@@ -179,18 +184,42 @@ class JointTorque(ForceElement):
             self.value = float(arr[0]) if arr.size == 1 else tuple(float(v) for v in arr)
 
     def references(self):
+        if self.signal is not None:
+            from ..signals import signal_references
+            return {"joint": self.joint, **signal_references([self.signal])}
         return {"joint": self.joint}
 
     def structure(self):
+        if self.signal is not None:
+            return ("signal", self.signal.describe())
         return ("callable" if self.is_callable else "constant",)
 
     def input_size(self) -> int:
         return self._size if self.is_callable else 0
 
+    # A signal value makes this a drive element (drive_equations): generated with the drives.
+    @property
+    def drive_element(self) -> bool:
+        return self.signal is not None
+
+    def signals(self) -> list:
+        return [] if self.signal is None else [self.signal]
+
+    def state_names(self) -> tuple:
+        return ()
+
+    def _drive_loads(self, ctx):
+        return [(self.joint, ctx.signal(self.signal))]
+
+    def _state_rates(self, ctx):
+        return []
+
     def bind_joint(self, joint) -> None:
         """Check the value's size against the resolved joint (called by the compiler)."""
         self._size = joint.n_coords
-        if not self.is_callable:
+        if self.signal is not None and joint.n_coords != 1:
+            raise ModelError(self, f"a signal value needs a 1-DOF joint, {joint.name!r} has {joint.n_coords} coordinates")
+        if not self.is_callable and self.signal is None:
             size = 1 if isinstance(self.value, float) else len(self.value)
             if size != joint.n_coords:
                 raise ModelError(self, f"value has {size} entries, joint {joint.name!r} has {joint.n_coords} coordinate(s)")
@@ -199,6 +228,8 @@ class JointTorque(ForceElement):
         return checked_output(self, self.value(t, q, qd), self._size)
 
     def _loads(self, kin):
+        if self.signal is not None:
+            return []
         values = kin.input(self) if self.is_callable else kin.param(self, "value")
         values = values if isinstance(values, (list, tuple)) else [values]
         return [("generalized", self.joint, list(values))]
