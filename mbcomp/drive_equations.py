@@ -15,8 +15,11 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from .components._values import name_of
 from .errors import CompileError, describe
+
+
+def name_of(ref: Any) -> str:
+    return ref if isinstance(ref, str) else ref.name
 
 
 @dataclass(frozen=True)
@@ -97,8 +100,9 @@ class DriveContext:
         self._busy: set = set()
 
     def number(self, value: float):
-        from .equations import exact
-        return exact(value)
+        """A sympy number, exact for integers so that 0 and 1 prune."""
+        value = float(value)
+        return sp.Integer(int(value)) if value.is_integer() else sp.Float(value)
 
     def param(self, comp, attr: str):
         return self.kin.param(comp, attr)
@@ -123,14 +127,14 @@ class DriveContext:
                 raise CompileError(problems=[f"signal {signal.describe()} depends on itself (an algebraic loop "
                                              f"between controllers)"])
             self._busy.add(key)
-            self._values[key] = self.let(signal._expr(self))
+            self._values[key] = self.let(signal.symbolic(self))
             self._busy.discard(key)
         return self._values[key]
 
     def rate(self, signal):
         key = id(signal)
         if key not in self._rates:
-            rate = signal._rate(self)
+            rate = signal.symbolic_rate(self)
             self._rates[key] = None if rate is None else self.let(rate)
         return self._rates[key]
 
@@ -148,10 +152,10 @@ def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
     forces = [sp.Integer(0)] * nq
     rates = []
     for comp in layout.elements:
-        for joint, value in comp._drive_loads(ctx):
+        for joint, value in comp.drive_loads(ctx):
             k = kin.topology.q_slice[name_of(joint)].start
             forces[k] = forces[k] + value
-        element_rates = comp._state_rates(ctx)
+        element_rates = comp.state_rates(ctx)
         if len(element_rates) != len(comp.state_names()):
             raise RuntimeError(f"{describe(comp)} gave {len(element_rates)} rates for {len(comp.state_names())} states")
         rates += element_rates

@@ -18,14 +18,19 @@ class DriveTorque:
     """Callable ``(t, q, qd) -> tau``: user tau + drive forces at the states ``z`` last set."""
 
     def __init__(self, system, tau: Any, z0: np.ndarray):
+        """``tau``: None, an array (nq) or a callable ``(t, q, qd)``."""
         self.system, self.tau = system, tau
         self.z = np.array(z0, dtype=float)
         self.rates = np.zeros_like(self.z)
 
     def __call__(self, t, q, qd) -> np.ndarray:
-        forces, self.rates = self.system._drives(t, q, qd, self.z)
-        user = self.system._tau(self.tau, t, q, qd)
-        return forces if user is None else forces + user
+        forces, self.rates = self.system.drive_outputs(t, q, qd, self.z)
+        if self.tau is None:
+            return forces
+        if callable(self.tau):
+            from .components.forces import checked_output
+            return forces + checked_output("tau", self.tau(t, q, qd), len(forces))
+        return forces + self.tau
 
 
 class DriveWorkspace:

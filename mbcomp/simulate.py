@@ -170,10 +170,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     cls = solver_class(method)
     formulation = system._formulation
     drive = None
-    if system._compiled.drives.elements:  # drive elements: their forces join tau, their states y
-        drive = tau = DriveTorque(system, tau, z0)
-        if not callable(drive.tau):
-            drive.tau = system._tau(drive.tau, 0.0, q0, qd0)
+    if system.has_drives:  # drive elements: their forces join tau, their states y
+        drive = tau = DriveTorque(system, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
     watch = ContactWatch(system, rest_speed, offsets, tau) if system.topology.contacts else None

@@ -113,8 +113,15 @@ class System:
         reason = why_not_compiled(self, method, tau)
         return "compiled" if reason is None else f"python: {reason}"
 
-    def _drives(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
-        """Generalised forces of the drive elements (nq) and the rates of their states (nz)."""
+    @property
+    def has_drives(self) -> bool:
+        """True when drive elements (drives, motors, signal torques, PIDs) act on the model."""
+        return bool(self._compiled.drives.elements)
+
+    def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nq, speed space)
+        and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
+        ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
         drives = self._compiled.drives
         out = self._call("drives", q, qd, drives.inputs(t, z, q, qd))
         total = float(out.sum())
@@ -135,7 +142,7 @@ class System:
             z = np.asarray(states, dtype=float).reshape(-1)
             if z.shape != (len(self.extra_states),):
                 raise ModelError("states", f"must give {len(self.extra_states)} values {list(self.extra_states)}")
-        drive = self._drives(t, q, qd, z)[0]
+        drive = self.drive_outputs(t, q, qd, z)[0]
         return drive if tau is None else tau + drive
 
     @property
@@ -422,9 +429,10 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.assemble(self, q, qd, t)
 
-    def constraint_violation(self, q: Any, t: float = 0.0) -> float:
-        """max |g(q, t)| over the position-level constraint equations."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q))
+    def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
+        """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
+        values of speed motors, as a ``Result`` records them)."""
+        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
@@ -510,6 +518,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from .formulations import get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
+    model = model.flat()  # sub-models expanded, joints oriented along the tree
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)

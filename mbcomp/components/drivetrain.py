@@ -52,7 +52,7 @@ class Drive(_OnJoint):
     drive_element = True
 
     def __init__(self, name: str, joint: Any, ratio: float = 1.0, rotor_inertia: float = 0.0, torque: Any = 0.0):
-        from ..signals import as_signal
+        from .signals import as_signal
         super().__init__(name, joint)
         self.ratio = scalar(ratio, self, "ratio")
         self.rotor_inertia = scalar(rotor_inertia, self, "rotor_inertia", nonnegative=True)
@@ -65,7 +65,7 @@ class Drive(_OnJoint):
         return [] if self.torque_is_number else [self.torque]
 
     def references(self):
-        from ..signals import signal_references
+        from .signals import signal_references
         return {"joint": self.joint, **signal_references(self.signals())}
 
     def structure(self):
@@ -74,15 +74,15 @@ class Drive(_OnJoint):
     def state_names(self) -> tuple[str, ...]:
         return ()
 
-    def _armature(self, kin):
+    def armature(self, kin):
         ratio, inertia = kin.param(self, "ratio"), kin.param(self, "rotor_inertia")
         return [(self.joint, ratio * ratio * inertia)]
 
-    def _drive_loads(self, ctx):
+    def drive_loads(self, ctx):
         torque = ctx.param(self, "torque") if self.torque_is_number else ctx.signal(self.torque)
         return [(self.joint, ctx.param(self, "ratio") * torque)]
 
-    def _state_rates(self, ctx):
+    def state_rates(self, ctx):
         return []
 
 
@@ -104,7 +104,7 @@ class DCMotor(_OnJoint):
 
     def __init__(self, name: str, joint: Any, *, ratio: float, resistance: float, inductance: float, k: float,
                  voltage: Any, rotor_inertia: float = 0.0):
-        from ..signals import as_signal
+        from .signals import as_signal
         super().__init__(name, joint)
         self.ratio = scalar(ratio, self, "ratio")
         self.resistance = scalar(resistance, self, "resistance", nonnegative=True)
@@ -121,7 +121,7 @@ class DCMotor(_OnJoint):
         return [] if self.voltage_is_number else [self.voltage]
 
     def references(self):
-        from ..signals import signal_references
+        from .signals import signal_references
         return {"joint": self.joint, **signal_references(self.signals())}
 
     def structure(self):
@@ -130,15 +130,15 @@ class DCMotor(_OnJoint):
     def state_names(self) -> tuple[str, ...]:
         return ("current",)
 
-    def _armature(self, kin):
+    def armature(self, kin):
         ratio, inertia = kin.param(self, "ratio"), kin.param(self, "rotor_inertia")
         return [(self.joint, ratio * ratio * inertia)]
 
-    def _drive_loads(self, ctx):
+    def drive_loads(self, ctx):
         (current,) = ctx.states(self)
         return [(self.joint, ctx.param(self, "ratio") * ctx.param(self, "k") * current)]
 
-    def _state_rates(self, ctx):
+    def state_rates(self, ctx):
         (current,) = ctx.states(self)
         (qd,) = ctx.kin.qd(self.joint)
         voltage = ctx.param(self, "voltage") if self.voltage_is_number else ctx.signal(self.voltage)
@@ -229,5 +229,5 @@ class LimitSide:
 
 
 def _is_signal(value: Any) -> bool:
-    from ..signals import Signal
+    from .signals import Signal
     return isinstance(value, Signal)

@@ -10,7 +10,7 @@ A plain Python callable of ``t`` (inside a signal) or of ``(t, q, qd)`` (as a co
 value) works too, but it is evaluated in Python at every right-hand side evaluation, so a
 model with one integrates in the slower Python-stepped path (``System.integration_path``).
 
-Every signal provides ``_expr(ctx)``, its symbolic value, and ``_rate(ctx)``, its time
+Every signal provides ``symbolic(ctx)``, its symbolic value, and ``symbolic_rate(ctx)``, its time
 derivative when that is known without accelerations (``None`` otherwise); ``ctx`` is the
 ``DriveContext`` of ``drive_equations``.  Numbers inside sources are constants of the
 generated code (a change compiles again); a PID's gains are parameters.
@@ -20,18 +20,18 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Iterator
 
-from .components.base import Component
-from .components._values import name_of, scalar
-from .errors import ModelError
+from .base import Component
+from ._values import name_of, scalar
+from ..errors import ModelError
 
 
 class Signal:
     """A scalar signal (base class).  Units are those of whatever it feeds."""
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         raise NotImplementedError
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         """Time derivative, or None when it would need accelerations or is unknown."""
         return None
 
@@ -95,14 +95,14 @@ class _Combination(Signal):
     def children(self):
         return self.args
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         values = [ctx.signal(a) for a in self.args]
         out = values[0]
         for v in values[1:]:
             out = out + v if self.op == "+" else out * v
         return out
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         rates = [ctx.rate(a) for a in self.args]
         if any(r is None for r in rates):
             return None
@@ -124,10 +124,10 @@ class Angle(Signal):
     def joints(self):
         return [self.joint]
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         return ctx.q(self.joint)
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         return ctx.qd(self.joint)
 
     def describe(self):
@@ -143,7 +143,7 @@ class Speed(Signal):
     def joints(self):
         return [self.joint]
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         return ctx.qd(self.joint)
 
     def describe(self):
@@ -156,10 +156,10 @@ class Constant(Signal):
     def __init__(self, value: float):
         self.value = scalar(value, "Constant", "value")
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         return ctx.number(self.value)
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         return 0
 
     def describe(self):
@@ -174,11 +174,11 @@ class Step(Signal):
         self.after = scalar(after, "Step", "after")
         self.before = scalar(before, "Step", "before")
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         import sympy as sp
         return sp.Piecewise((ctx.number(self.after), ctx.t >= ctx.number(self.time)), (ctx.number(self.before), True))
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         return 0
 
     def describe(self):
@@ -197,11 +197,11 @@ class Sine(Signal):
     def _argument(self, ctx):
         return ctx.number(2 * math.pi * self.frequency) * ctx.t + ctx.number(self.phase)
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         import sympy as sp
         return ctx.number(self.offset) + ctx.number(self.amplitude) * sp.sin(ctx.let(self._argument(ctx)))
 
-    def _rate(self, ctx):
+    def symbolic_rate(self, ctx):
         import sympy as sp
         return ctx.number(self.amplitude * 2 * math.pi * self.frequency) * sp.cos(ctx.let(self._argument(ctx)))
 
@@ -218,7 +218,7 @@ class CallableSignal(Signal):
         self.state_arguments = state_arguments
 
     def evaluate(self, t: float, q, qd) -> float:
-        from .errors import SimulationError
+        from ..errors import SimulationError
         try:
             value = self.function(t, q, qd) if self.state_arguments else self.function(t)
             value = float(value)
@@ -228,7 +228,7 @@ class CallableSignal(Signal):
             raise SimulationError(f"signal callable {self.function!r} returned a non-finite value {value}")
         return value
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         return ctx.callable_value(self)
 
     def describe(self):
@@ -298,7 +298,7 @@ class PID(Component, Signal):
             u = u + ctx.param(self, "kd") * (rate_sp - rate_m)
         return e, ctx.let(u)
 
-    def _expr(self, ctx):
+    def symbolic(self, ctx):
         import sympy as sp
         _, raw = self._raw(ctx)
         if self.limit is None:
@@ -306,10 +306,10 @@ class PID(Component, Signal):
         limit = ctx.param(self, "limit")
         return ctx.let(sp.Min(sp.Max(raw, -limit), limit))
 
-    def _drive_loads(self, ctx):
+    def drive_loads(self, ctx):
         return []
 
-    def _state_rates(self, ctx):
+    def state_rates(self, ctx):
         import sympy as sp
         e, raw = self._raw(ctx)
         if self.limit is None:
