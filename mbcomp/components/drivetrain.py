@@ -16,13 +16,15 @@ from typing import Any
 
 import sympy as sp
 
-from ..errors import ModelError
+from ..errors import ModelError, describe
+from ..params import ParameterSpec, in_range, nonnegative, positive
 from .base import Component, ForceElement
-from ._values import scalar
 
 
 class _OnJoint(ForceElement):
     """A force element acting on one 1-DOF tree joint."""
+
+    section = "forces"
 
     def __init__(self, name: str, joint: Any):
         super().__init__(name)
@@ -31,13 +33,25 @@ class _OnJoint(ForceElement):
     def references(self):
         return {"joint": self.joint}
 
-    def bind_joint(self, joint) -> None:
-        """Checked by the compiler: only 1-DOF joints."""
+    def check(self, resolved: dict) -> list[str]:
+        """Problems against the resolved references: only 1-DOF joints."""
+        joint = resolved["joint"]
         if joint.n_coords != 1:
-            raise ModelError(self, f"needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}")
+            return [f"{describe(self)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}"]
+        return []
 
     def _loads(self, kin):
         return []
+
+    def _set_input(self, attr: str, value: Any) -> None:
+        """A run-time input: a number (validated parameter), a callable or a signal."""
+        if _is_signal(value):
+            object.__setattr__(self, attr, value)
+        else:
+            setattr(self, attr, value)
+
+    def parameter_values(self) -> dict[str, Any]:
+        return {k: v for k, v in super().parameter_values().items() if not _is_signal(v)}
 
 
 class Drive(_OnJoint):
@@ -50,16 +64,23 @@ class Drive(_OnJoint):
     """
 
     drive_element = True
+    kind = "drive"
+    params = (ParameterSpec("ratio", (), "1", default=1.0, doc="rotor turns per joint turn"),
+              ParameterSpec("rotor_inertia", (), "kg m^2", nonnegative, default=0.0, doc="rotor inertia"),
+              ParameterSpec("torque", (), "N m", default=0.0, time_input=True,
+                            doc="rotor torque: a number, a signal or a callable (t, q, qd)"))
 
     def __init__(self, name: str, joint: Any, ratio: float = 1.0, rotor_inertia: float = 0.0, torque: Any = 0.0):
         from .signals import as_signal
         super().__init__(name, joint)
-        self.ratio = scalar(ratio, self, "ratio")
-        self.rotor_inertia = scalar(rotor_inertia, self, "rotor_inertia", nonnegative=True)
-        self.torque_is_number = not callable(torque) and not _is_signal(torque)
-        self.torque = scalar(torque, self, "torque") if self.torque_is_number else \
-            as_signal(torque, self, "torque", state_callable=True)
-        self.parameters = ("ratio", "rotor_inertia") + (("torque",) if self.torque_is_number else ())
+        self.ratio = ratio
+        self.rotor_inertia = rotor_inertia
+        self._set_input("torque", torque if not callable(torque) or _is_signal(torque)
+                        else as_signal(torque, self, "torque", state_callable=True))
+
+    @property
+    def torque_is_number(self) -> bool:
+        return isinstance(self.torque, float)
 
     def signals(self) -> list:
         return [] if self.torque_is_number else [self.torque]
@@ -101,21 +122,29 @@ class DCMotor(_OnJoint):
     """
 
     drive_element = True
+    kind = "dc_motor"
+    params = (ParameterSpec("ratio", (), "1", doc="rotor turns per joint turn"),
+              ParameterSpec("resistance", (), "ohm", nonnegative, doc="armature resistance"),
+              ParameterSpec("inductance", (), "H", positive, doc="armature inductance"),
+              ParameterSpec("k", (), "N m/A", doc="torque constant (= back-EMF constant, V s/rad)"),
+              ParameterSpec("voltage", (), "V", time_input=True, doc="a number, a signal or a callable (t, q, qd)"),
+              ParameterSpec("rotor_inertia", (), "kg m^2", nonnegative, default=0.0, doc="rotor inertia"))
 
     def __init__(self, name: str, joint: Any, *, ratio: float, resistance: float, inductance: float, k: float,
                  voltage: Any, rotor_inertia: float = 0.0):
         from .signals import as_signal
         super().__init__(name, joint)
-        self.ratio = scalar(ratio, self, "ratio")
-        self.resistance = scalar(resistance, self, "resistance", nonnegative=True)
-        self.inductance = scalar(inductance, self, "inductance", positive=True)
-        self.k = scalar(k, self, "k")
-        self.rotor_inertia = scalar(rotor_inertia, self, "rotor_inertia", nonnegative=True)
-        self.voltage_is_number = not callable(voltage) and not _is_signal(voltage)
-        self.voltage = scalar(voltage, self, "voltage") if self.voltage_is_number else \
-            as_signal(voltage, self, "voltage", state_callable=True)
-        self.parameters = ("ratio", "resistance", "inductance", "k", "rotor_inertia") + \
-            (("voltage",) if self.voltage_is_number else ())
+        self.ratio = ratio
+        self.resistance = resistance
+        self.inductance = inductance
+        self.k = k
+        self.rotor_inertia = rotor_inertia
+        self._set_input("voltage", voltage if not callable(voltage) or _is_signal(voltage)
+                        else as_signal(voltage, self, "voltage", state_callable=True))
+
+    @property
+    def voltage_is_number(self) -> bool:
+        return isinstance(self.voltage, float)
 
     def signals(self) -> list:
         return [] if self.voltage_is_number else [self.voltage]
@@ -161,14 +190,18 @@ class JointFriction(_OnJoint):
     ``speed_scale * inertia / coulomb``).  All three numbers are parameters.
     """
 
+    kind = "joint_friction"
+    params = (ParameterSpec("coulomb", (), "N m or N", nonnegative, default=0.0, doc="Coulomb friction level"),
+              ParameterSpec("viscous", (), "N m s/rad or N s/m", nonnegative, default=0.0, doc="viscous coefficient"),
+              ParameterSpec("speed_scale", (), "rad/s or m/s", positive, default=1e-3,
+                            doc="regularisation speed of the Coulomb friction"))
+
     def __init__(self, name: str, joint: Any, coulomb: float = 0.0, viscous: float = 0.0,
                  speed_scale: float = 1e-3):
         super().__init__(name, joint)
-        self.coulomb = scalar(coulomb, self, "coulomb", nonnegative=True)
-        self.viscous = scalar(viscous, self, "viscous", nonnegative=True)
-        self.speed_scale = scalar(speed_scale, self, "speed_scale", positive=True)
-
-    parameters = ("coulomb", "viscous", "speed_scale")
+        self.coulomb = coulomb
+        self.viscous = viscous
+        self.speed_scale = speed_scale
 
     def _loads(self, kin):
         (qd,) = kin.qd(self.joint)
@@ -187,18 +220,23 @@ class JointLimit(Component):
     ``restitution`` are parameters; which bounds exist is structure.
     """
 
+    kind = "joint_limit"
+    section = "contacts"
+    params = (ParameterSpec("lower", (), "q", optional=True, default=None, doc="lower bound of the coordinate"),
+              ParameterSpec("upper", (), "q", optional=True, default=None, doc="upper bound of the coordinate"),
+              ParameterSpec("restitution", (), "1", in_range(0.0, 1.0), default=0.0, doc="Newton's coefficient"))
+
     def __init__(self, name: str, joint: Any, lower: float | None = None, upper: float | None = None,
                  restitution: float = 0.0):
         super().__init__(name)
         self.joint = joint
         if lower is None and upper is None:
             raise ModelError(self, "needs a lower or an upper bound (or both)")
-        self.lower = None if lower is None else scalar(lower, self, "lower")
-        self.upper = None if upper is None else scalar(upper, self, "upper")
+        self.lower = lower
+        self.upper = upper
         if self.lower is not None and self.upper is not None and self.lower >= self.upper:
             raise ModelError(self, f"lower {self.lower} must be below upper {self.upper}")
-        self.restitution = scalar(restitution, self, "restitution", low=0.0, high=1.0)
-        self.parameters = tuple(n for n in ("lower", "upper") if getattr(self, n) is not None) + ("restitution",)
+        self.restitution = restitution
 
     def references(self):
         return {"joint": self.joint}

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterator
 from .base import Component
 from ._values import name_of, scalar
 from ..errors import ModelError
+from ..params import ParameterSpec, positive
 
 
 class Signal:
@@ -248,6 +249,14 @@ class PID(Component, Signal):
     recompile).  Add the PID to the model and feed it to a drive, motor or torque.
     """
 
+    kind = "pid"
+    section = "controllers"
+    params = (ParameterSpec("kp", (), "output per error", doc="proportional gain"),
+              ParameterSpec("ki", (), "output per error s", default=0.0, doc="integral gain"),
+              ParameterSpec("kd", (), "output s per error", default=0.0, doc="derivative gain"),
+              ParameterSpec("limit", (), "output", positive, optional=True, default=None,
+                            doc="output clipped to [-limit, limit]"))
+
     def __init__(self, name: str, measured: Any, setpoint: Any, kp: float, ki: float = 0.0, kd: float = 0.0,
                  limit: float | None = None):
         Component.__init__(self, name)
@@ -255,16 +264,16 @@ class PID(Component, Signal):
             raise ModelError(self, f"measured must be a signal (Angle(joint), Speed(joint), ...), got {measured!r}")
         self.measured = measured
         self.setpoint = as_signal(setpoint, self, "setpoint")
-        self.kp = scalar(kp, self, "kp")
-        self.ki = scalar(ki, self, "ki")
-        self.kd = scalar(kd, self, "kd")
-        self.limit = None if limit is None else scalar(limit, self, "limit", positive=True)
+        self.kp = kp
+        self.ki = ki
+        self.kd = kd
+        self.limit = limit
         self.has_derivative = not isinstance(measured, Speed) and not _contains_speed(measured)
         if not self.has_derivative and self.kd != 0.0:
             raise ModelError(self, "kd needs the rate of the measured signal, which is not known for a Speed "
                                    "(it would need accelerations); use kd=0 or measure an Angle")
         names = ["kp", "ki"] + (["kd"] if self.has_derivative else []) + (["limit"] if limit is not None else [])
-        self.parameters = tuple(names)
+        object.__setattr__(self, "parameters", tuple(names))
 
     drive_element = True
 
