@@ -1229,8 +1229,7 @@ def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[st
     for item in members:
         if isinstance(item, Submodel):
             head = f"{prefix}submodels.{_toml_key(item.name)}"
-            values = ", ".join(f"{k}={v:g}" for k, v in item.parameter_values().items())
-            lines += ["", f"# {type(item).__name__}({values}), written with its values", f"[{head}]"]
+            lines += ["", f"# sub-model instance {item.path!r}, written with its values", f"[{head}]"]
             lines += _part_lines(model, list(item.members().values()), item.path, head + ".")
     return lines
 

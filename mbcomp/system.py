@@ -12,6 +12,7 @@ from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY
 from .errors import format_state, ModelError, SimulationError, describe
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
+from .params import validate
 
 
 class BodyState:
@@ -77,6 +78,75 @@ class System:
         return self._compiled.topology.nq
 
     @property
+    def extra_states(self) -> tuple[str, ...]:
+        """States of drive elements (motor currents, PID integrals): ``"component.state"``."""
+        return self._compiled.drives.states
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """Every state of a simulation: coordinates, their speeds (``NAME_d``), then the
+        states of drive elements (``extra_states``)."""
+        return tuple(self.coords) + tuple(f"{c}_d" for c in self.coords) + self.extra_states
+
+    def extra_state_vector(self, x0: Any = None) -> np.ndarray:
+        """Initial values of ``extra_states`` from ``{name: value}`` (missing ones 0)."""
+        names = self.extra_states
+        z = np.zeros(len(names))
+        if x0 is None:
+            return z
+        if not isinstance(x0, Mapping):
+            raise ModelError("x0", f"must be a dict {{state name: value}}, got {x0!r}")
+        for key, value in x0.items():
+            if key not in names:
+                raise ModelError("x0", f"unknown state {key!r}; the states of drive elements are {list(names)}")
+            try:
+                z[names.index(key)] = float(value)
+            except (TypeError, ValueError):
+                raise ModelError("x0", f"{key!r} must be a number, got {value!r}") from None
+            if not np.isfinite(z[names.index(key)]):
+                raise ModelError("x0", f"{key!r} must be finite, got {value!r}")
+        return z
+
+    def integration_path(self, method: str = "DOP853", tau: Any = None) -> str:
+        """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
+        ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
+        from .integrators import why_not_compiled
+        reason = why_not_compiled(self, method, tau)
+        return "compiled" if reason is None else f"python: {reason}"
+
+    @property
+    def has_drives(self) -> bool:
+        """True when drive elements (drives, motors, signal torques, PIDs) act on the model."""
+        return bool(self._compiled.drives.elements)
+
+    def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nq, speed space)
+        and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
+        ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
+        drives = self._compiled.drives
+        out = self._call("drives", q, qd, drives.inputs(t, z, q, qd))
+        total = float(out.sum())
+        if total - total != 0.0:
+            raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
+                                  f"{format_state(q)}, states {format_state(z)}")
+        return out[: self.nq], out[self.nq:]
+
+    def _applied(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray, states: Any = None):
+        """``tau`` plus the drive elements' generalised forces (their states from ``states``:
+        a dict by name or an array in ``extra_states`` order; 0 when not given)."""
+        tau = self._tau(tau, t, q, qd)
+        if not self._compiled.drives.elements:
+            return tau
+        if states is None or isinstance(states, Mapping):
+            z = self.extra_state_vector(states)
+        else:
+            z = np.asarray(states, dtype=float).reshape(-1)
+            if z.shape != (len(self.extra_states),):
+                raise ModelError("states", f"must give {len(self.extra_states)} values {list(self.extra_states)}")
+        drive = self.drive_outputs(t, q, qd, z)[0]
+        return drive if tau is None else tau + drive
+
+    @property
     def ndof(self) -> int:
         """Degrees of freedom left after constraints."""
         return self._formulation.ndof
@@ -114,7 +184,11 @@ class System:
         return self._compiled.compile_time
 
     def with_parameters(self, values: Mapping[str, Any] | None) -> "System":
-        """A new System with some parameter values replaced (shares the compiled code)."""
+        """A new System with some parameter values replaced (shares the compiled code).
+
+        Each value is checked by the same ``ParameterSpec`` validation as the component's
+        constructor (``mbcomp.params.validate``); a ``ModelError`` names the component and
+        the attribute."""
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)
@@ -126,22 +200,18 @@ class System:
                       **{k: v for k, v in values.items() if k not in changes}}
         merged = dict(self._parameters)
         for key, value in values.items():
-            if key not in merged:
+            if derivation is not None and key in derivation.parameters:
+                merged[key] = float(value)   # checked against its Parameter by derivation.apply
+                continue
+            found = self._compiled.parameter_spec(key) if key in merged else None
+            if found is None:
                 raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
-            old = np.asarray(merged[key], dtype=float)
-            try:
-                new = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                raise ModelError(f"parameter {key!r}", f"must be numeric, got {value!r}") from None
-            if new.shape != old.shape:
-                raise ModelError(f"parameter {key!r}", f"must have shape {old.shape}, got {new.shape}")
-            if not np.all(np.isfinite(new)):
-                raise ModelError(f"parameter {key!r}", f"must be finite, got {value!r}")
-            if key.endswith(".mass") and float(new) <= 0:
-                raise ModelError(f"parameter {key!r}", f"mass must be positive, got {float(new)}")
-            if key.endswith(".restitution") and not 0.0 <= float(new) <= 1.0:
-                raise ModelError(f"parameter {key!r}", f"restitution must lie in [0, 1], got {float(new)}")
-            merged[key] = float(new) if new.ndim == 0 else tuple(new.tolist())
+            owner, spec = found
+            new = validate(spec, value, owner)  # the constructors' validator
+            if np.shape(new) != np.shape(merged[key]):
+                raise ModelError(owner, f"{spec.name} {new!r} changes the model's structure (shape "
+                                 f"{np.shape(merged[key])} -> {np.shape(new)}); change the model and compile again")
+            merged[key] = new
         return System(self._compiled, self._formulation, merged)
 
     # -- state handling -------------------------------------------------------------------
@@ -179,7 +249,7 @@ class System:
             return self._compiled.no_inputs
         u = np.zeros(self._compiled.n_inputs)
         for name, (start, size) in self._compiled.inputs.items():
-            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd)
+            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd, size)
         return u
 
     def _tau(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
@@ -277,13 +347,14 @@ class System:
         M, _ = self._dynamics(t, q, np.zeros(self.nq))
         return self._check_finite(M, "mass matrix", q)
 
-    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
-        """(nq,) coordinate accelerations, consistent with every constraint."""
+    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
+        """(nq,) coordinate accelerations, consistent with every constraint (drive elements
+        act with their ``states``, by name; 0 when not given)."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
+        return self._formulation.accelerations(self, t, q, qd, self._applied(tau, t, q, qd, states))
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
-                  contacts: Any = ()) -> dict[str, np.ndarray]:
+                  contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
@@ -292,7 +363,7 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self, contacts)) if contacts else ()
-        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets, closed)
+        return self._formulation.reactions(self, t, q, qd, self._applied(tau, t, q, qd, states), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nq,) generalised forces that, applied, hold the system at rest at ``q``
@@ -375,7 +446,7 @@ class System:
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
                  max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-                 dt: float | None = None):
+                 dt: float | None = None, x0: Mapping[str, float] | None = None):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
@@ -386,12 +457,13 @@ class System:
         (C backend; a tree, or a ``dae`` model whose constraints are all loops and sliders; no
         contacts, motors or callable inputs); ``"scipy"``
         forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
+        ``x0`` gives initial values of ``extra_states`` by name (default 0).
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
         return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
                         tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed,
-                        integrator=integrator, dt=dt)
+                        integrator=integrator, dt=dt, x0=x0)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every
@@ -457,11 +529,15 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    compiled.derivation = getattr(model, "derivation", None)
+    derivation = getattr(model, "derivation", None)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters); a
+    # model with sub-models keeps how its values follow their parameters.
+    compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
+                       dict(options), backend)
+    compiled.derivation = derivation
     parameters = dict(compiled.default_parameters)
-    if compiled.derivation is not None:
-        parameters.update(compiled.derivation.values())  # sub-model parameters, by path
+    if derivation is not None:
+        parameters.update(derivation.values())  # sub-model parameters, by path
     system = System(compiled, formulation_class(compiled, **options), parameters)
     analyse(system._formulation, system)
     return system
