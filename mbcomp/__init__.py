@@ -4,6 +4,7 @@
 from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
+from .components.frame import Frame, rpy
 
 # The compiled system and its results
 from .result import Energy, Event, Result
@@ -28,7 +29,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]
 
 

@@ -494,6 +494,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from .formulations import get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
+    model = model.flat()  # sub-models expanded, joints oriented along the tree
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)

@@ -32,6 +32,12 @@ class Body(Component):
         self.com = vector3(com, self, "com")
         self.inertia = self._check_inertia(inertia)
 
+    def frame(self, point: Any = (0.0, 0.0, 0.0), rotation: Any = None) -> "Frame":
+        """A ``Frame`` fixed on this body at ``point`` (m, body frame), optionally rotated
+        (``rotation``: 3x3 matrix of the frame's axes in the body frame, or ``mb.rpy(...)``)."""
+        from .frame import Frame
+        return Frame(self, point, rotation)
+
     @property
     def is_point_mass(self) -> bool:
         """True when the body has no rotational inertia (no rotational terms are generated)."""
