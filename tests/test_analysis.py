@@ -265,6 +265,9 @@ def test_jacobian_gives_point_velocity_and_angular_velocity():
     # the upper arm does not move with the elbow; the default point is the COM
     assert_close(arm.jacobian("upper", q)[:, 2], np.zeros(6), name="elbow column of upper")
     assert_close(arm.jacobian("lower", q)[3:] @ qd, arm.body_state("lower", q, qd).velocity, name="COM")
+    model = arm_model()
+    tip = model["lower"].frame((0.0, 0.4, 0.05))
+    assert_close(model.compile().jacobian(tip, q), J, name="Frame")
     with pytest.raises(mb.ModelError, match="not a body"):
         arm.jacobian("elbow", q)
 
