@@ -82,6 +82,23 @@ def test_damped_pendulum_damping_ratio():
     assert_close(modes.frequencies, [omega / (2 * np.pi)], rtol=1e-7, name="natural frequency")
 
 
+@pytest.mark.parametrize("inertia, expected", [
+    (True, [-2.34625412193255, 19.8527369182644, 41.1805759758834]),
+    (False, [-2.56054267393227, 21.5802062070371, 56.5276415528563])])
+def test_held_seed_arm_pose_matches_the_reference_eigenvalues(inertia, expected):
+    """Seed case arm3d.c.torques: held at (110, -20, -20) deg by constant torques,
+    eig(Mbar^-1 dQgrav/dq) as given (positive = unstable): two divergent modes."""
+    arm = arm_model(inertia).compile()
+    q = np.radians([110.0, -20.0, -20.0])
+    held = arm.modes(q, tau=arm.holding_forces(q))
+    lin = held.linearization
+    assert_close(np.sort(np.linalg.eigvals(lin.A[3:, :3]).real), expected, rtol=1e-8, name="eig")
+    assert not held.stable and held.unstable == 2
+    # oscillation at sqrt(2.346) rad/s, divergence rates sqrt(19.85) and sqrt(41.18) 1/s
+    assert_close(held.frequencies, np.sqrt(np.abs(expected)) / (2 * np.pi), rtol=1e-8, name="frequencies")
+    assert_close(held.damping_ratios, [0.0, -1.0, -1.0], atol=1e-9, name="damping ratios")
+
+
 def test_modes_refuse_a_pose_that_is_not_an_equilibrium_unless_held(pendulum):
     with pytest.raises(mb.SimulationError, match="not an equilibrium"):
         pendulum.modes([0.5])
@@ -321,3 +338,24 @@ def test_inverse_dynamics_rejects_bad_shapes():
         chain.inverse_dynamics([0, 0], [0, 0], [0, 0, 0])
     with pytest.raises(mb.SimulationError, match="actuated joints cannot"):
         chain.inverse_dynamics([0.2, 0.1], [0, 0], [0, 0], actuated="joint0")
+
+
+# -- command line ----------------------------------------------------------------------------------
+def test_cli_analyse_prints_equilibrium_modes_and_stability(capsys, monkeypatch):
+    from pathlib import Path
+    from mbcomp.cli import main
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    assert main(["analyse", "library/double_pendulum.toml", "--at", "phi1=0.4,theta2=-0.2"]) == 0
+    out = capsys.readouterr().out
+    system = mb.load("library/double_pendulum.toml").compile()
+    q = system.equilibrium([0.4, -0.2])
+    for f in system.modes(q).frequencies:
+        assert f"{f:.6g}" in out
+    assert "stability: stable" in out and "equilibrium" in out
+    assert main(["analyse", "library/arm3d.toml", "--held", "--at", "alpha=1.91986217719376",
+                 "--at", "beta=-0.349065850398866,gamma=-0.349065850398866"]) == 0
+    out = capsys.readouterr().out
+    assert "UNSTABLE (2 growing modes)" in out and "holding force" in out and "0.243785" in out
+    assert main(["analyse", "library/double_pendulum.toml", "--at", "nope=1"]) == 2
+    assert "not a coordinate" in capsys.readouterr().err
+    assert main(["analyse", "library/double_pendulum.toml", "--at", "phi1=abc"]) == 2

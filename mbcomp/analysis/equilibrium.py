@@ -8,7 +8,7 @@ import scipy.optimize
 
 from ..errors import SimulationError, format_state
 from ..formulations.base import independent_rows
-from .space import Chart, force_vector, integrate, speed_names
+from .space import Chart, difference, force_vector, integrate, speed_names
 
 #: Accept an equilibrium when the reduced generalised force is below this fraction of the
 #: loads (the largest generalised force at the guess, or 1), and the constraints hold to
@@ -73,19 +73,39 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
             # 2. It stopped where the force is smallest but not zero (a fold of the force field):
             # pseudo-transient continuation follows the overdamped motion towards a stable rest.
             q = _continuation(system, q0, t, tau, solved)
+            # close to it now: Newton finishes from there
+            polished = integrate(system, q0, _least_squares(residual, difference(system, q0, q), max_evaluations))
+            if r:
+                polished, _ = system.assemble(polished)
+            if solved(polished)[0] or not solved(q)[0]:
+                q = polished
             ok, worst = solved(q)
     except (SimulationError, np.linalg.LinAlgError) as exc:
         raise SimulationError(f"no equilibrium found near q = {format_state(q0)}: the search left the region "
                               f"where the model can be evaluated ({exc})") from None
     if not ok or not np.all(np.isfinite(q)):
+        hint = "try another guess, or the loads have no balance"
+        if r and np.all(np.isfinite(q)):
+            lost = r - len(independent_rows(system.constraint_values(q, None, t).J))
+            if lost > 0 or np.max(np.abs(q - q0), initial=0.0) > 1e3:
+                hint = ("the search runs into a singular position of the mechanism (the constraint Jacobian loses "
+                        "rank: a dead point, where an equilibrium cannot be found this way)")
         raise SimulationError(f"no equilibrium found near q = {format_state(q0)}: the closest point reached, "
                               f"q = {format_state(q)}, leaves an unbalanced generalised force of {worst:.3g} "
-                              f"(loads up to {scale:.3g}); try another guess, or the loads have no balance")
+                              f"(loads up to {scale:.3g}); {hint}")
     return q
 
 
+#: "Near the guess": each tangent coordinate stays within this distance of the guess (rad or m).
+SEARCH_RADIUS = 2 * np.pi
+
+#: Largest pseudo-transient step per iteration (rad or m).
+MAX_STEP = 0.5
+
+
 def _least_squares(residual, x0: np.ndarray, max_evaluations: int) -> np.ndarray:
-    solution = scipy.optimize.least_squares(residual, x0, method="trf", jac="3-point", x_scale="jac",
+    solution = scipy.optimize.least_squares(residual, x0, method="trf", jac="3-point",
+                                            bounds=(x0 - SEARCH_RADIUS, x0 + SEARCH_RADIUS),
                                             xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_evaluations)
     x = solution.x
     for _ in range(4):  # Newton polish (the trust region stops on its own tolerances)
@@ -114,10 +134,14 @@ def _continuation(system, q0: np.ndarray, t: float, tau: Any, solved, max_steps:
     D = _jacobian(lambda xi: accel(chart, xi), np.zeros(chart.k), 1e-6)
     h = 0.1 / max(float(np.linalg.norm(D, 2)), 1e-12)
     for _ in range(max_steps):
-        if solved(q)[0]:
-            return q
+        if solved(q)[0] or (h > 1e6 and np.linalg.norm(a) < 1e-6 * max(1.0, np.linalg.norm(D))):
+            return q  # solved, or Newton-like steps close to the solution: the caller polishes
         try:
             dx = np.linalg.solve(np.eye(chart.k) / h - D, a)
+            size = float(np.max(np.abs(dx), initial=0.0))
+            if size > MAX_STEP:
+                h *= 0.5
+                continue
             q_new, _ = chart.position(dx)
             new_chart = Chart(system, q_new, t)
             a_new = accel(new_chart, np.zeros(new_chart.k))

@@ -29,7 +29,7 @@ class Modes:
     ``frequencies`` = ``|lambda| / 2 pi`` (Hz) and ``damping_ratios`` = ``-Re(lambda) / |lambda|``
     (as MATLAB's ``damp``): 0 for undamped oscillation, 1 or more when decaying without
     oscillation, -1 for a divergent (statically unstable) mode whose growth rate is
-    ``2 pi f``; 0 for a zero eigenvalue.  Sorted by frequency.  ``shapes`` (n, k): each mode's
+    ``2 pi f``; 0 for a zero eigenvalue (ratios below 1e-9, the derivatives' noise, read 0).  Sorted by frequency.  ``shapes`` (n, k): each mode's
     position shape over all speeds, largest entry 1 (complex only when damping or gyroscopic
     terms twist it).  ``stable``: no eigenvalue grows (undamped oscillation counts as stable);
     ``all_eigenvalues``: the 2k eigenvalues of ``A``.
@@ -85,7 +85,8 @@ def modes(system, q: Any, t: float = 0.0, tau: Any = None) -> Modes:
     if shape_matrix.size and np.max(np.abs(shape_matrix.imag)) < 1e-9:
         shape_matrix = shape_matrix.real
     magnitude = np.abs(reps)
-    damping = 0.0 + np.where(magnitude > 1e-12 * scale, -reps.real / np.where(magnitude > 0, magnitude, 1.0), 0.0)
+    damping = np.where(magnitude > 1e-12 * scale, -reps.real / np.where(magnitude > 0, magnitude, 1.0), 0.0)
+    damping = np.where(np.abs(damping) < 1e-9, 0.0, damping)  # finite-difference noise on undamped modes
     stable = bool(np.all(values.real <= STABILITY_TOLERANCE * scale))
     from .space import speed_names
     return Modes(frequencies=magnitude / (2 * np.pi), damping_ratios=damping, eigenvalues=reps,
