@@ -87,7 +87,9 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
         kind = _kind(lam, z, modes)
         shape = modes.shapes[:, i]
         text = ", ".join(f"{s}={fmt(float(np.real(v)))}" for s, v in zip(speeds, shape) if abs(v) > 1e-9)
-        lam_text = fmt(lam.real) if abs(lam.imag) < 1e-12 else f"{lam.real:.4g}{lam.imag:+.4g}j"
+        scale = max(1.0, float(np.max(np.abs(modes.all_eigenvalues), initial=0.0)))
+        re = 0.0 if abs(lam.real) < 1e-9 * scale else lam.real
+        lam_text = fmt(re) if abs(lam.imag) < 1e-9 * scale else f"{re:.4g}{lam.imag:+.4g}j"
         rows.append([str(i + 1), fmt(f), fmt(z), lam_text, kind, text])
     if len(rows) > 1:
         print(table(rows))
