@@ -16,13 +16,20 @@ from .batch import sweep
 # Errors
 from .errors import CompileError, ModelError, SimulationError
 
-# Operations of the model layer implemented above it (see services.py)
+# Operations that lower layers offer as methods, implemented above them (see services.py)
 from . import services as _services
+from . import post as _post
 from .io import save as _save
+from .plotting import animate_result as _animate_result, plot_result as _plot_result
 from .system import compile_model as _compile_model
 
 _services.provide("compile", _compile_model)
 _services.provide("save", _save)
+_services.provide("energy", _post.energy)
+_services.provide("reactions", _post.reactions)
+_services.provide("constraint_violation", _post.constraint_violation)
+_services.provide("plot", _plot_result)
+_services.provide("animate", _animate_result)
 
 __version__ = "0.1.0"
 

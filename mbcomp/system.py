@@ -359,9 +359,10 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.assemble(self, q, qd, t)
 
-    def constraint_violation(self, q: Any, t: float = 0.0) -> float:
-        """max |g(q, t)| over the position-level constraint equations."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q))
+    def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
+        """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
+        values of speed motors, as a ``Result`` records them)."""
+        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
