@@ -51,7 +51,6 @@ def parse_at(values: list[str], coords: tuple[str, ...], cli: Any) -> dict[str, 
 def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     """Print the equilibrium, its modes and the stability verdict."""
     CommandError, EXIT_FAILED, EXIT_OK = cli.CommandError, cli.EXIT_FAILED, cli.EXIT_OK
-    fmt, table = cli._fmt, cli._table
     from .errors import ModelError, SimulationError
     model, _ = cli.load_model(args.file)
     system = cli.compile_model(model, args.formulation)
@@ -96,6 +95,17 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     verdict = "stable" if modes.stable else f"UNSTABLE ({modes.unstable} growing mode{'s' * (modes.unstable > 1)})"
     print(f"stability: {verdict}")
     return EXIT_OK
+
+
+def fmt(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def table(rows: list[list[str]], indent: str = "  ") -> str:
+    """Left-aligned first column, right-aligned others (as the other commands print)."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join(indent + "  ".join(cell.rjust(w) if i else cell.ljust(w) for i, (cell, w)
+                                        in enumerate(zip(row, widths))).rstrip() for row in rows)
 
 
 def _kind(lam: complex, zeta: float, modes) -> str:
