@@ -192,17 +192,15 @@ class System:
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)
-        if derivation is not None and any(key in derivation.parameters for key in values):
-            # Sub-model parameters: every component value derived from them follows (as a
-            # fresh build would give it); component values given in the same call win.
-            changes = {k: v for k, v in values.items() if k in derivation.parameters}
-            values = {**derivation.apply(self._parameters, changes),
-                      **{k: v for k, v in values.items() if k not in changes}}
         merged = dict(self._parameters)
+        if derivation is not None and any(key in derivation.parameters for key in values):
+            # Sub-model parameters: every component value derived from them follows, as a
+            # fresh build gives it (the components' constructors validated those values);
+            # component values given in the same call win.
+            changes = {k: v for k, v in values.items() if k in derivation.parameters}
+            merged.update(derivation.apply(self._parameters, changes))
+            values = {k: v for k, v in values.items() if k not in changes}
         for key, value in values.items():
-            if derivation is not None and key in derivation.parameters:
-                merged[key] = float(value)   # checked against its Parameter by derivation.apply
-                continue
             found = self._compiled.parameter_spec(key) if key in merged else None
             if found is None:
                 raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
