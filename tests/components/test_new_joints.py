@@ -240,3 +240,17 @@ def test_state_map_of_a_tree_matches_its_joints():
         np.testing.assert_allclose(state_map.qdot(q, v)[sq], joint.qdot(q[sq], v[sv]), atol=1e-15)
         np.testing.assert_allclose(q1[sq], joint.integrate(q[sq], dv[sv]), atol=1e-15)
     np.testing.assert_allclose(state_map.neutral(), [0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0])
+
+
+def test_system_integrate_difference_and_rates():
+    system = _ball_model().compile()
+    q = system.state_vector([1.0, 0.2, -0.1, 0.3])
+    dv = np.array([0.1, -0.2, 0.05])
+    q1 = system.integrate(q, dv)
+    np.testing.assert_allclose(system.difference(q, q1), dv, atol=1e-12)
+    R0, R1 = system.body_state("top", q).rotation, system.body_state("top", q1).rotation
+    np.testing.assert_allclose(R1, R0 @ axis_angle(dv / np.linalg.norm(dv), np.linalg.norm(dv)), atol=1e-12)
+    w = np.array([0.0, 0.0, 2.0])
+    rate = system.coordinate_rates(q, w)
+    np.testing.assert_allclose(rate @ q, 0.0, atol=1e-15)  # keeps |q| = 1
+    np.testing.assert_allclose(rate, [-q[3], q[2], -q[1], q[0]], atol=1e-15)  # q (0, 0, 0, 2) / 2
