@@ -19,7 +19,7 @@ import numpy as np
 from .errors import ModelError
 
 __all__ = ["Check", "ParameterSpec", "ParameterError", "REQUIRED", "validate", "finite", "positive", "nonnegative",
-           "in_range", "unit_vector", "spd_inertia", "spec_of"]
+           "in_range", "unit_vector", "spd_inertia", "spec_of", "axis_name"]
 
 
 class _Required:
@@ -80,6 +80,18 @@ def _axis_name(value: Any) -> Any:
             return tuple(sign * float(c == body) for c in "xyz")
         raise _Problem(f"must be 'x', 'y', 'z' or a 3-vector, got {value!r}")
     return value
+
+
+def axis_name(axis: Any) -> Any:
+    """``"x"``, ``"-y"``, ... for a signed coordinate axis, else the vector as a list."""
+    values = tuple(float(c) for c in axis)
+    for i, letter in enumerate("xyz"):
+        unit = tuple(float(j == i) for j in range(3))
+        if values == unit:
+            return letter
+        if values == tuple(-c + 0.0 for c in unit):
+            return "-" + letter
+    return list(values)
 
 
 def _unit(arr: np.ndarray) -> tuple:
