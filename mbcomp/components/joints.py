@@ -87,6 +87,10 @@ class Joint(Component):
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
 
+    def reaction_unit(self, resolve) -> str:
+        """Unit of the reactions of this joint when it closes a loop (forces, then torques)."""
+        return "N, N m"
+
     def summary(self) -> str:
         detail = getattr(self, "axis", None)
         if detail is not None:
