@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .components.base import Component, component_class, kinds_in
-from .components.frame import rotation_matrix
+from .components.frame import Frame, rotation_matrix
 from .errors import ModelError, describe
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
 from .params import ParameterError, ParameterSpec, axis_name, spd_inertia, unit_vector, validate
@@ -75,6 +75,7 @@ class Reader:
         self.label = label
         self.problems: list[str] = []
         self.parameters: dict[str, float] = {}
+        self.ports: set[str] = set()   # names bound to Frames by the user of a sub-model file
 
     # -- reporting ------------------------------------------------------------------------
     def problem(self, table: str | None, key: str | None, message: str) -> _Bad:
@@ -128,6 +129,7 @@ class Reader:
                 x = float(value)
             except OverflowError:
                 return self.problem(table, key, f"{value} is too large")
+        linked, x = x, float(x)   # a sub-model file's parameter expression keeps its link
         if not math.isfinite(x):
             return self.problem(table, key, f"must be finite, got {x}")
         if positive and x <= 0:
@@ -136,7 +138,7 @@ class Reader:
             return self.problem(table, key, f"must not be negative, got {x:g}")
         if (low is not None and x < low) or (high is not None and x > high):
             return self.problem(table, key, f"must lie in [{low:g}, {high:g}], got {x:g}")
-        return x
+        return linked
 
     def vector(self, table: str, key: str, value: Any, *, time: bool = False, owner: str = "") -> Any:
         """Three numbers (entries may be expressions)."""
@@ -179,6 +181,11 @@ class Reader:
             plural = "bodies" if kind == "body" else kind + "s"
             return self.problem(table, key, f"unknown {kind} {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
                                 + f"; {plural}: {names}")
+        if value in self.ports:   # a port: the Frame (or body) its user bound
+            bound = known[value]
+            if isinstance(bound, Frame) and bound.rotation is None and not any(float(c) for c in bound.point):
+                return bound.body
+            return bound
         return value
 
     def inertia(self, table: str, value: Any) -> Any:
@@ -199,7 +206,7 @@ class Reader:
         """``"body"`` or ``{body = "...", point = [x, y, z]}``."""
         if isinstance(value, str):
             body = self.reference(table, key, value, bodies, "body")
-            return BAD if body is BAD else (body, ZERO3)
+            return BAD if body is BAD else body if isinstance(body, Frame) else (body, ZERO3)
         if isinstance(value, dict):
             where = f"{table}.{key}"
             self.keys(where, value, ("body", "point"), ("body",))
@@ -337,8 +344,8 @@ def read_component(r: Reader, section: str, name: str, label: str, table: dict, 
         if kind is None:
             r.problem(label, "type", f"missing (required): one of {', '.join(kinds)}")
             return None
-        cls = component_class(kind) if isinstance(kind, str) else None
-        if cls is None or cls.section != section:
+        cls = kinds.get(kind) if isinstance(kind, str) else None
+        if cls is None:
             r.string(label, "type", kind, tuple(kinds))
             return None
         allowed = ("type",) + cls.file_keys
@@ -431,9 +438,10 @@ def read_parameter(r: Reader, spec: ParameterSpec, label: str, key: str, value: 
     if read is BAD:
         return BAD
     try:
-        return validate(spec, read, owner)
+        validate(spec, read, owner)
     except ParameterError as exc:
         return r.problem(label, key, exc.detail)
+    return read  # as read: a sub-model file's parameter expression keeps its link
 
 
 def read_names(r: Reader, label: str, key: str, value: Any) -> Any:
@@ -469,7 +477,7 @@ def _locate(exc: ModelError, cls: type) -> tuple[str | None, str]:
 def component_table(comp: Component) -> tuple[str, dict]:
     """``(section, {key: value})`` describing ``comp`` as its file form declares."""
     cls = type(comp)
-    if not cls.section or component_class(cls.kind) is not cls:
+    if not cls.file_keys or component_class(cls.kind) is not cls:
         raise ModelError(comp, f"{cls.__name__} has no file representation and cannot be saved")
     table: dict[str, Any] = {"type": cls.kind} if cls.section in TYPED_SECTIONS else {}
     owner = describe(comp)

@@ -17,8 +17,9 @@ def component_class(kind: str) -> type | None:
 
 
 def kinds_in(section: str) -> dict[str, type]:
-    """``{kind: class}`` of the classes whose file form lives in ``section`` ("joints", ...)."""
-    return {k: c for k, c in KINDS.items() if c.section == section}
+    """``{kind: class}`` of the classes with a file form (``file_keys``) in model file
+    section ``section`` ("joints", ...), in registration order."""
+    return {k: c for k, c in KINDS.items() if c.section == section and c.file_keys}
 
 
 class FrozenComponentError(ModelError, AttributeError):
@@ -75,6 +76,20 @@ class Component:
             cls.parameters = tuple(spec.name for spec in cls.params if not spec.structural)
         if cls.__dict__.get("kind"):
             KINDS[cls.kind] = cls
+
+    def __new__(cls, *args: Any, **kwargs: Any):
+        # Arguments holding sub-model parameter expressions are kept, so that a run-time
+        # parameter change can rebuild this component's values (mbcomp.compose).
+        obj = super().__new__(cls)
+        if args or kwargs:
+            from .expr import contains_expr
+            if contains_expr(args) or contains_expr(kwargs):
+                object.__setattr__(obj, "expression_args", (args, kwargs))
+        return obj
+
+    #: ``(args, kwargs)`` of the constructor call when they hold sub-model parameter
+    #: expressions (``None`` otherwise).
+    expression_args: Any = None
 
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():

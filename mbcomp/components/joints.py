@@ -60,13 +60,24 @@ class Joint(Component):
 
     @classmethod
     def from_file(cls, name: str, values: dict[str, Any]) -> "Joint":
-        """A joint from its file table; rotated ends become ``Frame``s."""
+        """A joint from its file table.  An end that is a port (a ``Frame`` bound by the
+        user of a part file) takes the point as an offset in the port frame's axes; a
+        rotation turns the end's frame further (in the port's axes for a port)."""
         values = dict(values)
-        rotations = {role: values.pop(f"{role}_rotation", None) for role in ("parent", "child")}
-        for role, rotation in rotations.items():
-            if rotation is not None:
-                point = values.pop(f"{role}_point", (0.0, 0.0, 0.0))
-                values[role] = Frame(values[role], point, rotation)
+        for role in ("parent", "child"):
+            end = values[role]
+            point = values.pop(f"{role}_point", None)
+            rotation = values.pop(f"{role}_rotation", None)
+            if isinstance(end, Frame):
+                if point is not None:
+                    end = end.offset(point)
+                if rotation is not None:
+                    end = Frame(end.body, end.point, end.rotation_matrix @ np.asarray(rotation, dtype=float))
+                values[role] = end
+            elif rotation is not None:
+                values[role] = Frame(end, (0.0, 0.0, 0.0) if point is None else point, rotation)
+            elif point is not None:
+                values[f"{role}_point"] = point
         return cls(name, **values)
 
     def file_value(self, key: str) -> Any:
