@@ -41,6 +41,7 @@ PART_SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts")
 SIMULATION_KEYS = ("t_end", "method", "rtol", "atol", "formulation", "n_samples")
 METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 FORMULATIONS = ("lagrange", "dae")
+MAX_SAMPLES = 10_000_000  # output samples a file may ask for (each holds q and qd)
 
 # ----------------------------------------------------------------------------------------------
 # Reading
@@ -57,6 +58,8 @@ def _parse_toml(path: Path, label: str) -> dict:
         raise ModelError(problems=[f"{label}:{line}: the file is not UTF-8 text"]) from None
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise ModelError(problems=[f"{label}: arrays or tables are nested too deeply to read"]) from None
     except tomllib.TOMLDecodeError as exc:
         message = str(exc)
         found = re.search(r"\(at line (\d+), column (\d+)\)", message)
@@ -67,6 +70,15 @@ def _parse_toml(path: Path, label: str) -> dict:
         else:
             where = f"{label}:{text.count(chr(10)) + 1}"
         raise ModelError(problems=[f"{where}: TOML syntax error: {message}"]) from None
+    except ValueError:  # an integer too long to convert (Python reads at most 4300 digits)
+        found = re.search(r"\d{4301,}", text)
+        if found is None:
+            raise ModelError(problems=[f"{label}: a value cannot be read"]) from None
+        line_start = text.rfind("\n", 0, found.start()) + 1
+        key = text[line_start:found.start()].split("=")[0].strip()
+        line = text[: found.start()].count("\n") + 1
+        raise ModelError(problems=[f"{label}:{line} {key}: an integer of {len(found.group(0))} digits is too long "
+                                   "(at most 4300)"]) from None
 
 
 def load(path: str | os.PathLike) -> Model:
@@ -90,7 +102,15 @@ def load(path: str | os.PathLike) -> Model:
     label = str(path)
     data = _parse_toml(path, label)
     reader = Reader(label)
-    model = _read_model(reader, data, path)
+    try:
+        model = _read_model(reader, data, path)
+    except ModelError:
+        raise
+    except RecursionError:
+        raise ModelError(problems=reader.problems + [f"{label}: values are nested too deeply to read"]) from None
+    except (ArithmeticError, LookupError, TypeError, ValueError, OSError, MemoryError) as exc:
+        # A safety net: a file is data, and no file may end in a raw exception.
+        raise ModelError(problems=reader.problems + [f"{label}: cannot be read ({type(exc).__name__}: {exc})"]) from None
     if reader.problems:
         raise ModelError(problems=reader.problems)
     return model
@@ -191,7 +211,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
                 setattr(target, port, frame)
 
     # Ports on this file's own bodies first (sub-models may bind to them), the rest after.
-    own = {p: s for p, s in exposed.items() if (s if isinstance(s, str) else s.get("body")) in bodies}
+    own = {p: s for p, s in exposed.items() if _port_body(s) in bodies}
     expose(own)
     coords_seen: dict[str, str] = {}
     all_joints_read = True
@@ -328,6 +348,12 @@ class _FileContext:
         self.path, self.chain, self.classes = path, chain, classes
 
 
+def _port_body(spec: Any) -> str | None:
+    """The body name an exposed port names (None when it names none)."""
+    body = spec if isinstance(spec, str) else spec.get("body") if isinstance(spec, dict) else None
+    return body if isinstance(body, str) else None
+
+
 def _resolve_use(r: Reader, label: str, use: Any, context: _FileContext) -> Path | None:
     if not isinstance(use, str) or not use.strip():
         r.problem(label, "use", f'must be a file name ("part.toml") or "library:NAME", got {short(use)}')
@@ -339,12 +365,17 @@ def _resolve_use(r: Reader, label: str, use: Any, context: _FileContext) -> Path
                       f"{', '.join(library_parts())}; models: {', '.join(library_models())}")
         return found
     base = context.path.resolve().parent
-    target = (base / use).resolve()
+    try:
+        target = (base / use).resolve()
+        found = target.is_file()
+    except (OSError, ValueError) as exc:
+        r.problem(label, "use", f"{short(use)} is not a usable file name ({type(exc).__name__}: {exc})")
+        return None
     if not target.is_relative_to(base):
         r.problem(label, "use", f"{use!r} leaves the directory of {context.path.name}: a file may use files "
                   "beside or below it, or library:NAME")
         return None
-    if not target.is_file():
+    if not found:
         r.problem(label, "use", f"file {use!r} not found beside {context.path.name}")
         return None
     return target
@@ -542,8 +573,8 @@ def _read_simulation(r: Reader, table: dict) -> dict:
         elif key == "formulation":
             x = r.string("simulation", key, value, FORMULATIONS)
         elif key == "n_samples":
-            if isinstance(value, bool) or not isinstance(value, int) or value < 2:
-                x = r.problem("simulation", key, f"must be an integer >= 2, got {short(value)}")
+            if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= MAX_SAMPLES:
+                x = r.problem("simulation", key, f"must be an integer from 2 to {MAX_SAMPLES:.0e}, got {short(value)}")
             else:
                 x = value
         else:

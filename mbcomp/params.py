@@ -120,18 +120,17 @@ def _inertia_problem(arr: np.ndarray) -> "str | None":
     if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
         return "matrix is not symmetric"
     try:
-        with np.errstate(all="ignore"):
-            moments = np.linalg.eigvalsh(0.5 * (unit + unit.T)) * scale
+        a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
     except np.linalg.LinAlgError:
         return "has no computable principal moments"
+    with np.errstate(all="ignore"):
+        moments = np.array([a, b, c]) * scale
     if not np.all(np.isfinite(moments)):
         return "is too large to handle (its principal moments overflow)"
-    tol = 1e-9 * scale
-    if moments[0] < -tol:
+    if a < -1e-9:
         return f"is not positive semi-definite (principal moments {_show(moments)})"
-    a, b, c = moments
-    if c > a + b + tol:
-        return f"violates the triangle inequality: principal moment {c:g} > {a:g} + {b:g}"
+    if c > a + b + 1e-9:
+        return f"violates the triangle inequality: principal moment {moments[2]:g} > {moments[0]:g} + {moments[1]:g}"
     return None
 
 

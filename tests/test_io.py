@@ -327,7 +327,7 @@ BROKEN = {
     "unknown_coordinate": ("[bodies.b]\nmass = 1.0\n" + JOINT + "[initial.q]\njj = 0.1\n",
                            ["[initial.q] jj: unknown coordinate (did you mean 'j'?); coordinates: j"]),
     "simulation_method": ("[simulation]\nmethod = \"Euler\"\nn_samples = 1\n",
-                          ["[simulation] method: must be one of 'RK45'", "[simulation] n_samples: must be an integer >= 2, got 1"]),
+                          ["[simulation] method: must be one of 'RK45'", "[simulation] n_samples: must be an integer from 2 to 1e+07, got 1"]),
     "section_not_a_table": ("bodies = 3\n", ["model.toml bodies: must be a table"]),
 }
 

@@ -85,7 +85,7 @@ def bad_values(spec):
 
 
 def cases():
-    for kind, cls in KINDS.items():
+    for kind, cls in list(KINDS.items()):
         if kind not in EXAMPLES and kind not in SPHERICAL_LIKE:
             continue
         for spec in cls.params:
@@ -210,5 +210,6 @@ def test_good_values_round_trip_through_a_file(kind, systems, tmp_path):
 
 
 def test_every_registered_kind_is_covered():
-    missing = set(KINDS) - set(EXAMPLES) - set(SPHERICAL_LIKE) - ELSEWHERE
+    ours = {k for k, c in KINDS.items() if c.__module__.startswith("mbcomp.")}  # not classes tests define
+    missing = ours - set(EXAMPLES) - set(SPHERICAL_LIKE) - ELSEWHERE
     assert missing <= {k for k, c in KINDS.items() if c.section == "joints"}, missing
