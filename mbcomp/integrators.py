@@ -11,7 +11,7 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
-FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST = 0, 1, -1, -2, -3, -5
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED = 0, 1, -1, -2, -3, -5, -6
 
 
 def _array(name: str, values) -> str:
@@ -27,6 +27,7 @@ def c_integrators(nq: int) -> str:
         "#include <stdlib.h>",
         "#include <string.h>",
         "#include <float.h>",
+        "#include <time.h>",
         f"#define NY {2 * nq}",
         f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
@@ -52,6 +53,30 @@ static int rhs(double t, const double *y, double *f, const double *p, const doub
     }
 #endif
     return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+}
+
+/* The step hook: called with the simulated time about every `hook_interval` s of processor
+   time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
+   around each run to react to Ctrl-C, to stop requests and to show progress. */
+typedef int (*step_hook_t)(double);
+static __thread step_hook_t step_hook = 0;
+static __thread double hook_interval = 0.0;
+static __thread clock_t hook_last = 0;
+static __thread long hook_tick = 0;
+
+void set_step_hook(step_hook_t hook, double interval) {
+    step_hook = hook;
+    hook_interval = interval;
+    hook_last = clock();
+    hook_tick = 0;
+}
+
+static int hook_says_stop(double t) {
+    if (!step_hook || (++hook_tick & 15)) return 0;
+    clock_t now = clock();
+    if ((double)(now - hook_last) < hook_interval * CLOCKS_PER_SEC) return 0;
+    hook_last = now;
+    return step_hook(t) != 0;
 }
 
 static int all_finite(const double *v, int n) {
@@ -122,6 +147,7 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
         int rejected = 0;
         double h, t_new, err;
         for (;;) {
+            if (hook_says_stop(t)) { status = -6; goto done; }
             if (h_abs < min_step) { status = -1; goto done; }
             t_new = t + h_abs;
             if (t_new > t_end) t_new = t_end;
@@ -250,6 +276,7 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
     for (long s = 0; s < n; ++s) {
         const double *y = y_out + s * NY;
         double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        if (hook_says_stop(t)) { status = -6; goto done; }
         RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
@@ -271,8 +298,12 @@ done:
 
 
 # -- Python drivers ------------------------------------------------------------------------------
+import contextlib  # noqa: E402
 import ctypes  # noqa: E402
+import signal  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
+from typing import Callable, Iterator  # noqa: E402
 
 from .errors import ModelError, SimulationError  # noqa: E402
 
@@ -303,6 +334,112 @@ def why_not_compiled(system, method, tau) -> str | None:
     if callable(tau):
         return "tau is a callable"
     return None
+
+
+# -- the step hook: Ctrl-C, stop requests and progress inside compiled loops -------------------
+#: Processor time (s) between two calls of the hook from a compiled loop.
+HOOK_INTERVAL = 0.05
+_HOOK_TYPE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
+_hooks = threading.local()  # this thread's callbacks (step_hook)
+try:
+    _check_signals = ctypes.pythonapi.PyErr_CheckSignals  # runs Python's handlers: Ctrl-C raises here
+    _check_signals.argtypes, _check_signals.restype = [], ctypes.c_int
+except AttributeError:  # not CPython: handlers still run when the hook's own code executes
+    _check_signals = None
+
+
+@contextlib.contextmanager
+def step_hook(callback: Callable[[float], bool], interval: float = HOOK_INTERVAL) -> Iterator[None]:
+    """Within the block, compiled loops run by this thread call ``callback(t)`` (t: the
+    simulated time reached, s) about every ``interval`` seconds of processor time; a true
+    return stops the run with a ``SimulationError``.  For progress displays and for stopping
+    runs from another thread (``sweep`` uses it to stop its workers)."""
+    stack = _hooks.__dict__.setdefault("stack", [])
+    stack.append((callback, float(interval)))
+    try:
+        yield
+    finally:
+        stack.remove((callback, float(interval)))
+
+
+def poll_step_hooks(t: float) -> None:
+    """For Python-stepped loops: call this thread's ``step_hook`` callbacks once; raise
+    ``SimulationError`` when one asks to stop."""
+    for callback, _ in getattr(_hooks, "stack", ()):
+        if callback(t):
+            raise SimulationError(f"stopped at t = {t:.6g} s by a step hook")
+
+
+class _Hook:
+    """What a compiled loop calls back: notes Ctrl-C (main thread), then asks this thread's
+    ``step_hook`` callbacks.  Python runs signal handlers when the hook's code starts, where
+    an exception could not cross the C loop: so during a run SIGINT only sets a flag, and
+    the previous handler (``KeyboardInterrupt`` by default) gets the signal once the loop has
+    returned."""
+
+    def __init__(self):
+        self.callbacks = list(getattr(_hooks, "stack", ()))
+        self.interval = min([HOOK_INTERVAL] + [interval for _, interval in self.callbacks])
+        self.main = threading.current_thread() is threading.main_thread()
+        self.previous = None      # the SIGINT handler to restore (when one was replaced)
+        self.signal = None        # (signum, frame) of a SIGINT received during the run
+        self.error: BaseException | None = None
+        self.pointer = _HOOK_TYPE(self)  # kept alive with this object
+
+    def __call__(self, t: float) -> int:
+        try:
+            if self.main and _check_signals is not None:
+                _check_signals()
+            if self.signal is not None:
+                return 1
+            return int(any(callback(t) for callback, _ in self.callbacks))
+        except BaseException as exc:  # noqa: BLE001 - re-raised by stopped()
+            self.error = exc
+            return 1
+
+    def _on_sigint(self, signum, frame) -> None:
+        self.signal = (signum, frame)
+
+    def install(self, lib) -> None:
+        if self.main:
+            try:
+                previous = signal.getsignal(signal.SIGINT)
+                if callable(previous):
+                    signal.signal(signal.SIGINT, self._on_sigint)
+                    self.previous = previous
+            except ValueError:  # not the main interpreter
+                pass
+        setter = lib.set_step_hook
+        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
+        setter(self.pointer, self.interval)
+
+    def remove(self, lib) -> None:
+        """Unset the hook, restore the SIGINT handler and deliver a pending Ctrl-C to it."""
+        lib.set_step_hook(_HOOK_TYPE(), 0.0)
+        self._deliver()
+
+    def _deliver(self, where: str = "") -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+        previous, self.previous = self.previous, None
+        pending, self.signal = self.signal, None
+        if pending is not None and previous is not None:
+            try:
+                previous(*pending)  # the default handler raises KeyboardInterrupt
+            except BaseException as exc:
+                if where and hasattr(exc, "add_note"):
+                    exc.add_note(where)
+                raise
+
+    def stopped(self, t: float, method: str):
+        """Raise for a run the hook stopped at simulated time ``t``."""
+        where = f"compiled {method} interrupted at t = {t:.6g} s"
+        self._deliver(where)
+        if self.error is not None:
+            if hasattr(self.error, "add_note"):
+                self.error.add_note(where)
+            raise self.error
+        raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
 
 
 def _bind(lib):
@@ -380,6 +517,15 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
 
 
 def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        return _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+    finally:
+        hook.remove(lib)
+
+
+def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
     n = system.nq
     p = system._p
@@ -397,6 +543,8 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         counts = np.zeros(3, dtype=np.int64)
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(counts[1] * dt, method)
         if status:
             _fail(system, status, float("nan"), y, method)
         t = np.arange(steps + 1) * dt
@@ -418,6 +566,8 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(state[0], method)
         if status:
             _fail(system, status, state[0], y, method)
         times, values = t_out, y_out
@@ -436,6 +586,8 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
             if status == BUFFER_FULL:
                 cap = min(cap * 4, 1 << 20)
                 continue
+            if status == STOPPED:
+                hook.stopped(state[0], method)
             if status:
                 _fail(system, status, state[0], y, method)
             break

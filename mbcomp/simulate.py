@@ -13,7 +13,7 @@ from .errors import ModelError, SimulationError
 from .events import ContactWatch
 from .formulations.lagrange import TrialStateError
 from .impact import GAP_TOLERANCE
-from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
+from .integrators import RankLost, compiled_jacobian, poll_step_hooks, run_compiled, why_not_compiled
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
@@ -232,6 +232,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                 corrected = workspace.after_step(t, solver.y)
                 recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
             bar.update(t)
+            poll_step_hooks(t)
             if restart is None and solver.status == "finished":
                 break
             if restart is None:
