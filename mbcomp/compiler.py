@@ -12,6 +12,10 @@ from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunct
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
 from .errors import ModelError
+from .flatten import flatten
+from .params import ParameterSpec
+
+GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world frame")
 from .topology import build_topology
 
 
@@ -33,7 +37,9 @@ class CompiledModel:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
     def __init__(self, model, *, cache: bool, backend: str):
+        model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
+        self.flat_model = model
         self.topology = build_topology(model)
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
@@ -57,6 +63,16 @@ class CompiledModel:
                       "contacts": len(self.topology.contacts) * (nq + 2)}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
+
+    def parameter_spec(self, key: str):
+        """``(owner, ParameterSpec)`` of a ``System.parameters`` key (``"spring.stiffness"``):
+        what ``with_parameters`` validates a new value against (None when unknown)."""
+        if key == "gravity":
+            return f"Model {self.model_name!r}", GRAVITY
+        name, _, attr = key.rpartition(".")
+        comp = self.topology.components.get(name)
+        spec = None if comp is None else type(comp).spec(attr)
+        return None if spec is None else (comp, spec)
 
     @property
     def program(self):
