@@ -11,7 +11,10 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
-FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED = 0, 1, -1, -2, -3, -5, -6
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
+#: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
+#: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
+COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
 
 
 def _array(name: str, values) -> str:
@@ -28,6 +31,8 @@ def c_integrators(nq: int) -> str:
         "#include <string.h>",
         "#include <float.h>",
         "#include <time.h>",
+        f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
+        f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
         f"#define NY {2 * nq}",
         f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
@@ -132,7 +137,8 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
     double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
     double *F = malloc(sizeof(double) * 7 * NY);
     int status = FINISHED_CODE;
-    double t = state[0], h_abs = state[1];
+    double t = state[0], h_abs = state[1], window_t0 = state[0];
+    long window_n = 0;
     if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
     if (h_abs <= 0) {
         RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
@@ -236,6 +242,14 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
             t_steps[*n_steps] = t;
             memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
             ++*n_steps;
+        }
+        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
+            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
+                status = -7;
+                goto done;
+            }
+            window_n = 0;
+            window_t0 = t;
         }
     }
 done:
@@ -488,9 +502,46 @@ def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     if status == SINGULAR:
         system._solve_tree(*system._dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
+    if status == COLLAPSED:
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], system.coords))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
+
+
+class CollapseWatch:
+    """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
+    that window's pace the rest of the interval would need more than ``limit`` steps, or more
+    than ``limit / 10`` while the pace has fallen a thousandfold below the run's best (a state
+    running away, not a model that needs small steps throughout)."""
+
+    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
+        self.t_end, self.window, self.limit = t_end, window, limit
+        self.t0, self.n, self.best = t0, 0, 0.0
+        self.projected = 0.0  # steps the rest of the run would need at the last window's pace
+
+    def collapsed(self, t: float) -> bool:
+        self.n += 1
+        if self.n < self.window:
+            return False
+        pace, self.t0, self.n = (t - self.t0) / self.window, t, 0
+        self.best = max(self.best, pace)
+        rest = self.t_end - t
+        self.projected = rest / pace if pace > 0 else float("inf")
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 10 * pace and pace < 1e-3 * self.best))
+
+
+def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
+                     projected: float = COLLAPSE_STEPS) -> str:
+    """Why a run whose step size collapsed gave up, and the largest speed it reached."""
+    speeds = np.abs(np.asarray(speeds, dtype=float))
+    largest = ""
+    if speeds.size:
+        i = int(speeds.argmax())
+        largest = f"; largest speed {speeds[i]:.3g} ({names[i] if len(names) == speeds.size else f'speed {i}'})"
+    return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
+            f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
+            f"(check the initial state and the forces)")
 
 
 class RankLost(Exception):

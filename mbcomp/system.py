@@ -9,6 +9,7 @@ from .components import Spherical
 from .constraint_set import cross
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY
+from . import checks
 from .errors import format_state, ModelError, SimulationError, describe
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 from .params import validate
@@ -178,7 +179,10 @@ class System:
         if callable(tau):
             from .components.forces import checked_output
             return checked_output("tau", tau(t, q, qd), self.nq)
-        arr = np.asarray(tau, dtype=float).reshape(-1)
+        try:
+            arr = np.asarray(tau, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}") from None
         if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
             raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}")
         return arr
@@ -314,7 +318,8 @@ class System:
             raise ModelError(f"body {name!r}", "is not a body of this model")
         q, qd = self.state_vector(q), self._velocity(qd)
         comp = self.topology.components[name]
-        local = np.asarray(comp.com if point is None else point, dtype=float)
+        local = np.asarray(comp.com, dtype=float) if point is None else checks.vector(
+            point, 3, "point", where=f"body_state of {name!r}")
         if point is None and name in (b.name for b in self.topology.bodies):
             local = np.asarray(self._parameters[f"{name}.com"], dtype=float)
         if comp is self.topology.ground:
