@@ -4,6 +4,8 @@
 from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
+from .components import DCMotor, Drive, JointFriction, JointLimit
+from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
 
 # The compiled system and its results
@@ -37,6 +39,7 @@ __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 
 
