@@ -25,8 +25,7 @@ def energy(system: Any, result: Any) -> Energy:
     system = bound_system(system, result)
     if len(result.t) == 0:
         return Energy(np.zeros(0), np.zeros(0))
-    values = [system.energy(q, qd, t) for t, q, qd in zip(result.t, result.q, result.qd)]
-    return Energy(np.array([e.kinetic for e in values]), np.array([e.potential for e in values]))
+    return system.energy_series(result.q, result.qd)
 
 
 def constraint_violation(system: Any, result: Any) -> np.ndarray:

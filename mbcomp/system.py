@@ -372,6 +372,19 @@ class System:
         kinetic, potential = self._call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
 
+    def energy_series(self, q: Any, qd: Any) -> Energy:
+        """Kinetic and potential energy (J) at many states (rows of ``q``, ``qd``): arrays of
+        shape (m,), from one call of the generated code."""
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq:
+            raise ModelError("energy_series", f"q and qd must be (m, {self.nq}) arrays of states, got shapes "
+                             f"{q.shape} and {qd.shape}")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise ModelError("energy_series", "the states must be finite")
+        out = self._compiled.functions.many("energy", q, qd, self._p, np.zeros(self._compiled.n_inputs))
+        return Energy(out[:, 0].copy(), out[:, 1].copy())
+
     def _kinematics(self, q, qd):
         out = self._call("kinematics", q, qd)
         nb = len(self.topology.bodies)
