@@ -496,6 +496,21 @@ def compiled_jacobian(system, tau):
     return jac
 
 
+def _diagnose(system, t: float, y: np.ndarray, method: str) -> None:
+    """Evaluate the accelerations at the state the compiled loop stopped at through the
+    checked Python path, which names the cause (a zero-length spring, a singular joint)."""
+    n = system.nq
+    if not np.all(np.isfinite(y)):
+        return
+    when = f"at t = {t:.6g} s" if np.isfinite(t) else "during the run"
+    try:
+        system.accelerations(y[:n], y[n:], t if np.isfinite(t) else 0.0)
+    except SimulationError as exc:
+        raise SimulationError(f"compiled {method} stopped {when}: {exc}") from None
+    except ModelError:
+        pass
+
+
 def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     n = system.nq
     if status == RANK_LOST:
@@ -503,8 +518,9 @@ def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
+    if status in (SINGULAR, NOT_FINITE):
+        _diagnose(system, t, y, method)
     if status == SINGULAR:
-        system._solve_tree(*system._dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == COLLAPSED:
         raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], system.coords))
@@ -601,7 +617,7 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if status == STOPPED:
             hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(system, status, float("nan"), y, method)
+            _fail(system, status, counts[1] * dt, out[counts[1]], method)
         t = np.arange(steps + 1) * dt
         if t_eval is not None:
             out, t = _hermite(system, t, out, t_eval, tau_arr), np.asarray(t_eval)
