@@ -176,6 +176,10 @@ class System:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
 
+    def parameter(self, key: str, default: Any = None) -> Any:
+        """The value of one parameter ``"component.attribute"`` (no copy of the whole table)."""
+        return self._parameters.get(key, default)
+
     @property
     def backend(self) -> str:
         return self._compiled.functions.name
