@@ -59,6 +59,10 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     series included (reactions of resting contacts and motors: each Result records what
     they need).
     """
+    if isinstance(cases, (str, bytes, Mapping)) or not isinstance(cases, Iterable):
+        raise ModelError("sweep", f"cases must be a sequence of mappings of simulate() arguments, got {cases!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ModelError("sweep", f"threads must be a positive whole number or None, got {threads!r}")
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
     if client is None:
         if threads == 1 or len(cases) <= 1:

@@ -194,6 +194,8 @@ class System:
         Each value is checked by the same ``ParameterSpec`` validation as the component's
         constructor (``mbcomp.params.validate``); a ``ModelError`` names the component and
         the attribute."""
+        if values is not None and not isinstance(values, Mapping):
+            raise ModelError("parameters", f"must be a mapping {{'component.attribute': value}}, got {values!r}")
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)

@@ -129,3 +129,38 @@ class TestRunaway:
         res = chain.simulate(2.0, Q0, [30.0, -30.0], rtol=1e-12, atol=1e-14)
         energy = res.energy().total
         assert res.stats["success"] and abs(energy[-1] - energy[0]) < 1e-6 * abs(energy[0])
+
+
+class TestResultsAndSweeps:
+    def test_a_result_series_by_a_wrong_name_is_a_model_error_and_key_error(self, chain):
+        res = chain.simulate(0.1, Q0)
+        for name in ("nope", 5, None):
+            with pytest.raises(mb.ModelError, match="coordinate"):
+                res[name]
+        with pytest.raises(KeyError):
+            res["nope"]
+        np.testing.assert_array_equal(res["joint0"], res.q[:, 0])
+
+    def test_to_csv_needs_a_file_name_not_a_file_descriptor(self, chain, tmp_path):
+        res = chain.simulate(0.1, Q0)
+        with pytest.raises(mb.ModelError, match="path must be a file name"):
+            res.to_csv(5)
+        res.to_csv(tmp_path / "run.csv")
+        rows = (tmp_path / "run.csv").read_text().splitlines()
+        assert len(rows) == len(res.t) + 1 and rows[0].startswith("t,joint0,joint1")
+
+    @pytest.mark.parametrize("values", ["x", 5, [("link0.mass", 2.0)]])
+    def test_parameters_must_be_a_mapping(self, chain, values):
+        with pytest.raises(mb.ModelError, match="parameters: must be a mapping"):
+            chain.with_parameters(values)
+        with pytest.raises(mb.ModelError, match="parameters: must be a mapping"):
+            chain.simulate(0.1, Q0, parameters=values)
+
+    @pytest.mark.parametrize("kwargs, says", [({"cases": 5}, "cases must be a sequence"),
+                                              ({"cases": "abc"}, "cases must be a sequence"),
+                                              ({"cases": [{"q0": Q0, "t_end": 0.1}], "threads": 0}, "threads"),
+                                              ({"cases": [{"q0": Q0, "t_end": 0.1}], "threads": "x"}, "threads")])
+    def test_sweep_arguments(self, chain, kwargs, says):
+        cases = kwargs.pop("cases")
+        with pytest.raises(mb.ModelError, match=says):
+            mb.sweep(chain, cases, **kwargs)
