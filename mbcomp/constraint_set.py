@@ -122,6 +122,27 @@ class ConstraintSet:
                 bias[r] = -s2
         return ConstraintValues(g, J, g_t, bias)
 
+    def residual_series(self, system, t: np.ndarray, q: np.ndarray, motor_offsets: dict | None = None) -> np.ndarray:
+        """Residuals ``g`` at many samples, (m, nc): the geometric rows from one call of the
+        generated code, motor rows in numpy (NaN for speed motors without start values)."""
+        m = len(q)
+        G = np.zeros((m, self.nc))
+        rows = self.geometric_rows
+        if rows and m:
+            G[:, rows] = system.evaluate_series("constraints", q, what="constraint_violation")[:, :len(rows)]
+        for r in self.coordinate_rows:
+            eq = self.equations[r]
+            k = self.topology.q_slice[name_of(eq.joint)].start
+            speed = self.motor_speed(system, r)
+            if speed is not None:
+                G[:, r] = q[:, k] - motor_offsets[r] - speed * t if motor_offsets and r in motor_offsets else np.nan
+                continue
+            try:
+                G[:, r] = q[:, k] - np.array([float(eq.position(ti)) for ti in t])
+            except Exception as exc:  # the user's callable failed
+                raise SimulationError(f"position(t) failed: {exc}", self.groups_by_row(r)) from None
+        return G
+
     def motor_speed(self, system, r: int) -> float | None:
         """The speed of the speed motor of row ``r`` with the System's parameter values (a
         run-time change of ``motor.speed`` takes effect), None for other rows."""

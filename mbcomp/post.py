@@ -32,7 +32,7 @@ def constraint_violation(system: Any, result: Any) -> np.ndarray:
     """max |C(q, t)| per sample (zeros for a model without constraints); speed motors are
     measured from the run's own start values."""
     system = bound_system(system, result)
-    return np.array([system.constraint_violation(q, t, offsets=result.offsets) for t, q in zip(result.t, result.q)])
+    return system.constraint_violation_series(result.t, result.q, result.offsets)
 
 
 def reactions(system: Any, result: Any) -> dict[str, np.ndarray]:

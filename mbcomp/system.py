@@ -387,18 +387,29 @@ class System:
         kinetic, potential = self._call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
 
+    def evaluate_series(self, name: str, q: Any, qd: Any = None, what: str = "evaluate_series") -> np.ndarray:
+        """The generated function ``name`` ("energy", "constraints", "kinematics", ...) at many
+        states (rows of ``q``, ``qd``; zero speeds when None) in one call: (m, size)."""
+        q = np.asarray(q, dtype=float)
+        qd = np.zeros_like(q) if qd is None else np.asarray(qd, dtype=float)
+        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq:
+            raise ModelError(what, f"q and qd must be (m, {self.nq}) arrays of states, got shapes "
+                             f"{q.shape} and {qd.shape}")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise ModelError(what, "the states must be finite")
+        return self._compiled.functions.many(name, q, qd, self._p, np.zeros(self._compiled.n_inputs))
+
     def energy_series(self, q: Any, qd: Any) -> Energy:
         """Kinetic and potential energy (J) at many states (rows of ``q``, ``qd``): arrays of
         shape (m,), from one call of the generated code."""
-        q = np.asarray(q, dtype=float)
-        qd = np.asarray(qd, dtype=float)
-        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq:
-            raise ModelError("energy_series", f"q and qd must be (m, {self.nq}) arrays of states, got shapes "
-                             f"{q.shape} and {qd.shape}")
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
-            raise ModelError("energy_series", "the states must be finite")
-        out = self._compiled.functions.many("energy", q, qd, self._p, np.zeros(self._compiled.n_inputs))
+        out = self.evaluate_series("energy", q, qd, what="energy_series")
         return Energy(out[:, 0].copy(), out[:, 1].copy())
+
+    def constraint_violation_series(self, t: Any, q: Any, offsets: dict | None = None) -> np.ndarray:
+        """max |g(q, t)| at many samples (``t`` (m,), rows of ``q``): the geometric rows
+        from one call of the generated code."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        return self._formulation.constraint_violation_series(self, t, np.asarray(q, dtype=float), offsets)
 
     def _kinematics(self, q, qd):
         out = self._call("kinematics", q, qd)

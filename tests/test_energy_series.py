@@ -45,3 +45,21 @@ def test_energy_series_checks_its_arguments():
         system.energy_series(np.full((2, 3), np.nan), np.zeros((2, 3)))
     empty = system.energy_series(np.zeros((0, 3)), np.zeros((0, 3)))
     assert empty.kinetic.shape == (0,)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("formulation", ["lagrange", "dae"])
+def test_constraint_violation_series_equals_the_per_state_one(backend, formulation):
+    from conftest import fourbar
+    for motor in (None, mb.Motor("motor", "A", speed=2.0), mb.Motor("motor", "A", position=lambda t: 0.5 + t)):
+        system = fourbar(motor=motor).compile(formulation, backend=backend)
+        res = system.simulate(0.3, [0.5, 0.0, 0.0], rtol=1e-6, atol=1e-8)
+        rng = np.random.default_rng(3)
+        q = res.q + 1e-3 * rng.normal(size=res.q.shape)          # off the constraints
+        series = system.constraint_violation_series(res.t, q, res.offsets)
+        one = [system.constraint_violation(q[i], res.t[i], offsets=res.offsets) for i in range(len(q))]
+        np.testing.assert_allclose(series, one, rtol=1e-13, atol=1e-15)
+        assert np.all(series > 1e-5)                                   # the noise shows
+        np.testing.assert_allclose(res.constraint_violation(),
+                                   [system.constraint_violation(qi, ti, offsets=res.offsets)
+                                    for ti, qi in zip(res.t, res.q)], rtol=1e-13, atol=1e-15)

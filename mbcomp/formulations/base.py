@@ -310,6 +310,13 @@ class Formulation:
         g = self.constraint_values(system, t, q, np.zeros_like(q), offsets).g
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
+    def constraint_violation_series(self, system, t: np.ndarray, q: np.ndarray, offsets=None) -> np.ndarray:
+        """``constraint_violation`` at every sample (rows of ``q``), vectorised."""
+        if self.constraints is None:
+            return np.zeros(len(q))
+        G = self.constraints.residual_series(system, t, q, offsets)
+        return np.max(np.where(np.isfinite(G), np.abs(G), 0.0), axis=1, initial=0.0)
+
     def start(self, system, t0, q0, qd0, tau, contacts=()) -> Workspace:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
         cls = Workspace if self.constraints is None and not contacts else self.workspace_class
