@@ -208,7 +208,7 @@ def test_file_initial_values_name_ball_speeds(tmp_path):
 def test_cli_info_and_run_on_the_ball_top(capsys, tmp_path):
     assert cli_main(["info", "spinning_top"]) == 0
     out = capsys.readouterr().out
-    assert "pivot: ball (quaternion), ground -> top" in out
+    assert "pivot: ball, ground -> top" in out
     assert "speeds       pivot_wx, pivot_wy, pivot_wz (3;" in out
     assert "M[2,2]" in out and "f[2]" in out and "M[3," not in out
     csv = tmp_path / "top.csv"
