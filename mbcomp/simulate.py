@@ -152,7 +152,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         q_start, qd_start = system._formulation.assemble(system, q0, qd0, 0.0)
         try:
             compiled = run_compiled(system, t_end, q_start, qd_start, method=method, rtol=rtol, atol=atol,
-                                    t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
+                                    t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
         except RankLost:
             if method == "RK4" or integrator == "compiled":
                 raise SimulationError(f"compiled {method} met a singular position of the constraints; "
@@ -164,7 +164,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
         return Result(system=system, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                      qd=values[:, n:].copy(), stats=stats, tau=tau)
+                      qd=values[:, n:2 * n].copy(), z=values[:, 2 * n:].copy(), stats=stats, tau=tau)
     if integrator == "compiled" and reason is not None or integrator == "compiled" and progress:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason or 'progress=True'}")
     cls = solver_class(method)

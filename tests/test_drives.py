@@ -243,3 +243,49 @@ def test_states_in_csv_and_errors(tmp_path):
     m.add(mb.Drive("drive", sph, torque=1.0))
     with pytest.raises(mb.ModelError, match="1-DOF"):
         m.compile()
+
+
+def servo_pendulum(name, controller=None):
+    """A pendulum on a DC motor whose voltage a PID (or a Python callable) sets."""
+    m, j = pendulum(name)
+    if controller is None:
+        controller = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.1, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
+    m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=controller))
+    return m
+
+
+def test_drive_states_run_in_the_compiled_integrators():
+    sys = servo_pendulum("servo_c").compile()
+    assert sys.integration_path() == "compiled"
+    t = np.linspace(0, 2.0, 21)
+    compiled = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01})
+    assert compiled.stats["integrator"] == "compiled"
+    stepped = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01}, integrator="scipy")
+    assert stepped.stats["integrator"] == "scipy"
+    for name in ("th", "motor.current", "pid.integral"):
+        assert np.max(np.abs(compiled[name] - stepped[name])) < 1e-6, name  # rtol 1e-8: steps differ at the kinks
+    rk4 = sys.simulate(2.0, [0.0], method="RK4", dt=1e-3, t_eval=t, x0={"pid.integral": 0.01})
+    assert np.max(np.abs(rk4["th"] - compiled["th"])) < 1e-6
+    assert np.max(np.abs(rk4["motor.current"] - compiled["motor.current"])) < 1e-5
+    # the same controller as a Python callable: same motion, slower path
+    gains = sys.parameters
+
+    def callable_model():
+        m, j = pendulum("servo_py")
+        m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=lambda t, q, qd: 0.0))
+        return m
+
+    python = callable_model().compile()
+    assert python.integration_path().startswith("python")
+    assert gains["pid.kp"] == 60.0
+
+
+def test_sweeping_pid_gains_does_not_recompile():
+    sys = servo_pendulum("servo_sweep").compile()
+    errors = []
+    for kp in (20.0, 60.0):
+        tuned = sys.with_parameters({"pid.kp": kp})
+        assert tuned.integration_path() == "compiled"
+        res = tuned.simulate(1.5, [0.0], t_eval=[1.5])
+        errors.append(abs(0.6 - res["th"][-1]))
+    assert errors[1] < errors[0]
