@@ -249,7 +249,7 @@ def servo_pendulum(name, controller=None):
     """A pendulum on a DC motor whose voltage a PID (or a Python callable) sets."""
     m, j = pendulum(name)
     if controller is None:
-        controller = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.1, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
+        controller = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.105, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
     m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=controller))
     return m
 
