@@ -361,6 +361,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     print(f"degrees of freedom  {system.ndof}")
+    if getattr(system, "extra_states", ()):  # states of drive elements (motor currents, PID integrals)
+        print(f"extra states  {', '.join(system.extra_states)} ({system.integration_path()})")
     if system.constraint_names:
         print(f"constraint equations  {', '.join(system.constraint_names)}"
               + (f" (loop closures: {', '.join(cut)})" if cut else ""))
