@@ -7,6 +7,7 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .components import DCMotor, Drive, JointFriction, JointLimit
 from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
+from .compose import Option, Parameter, Submodel
 
 # The compiled system and its results
 from .result import Energy, Event, Result
@@ -38,7 +39,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "ModelError", "CompileError", "SimulationError", "load", "sweep",
     "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 

@@ -359,6 +359,12 @@ def cmd_info(args: argparse.Namespace) -> int:
     cut = [j.name for j in getattr(system.topology, "cut_joints", ())]
     for line in describe_components(model, cut):
         print(line)
+    tree = model.tree()
+    if tree.children:   # sub-model instances with their parameters
+        print("instances")
+        for child in tree.children:
+            for line in child.lines("  "):
+                print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     print(f"degrees of freedom  {system.ndof}")
     if getattr(system, "extra_states", ()):  # states of drive elements (motor currents, PID integrals)
