@@ -7,6 +7,7 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .components import DCMotor, Drive, JointFriction, JointLimit
 from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
+from .servo import Servo
 from .compose import Option, Parameter, Submodel
 
 # The compiled system and its results
@@ -40,7 +41,7 @@ __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "ModelError", "CompileError", "SimulationError", "load", "sweep",
-    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
+    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID", "Servo",
 ]
 
 

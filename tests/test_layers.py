@@ -17,7 +17,7 @@ LAYERS = {
     "rotations": 1, "expressions": 1, "result": 1, "library": 1, "params": 1,
     "components.primitives": 1, "components.expr": 1, "components._values": 1,
     # 2 spec: components and the model builder
-    "components": 2, "model": 2, "compose": 2,
+    "components": 2, "model": 2, "compose": 2, "servo": 2,
     # 3 build: flattening, topology, symbolic program, layouts; files <-> models
     "flatten": 3, "topology": 3, "statemap": 3, "constraint_set": 3, "equations": 3, "layout": 3, "io": 3,
     "urdf": 3, "drive_equations": 3,
@@ -40,7 +40,8 @@ LAYERS = {
 SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen"), ("backend", "cache"),
               ("formulations.base", "impact"), ("simulate", "events"), ("model", "components"),
               ("compose", "components"), ("compose", "model"), ("model", "compose"), ("io", "topology"),
-              ("equations", "drive_equations"), ("simulate", "drive_runtime"),
+              ("equations", "drive_equations"), ("simulate", "drive_runtime"), ("servo", "components"),
+              ("servo", "compose"),
               ("components._values", "params")}
 #: Known breaches being removed: ``(file, problem)``.  Do not add to this list.
 KNOWN: set[tuple[str, str]] = {

@@ -19,6 +19,7 @@ import sympy as sp
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, in_range, nonnegative, positive
 from .base import Component, ForceElement
+from .signals import SignalOwner
 
 
 class _OnJoint(ForceElement):
@@ -54,7 +55,7 @@ class _OnJoint(ForceElement):
         return {k: v for k, v in super().parameter_values().items() if not _is_signal(v)}
 
 
-class Drive(_OnJoint):
+class Drive(SignalOwner, _OnJoint):
     """A motor rotor on a 1-DOF joint through a gear.
 
     ``ratio`` (rotor turns per joint turn), ``rotor_inertia`` (kg m^2, reflected as
@@ -64,6 +65,7 @@ class Drive(_OnJoint):
     """
 
     drive_element = True
+    signal_attrs = ("torque",)
     kind = "drive"
     params = (ParameterSpec("ratio", (), "1", default=1.0, doc="rotor turns per joint turn"),
               ParameterSpec("rotor_inertia", (), "kg m^2", nonnegative, default=0.0, doc="rotor inertia"),
@@ -107,7 +109,7 @@ class Drive(_OnJoint):
         return []
 
 
-class DCMotor(_OnJoint):
+class DCMotor(SignalOwner, _OnJoint):
     """A permanent-magnet DC motor driving a 1-DOF joint through a gear of ``ratio``.
 
     The armature current ``i`` (A) is a state (``"NAME.current"``)::
@@ -122,6 +124,7 @@ class DCMotor(_OnJoint):
     """
 
     drive_element = True
+    signal_attrs = ("voltage",)
     kind = "dc_motor"
     params = (ParameterSpec("ratio", (), "1", doc="rotor turns per joint turn"),
               ParameterSpec("resistance", (), "ohm", nonnegative, doc="armature resistance"),

@@ -134,6 +134,9 @@ class Angle(Signal):
     def describe(self):
         return f"Angle({name_of(self.joint)})"
 
+    def file_table(self) -> dict:
+        return {"type": "angle", "joint": name_of(self.joint)}
+
 
 class Speed(Signal):
     """The speed of a 1-DOF joint (rad/s or m/s)."""
@@ -150,6 +153,9 @@ class Speed(Signal):
     def describe(self):
         return f"Speed({name_of(self.joint)})"
 
+    def file_table(self) -> dict:
+        return {"type": "speed", "joint": name_of(self.joint)}
+
 
 class Constant(Signal):
     """A constant value."""
@@ -165,6 +171,9 @@ class Constant(Signal):
 
     def describe(self):
         return f"Constant({self.value!r})"
+
+    def file_table(self) -> dict:
+        return {"type": "constant", "value": self.value}
 
 
 class Step(Signal):
@@ -184,6 +193,9 @@ class Step(Signal):
 
     def describe(self):
         return f"Step({self.time!r}, {self.after!r}, {self.before!r})"
+
+    def file_table(self) -> dict:
+        return {"type": "step", "time": self.time, "after": self.after, "before": self.before}
 
 
 class Sine(Signal):
@@ -208,6 +220,10 @@ class Sine(Signal):
 
     def describe(self):
         return f"Sine({self.amplitude!r}, {self.frequency!r}, {self.phase!r}, {self.offset!r})"
+
+    def file_table(self) -> dict:
+        return {"type": "sine", "amplitude": self.amplitude, "frequency": self.frequency, "phase": self.phase,
+                "offset": self.offset}
 
 
 class CallableSignal(Signal):
@@ -236,7 +252,28 @@ class CallableSignal(Signal):
         return "callable(t, q, qd)" if self.state_arguments else "callable(t)"
 
 
-class PID(Component, Signal):
+class SignalOwner:
+    """Mixin of components whose attributes ``signal_attrs`` may hold signals: a copy with
+    renamed references (``copy_with_references``) rebuilds those signals too."""
+
+    signal_attrs: tuple = ()
+
+    def copy_with_references(self, name: str, references: dict):
+        import copy
+        new = copy.copy(self)
+        for role, ref in references.items():
+            if not role.startswith("signal ") and hasattr(self, role):
+                object.__setattr__(new, role, ref)
+        attrs = [a for a in self.signal_attrs if isinstance(getattr(self, a, None), Signal)]
+        rebuilt = rebind_signals([getattr(self, a) for a in attrs], references,
+                                 owner=self if isinstance(self, PID) else None)
+        for attr, signal in zip(attrs, rebuilt):
+            object.__setattr__(new, attr, signal)
+        object.__setattr__(new, "name", name)
+        return new
+
+
+class PID(SignalOwner, Component, Signal):
     """A PID controller: ``u = kp e + ki integral(e) + kd de/dt`` with ``e = setpoint - measured``.
 
     The integral of the error is a state of the model (``"NAME.integral"``, starting at 0 or
@@ -251,6 +288,7 @@ class PID(Component, Signal):
 
     kind = "pid"
     section = "controllers"
+    signal_attrs = ("measured", "setpoint")
     params = (ParameterSpec("kp", (), "output per error", doc="proportional gain"),
               ParameterSpec("ki", (), "output per error s", default=0.0, doc="integral gain"),
               ParameterSpec("kd", (), "output s per error", default=0.0, doc="derivative gain"),
@@ -295,6 +333,13 @@ class PID(Component, Signal):
     def describe(self):
         return f"PID({self.name})"
 
+    def file_table(self) -> dict:
+        return {"type": "pid", "name": self.name}
+
+    def file_value(self, key: str):
+        value = getattr(self, key, None)
+        return value.file_table() if isinstance(value, Signal) else value
+
     def _raw(self, ctx):
         e = ctx.let(ctx.signal(self.setpoint) - ctx.signal(self.measured))
         (z,) = ctx.states(self)
@@ -331,6 +376,53 @@ class PID(Component, Signal):
         return [sp.Piecewise((0, push > 0), (e, True))]
 
 
+class ControllerRef(Signal):
+    """A controller's output named by the controller's name (model files refer to a ``PID``
+    this way); resolved against the model's components when compiling."""
+
+    def __init__(self, name: str):
+        if not isinstance(name, str) or not name:
+            raise ModelError("signal", f"a controller reference needs a name, got {name!r}")
+        self.name = name
+
+    def symbolic(self, ctx):
+        return ctx.signal(ctx.component(self.name))
+
+    def describe(self):
+        return f"PID({self.name})"
+
+    def file_table(self) -> dict:
+        return {"type": "pid", "name": self.name}
+
+
+#: Signal tables of model files: ``{type = "step", time = 0.2, after = 1.0}`` and so on.
+SIGNAL_TYPES = {"constant": (Constant, ("value",)), "step": (Step, ("time", "after", "before")),
+                "sine": (Sine, ("amplitude", "frequency", "phase", "offset")),
+                "angle": (Angle, ("joint",)), "speed": (Speed, ("joint",)), "pid": (ControllerRef, ("name",))}
+
+
+def signal_from_table(table: dict, where: str) -> Signal:
+    """The signal a model-file table describes, else a ``ModelError`` naming ``where``
+    and the key (numbers must be numbers; joints and controllers are names)."""
+    kind = table.get("type")
+    if kind not in SIGNAL_TYPES:
+        raise ModelError(where, f"signal type must be one of {', '.join(map(repr, SIGNAL_TYPES))}, got {kind!r}")
+    cls, keys = SIGNAL_TYPES[kind]
+    unknown = [k for k in table if k != "type" and k not in keys]
+    if unknown:
+        raise ModelError(where, f"unknown key(s) {unknown} for a {kind!r} signal; allowed: {', '.join(keys)}")
+    values = {k: v for k, v in table.items() if k != "type"}
+    for key, value in values.items():
+        if key in ("joint", "name"):
+            if not isinstance(value, str):
+                raise ModelError(where, f"{key} must be a name, got {value!r}")
+        elif isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ModelError(where, f"{key} must be a number, got {value!r}")
+    if kind in ("angle", "speed", "pid") and not values:
+        raise ModelError(where, f"a {kind!r} signal needs {keys[0]}")
+    return cls(**values)
+
+
 def _contains_speed(signal: Signal) -> bool:
     return any(isinstance(s, (Speed, CallableSignal)) for s in signal.walk())
 
@@ -345,4 +437,33 @@ def signal_references(signals, owner: Any = None) -> dict[str, Any]:
                 refs[f"signal joint {len(refs)}"] = joint
             if isinstance(s, PID) and s is not owner:
                 refs[f"signal pid {len(refs)}"] = s
+            if isinstance(s, ControllerRef) and (owner is None or s.name != owner.name):
+                refs[f"signal pid {len(refs)}"] = s.name
     return refs
+
+
+def rebind_signals(signals: list, references: dict, owner: Any = None) -> list:
+    """Copies of signal trees with their references replaced as ``references`` maps the roles
+    of ``signal_references`` (a sub-model's components are renamed when flattened); a PID
+    mapped to a name becomes a ``ControllerRef``."""
+    counter = [0]
+
+    def mapped(kind: str, default: Any) -> Any:
+        key = f"signal {kind} {counter[0]}"
+        counter[0] += 1
+        return references.get(key, default)
+
+    def rebuild(s: Signal) -> Signal:
+        if isinstance(s, (Angle, Speed)):
+            return type(s)(mapped("joint", s.joint))
+        if isinstance(s, PID) and s is not owner:
+            new = mapped("pid", s)
+            return ControllerRef(new) if isinstance(new, str) else new
+        if isinstance(s, ControllerRef) and (owner is None or s.name != owner.name):
+            new = mapped("pid", s.name)
+            return ControllerRef(new if isinstance(new, str) else new.name)
+        if isinstance(s, _Combination):
+            return _Combination(s.op, tuple(rebuild(a) for a in s.args))
+        return s
+
+    return [rebuild(s) for s in signals]
