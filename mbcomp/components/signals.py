@@ -280,8 +280,11 @@ class PID(SignalOwner, Component, Signal):
     at ``x0``).  ``de/dt`` is the rate of the setpoint minus that of the measured signal; it
     is available when the measured signal is an ``Angle`` (its rate is the joint speed);
     with a ``Speed`` measurement ``kd`` must be 0 (and is no parameter).  ``limit`` (> 0)
-    clips the output to ``[-limit, limit]``; then the integral stops growing while the
-    output is saturated in the direction the error pushes (anti-windup by clamping).
+    clips the output to ``[-limit, limit]``, with anti-windup by back-calculation: while the
+    unclipped output ``u`` is beyond the limit, ``z' = e - (u - clip(u)) / kp`` (tracking
+    time ``kp / ki``), which holds the integral term near the limit instead of letting it
+    grow.  The correction is continuous, so adaptive integrators do not chatter at the
+    limit (as they do with clamping, which switches the integration on and off).
     ``kp``, ``ki``, ``kd`` and ``limit`` are parameters (a sweep over them does not
     recompile).  Add the PID to the model and feed it to a drive, motor or torque.
     """
@@ -369,11 +372,11 @@ class PID(SignalOwner, Component, Signal):
         if self.limit is None:
             return [e]
         limit = ctx.param(self, "limit")
-        # How far the output is beyond the limit (0 inside): integrating e would push further
-        # out when excess * e * ki > 0.
+        # Back-calculation: how far the output is beyond the limit (0 inside), fed back with
+        # the tracking time kp / ki (no correction for kp = 0).
         excess = ctx.let(sp.Max(raw - limit, 0) + sp.Min(raw + limit, 0))
-        push = ctx.let(excess * e * ctx.param(self, "ki"))
-        return [sp.Piecewise((0, push > 0), (e, True))]
+        kp = ctx.param(self, "kp")
+        return [e - excess * kp / (kp * kp + sp.Float(1e-300))]
 
 
 class ControllerRef(Signal):
