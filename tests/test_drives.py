@@ -320,3 +320,65 @@ def test_servo_part_and_drives_inside_submodels():
     # a sub-model parameter reaches the PID without recompiling
     slower = sys.with_parameters({"servo.kp": 30.0}).simulate(2.0, [0.0], t_eval=t)
     assert abs(slower["th"][5] - res["th"][5]) > 1e-3
+
+
+SERVO_FILE = """
+name = "servo_file"
+[bodies.rod]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+[joints.hinge]
+type = "revolute"
+parent = "ground"
+child = "rod"
+axis = "x"
+coords = "th"
+[forces.pid]
+type = "pid"
+measured = { type = "angle", joint = "hinge" }
+setpoint = { type = "step", time = 0.105, after = 0.6 }
+kp = 60.0
+ki = 80.0
+kd = 6.0
+limit = 12.0
+[forces.motor]
+type = "dc_motor"
+joint = "hinge"
+ratio = 20.0
+resistance = 2.0
+inductance = 0.05
+k = 0.03
+voltage = { type = "pid", name = "pid" }
+[forces.friction]
+type = "joint_friction"
+joint = "hinge"
+viscous = 0.01
+[constraints.stop]
+type = "joint_limit"
+joint = "hinge"
+upper = 1.5
+"""
+
+
+def test_drives_in_model_files(tmp_path):
+    path = tmp_path / "servo.toml"
+    path.write_text(SERVO_FILE)
+    sys = mb.load(path).compile()
+    m, j = pendulum("servo_py")
+    pid = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.105, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
+    m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=pid))
+    m.add(mb.JointFriction("friction", j, viscous=0.01), mb.JointLimit("stop", j, upper=1.5))
+    python = m.compile()
+    assert sys.extra_states == python.extra_states and sys.parameters == {**python.parameters}
+    a = sys.simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    b = python.simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    assert np.allclose(a["th"], b["th"], atol=1e-12) and np.allclose(a["motor.current"], b["motor.current"], atol=1e-10)
+    mb.load(path).save(tmp_path / "again.toml")  # written back: the same model
+    again = mb.load(tmp_path / "again.toml").compile().simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    assert np.allclose(again["th"], a["th"], atol=1e-12)
+    path.write_text(SERVO_FILE.replace('joint = "hinge" }', 'joint = "hing" }'))
+    with pytest.raises(mb.ModelError, match=r"forces.pid\] measured.joint: unknown joint 'hing'"):
+        mb.load(path)
+    path.write_text(SERVO_FILE.replace('type = "step"', 'type = "ramp"'))
+    with pytest.raises(mb.ModelError, match=r"forces.pid\] setpoint: signal type must be one of"):
+        mb.load(path)

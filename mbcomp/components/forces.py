@@ -195,6 +195,7 @@ class JointTorque(SignalOwner, ForceElement):
     kind = "joint_torque"
     section = "forces"
     signal_attrs = ("value",)
+    file_options = {"value": "signal"}
     params = (ParameterSpec("value", (-1,), "N m or N (per joint coordinate)", default=0.0, time_input=True,
                             doc="one value per joint coordinate, or a callable (t, q, qd)"),)
     refs = {"joint": "joint"}

@@ -254,9 +254,19 @@ class CallableSignal(Signal):
 
 class SignalOwner:
     """Mixin of components whose attributes ``signal_attrs`` may hold signals: a copy with
-    renamed references (``copy_with_references``) rebuilds those signals too."""
+    renamed references (``copy_with_references``) rebuilds those signals too, and model
+    files hold them as signal tables (``file_value``)."""
 
     signal_attrs: tuple = ()
+
+    def file_value(self, key: str):
+        value = super().file_value(key)
+        if isinstance(value, Signal):
+            if not hasattr(value, "file_table"):
+                raise ModelError(self, f"{key} {value.describe()} cannot be written to a model file (files hold "
+                                       f"numbers, expressions of t and the signal tables of docs/drives.md)")
+            return value.file_table()
+        return value
 
     def copy_with_references(self, name: str, references: dict):
         import copy
@@ -290,13 +300,17 @@ class PID(SignalOwner, Component, Signal):
     """
 
     kind = "pid"
-    section = "controllers"
+    section = "forces"
     signal_attrs = ("measured", "setpoint")
+    file_keys = ("measured", "setpoint", "kp", "ki", "kd", "limit")
+    file_required = ("measured", "setpoint", "kp")
+    file_options = {"measured": "signal", "setpoint": "signal"}
     params = (ParameterSpec("kp", (), "output per error", doc="proportional gain"),
               ParameterSpec("ki", (), "output per error s", default=0.0, doc="integral gain"),
               ParameterSpec("kd", (), "output s per error", default=0.0, doc="derivative gain"),
               ParameterSpec("limit", (), "output", positive, optional=True, default=None,
-                            doc="output clipped to [-limit, limit]"))
+                            doc="output clipped to [-limit, limit]"),
+              ParameterSpec("setpoint", (), "measured", doc="a number (a parameter), a signal or a callable of t"))
 
     def __init__(self, name: str, measured: Any, setpoint: Any, kp: float, ki: float = 0.0, kd: float = 0.0,
                  limit: float | None = None):
@@ -304,7 +318,10 @@ class PID(SignalOwner, Component, Signal):
         if not isinstance(measured, Signal):
             raise ModelError(self, f"measured must be a signal (Angle(joint), Speed(joint), ...), got {measured!r}")
         self.measured = measured
-        self.setpoint = as_signal(setpoint, self, "setpoint")
+        if isinstance(setpoint, Signal) or callable(setpoint):
+            object.__setattr__(self, "setpoint", as_signal(setpoint, self, "setpoint"))
+        else:
+            self.setpoint = setpoint  # a number: the parameter "NAME.setpoint"
         self.kp = kp
         self.ki = ki
         self.kd = kd
@@ -313,7 +330,8 @@ class PID(SignalOwner, Component, Signal):
         if not self.has_derivative and self.kd != 0.0:
             raise ModelError(self, "kd needs the rate of the measured signal, which is not known for a Speed "
                                    "(it would need accelerations); use kd=0 or measure an Angle")
-        names = ["kp", "ki"] + (["kd"] if self.has_derivative else []) + (["limit"] if limit is not None else [])
+        names = ["kp", "ki"] + (["kd"] if self.has_derivative else []) + (["limit"] if limit is not None else []) \
+            + (["setpoint"] if isinstance(self.setpoint, float) else [])
         object.__setattr__(self, "parameters", tuple(names))
 
     drive_element = True
@@ -322,7 +340,13 @@ class PID(SignalOwner, Component, Signal):
         return ("integral",)
 
     def signals(self) -> list[Signal]:
-        return [self.measured, self.setpoint]
+        return [self.measured, self._setpoint_signal()]
+
+    def _setpoint_signal(self) -> Signal:
+        return _ParameterSignal(self, "setpoint") if isinstance(self.setpoint, float) else self.setpoint
+
+    def parameter_values(self) -> dict[str, Any]:
+        return {k: v for k, v in super().parameter_values().items() if not isinstance(v, Signal)}
 
     def children(self):
         return ()  # the PID's inputs belong to the PID component, walked once from there
@@ -331,7 +355,8 @@ class PID(SignalOwner, Component, Signal):
         return signal_references(self.signals(), owner=self)
 
     def structure(self):
-        return (self.measured.describe(), self.setpoint.describe(), self.has_derivative, self.limit is not None)
+        return (self.measured.describe(), self._setpoint_signal().describe(), self.has_derivative,
+                self.limit is not None)
 
     def describe(self):
         return f"PID({self.name})"
@@ -339,16 +364,14 @@ class PID(SignalOwner, Component, Signal):
     def file_table(self) -> dict:
         return {"type": "pid", "name": self.name}
 
-    def file_value(self, key: str):
-        value = getattr(self, key, None)
-        return value.file_table() if isinstance(value, Signal) else value
 
     def _raw(self, ctx):
-        e = ctx.let(ctx.signal(self.setpoint) - ctx.signal(self.measured))
+        setpoint = self._setpoint_signal()
+        e = ctx.let(ctx.signal(setpoint) - ctx.signal(self.measured))
         (z,) = ctx.states(self)
         u = ctx.param(self, "kp") * e + ctx.param(self, "ki") * z
         if self.has_derivative:
-            rate_sp, rate_m = ctx.rate(self.setpoint), ctx.rate(self.measured)
+            rate_sp, rate_m = ctx.rate(setpoint), ctx.rate(self.measured)
             if rate_sp is None or rate_m is None:
                 raise ModelError(self, "the rate of its setpoint or measured signal is not known (a callable or "
                                        "a Speed): the derivative term cannot be formed; use kd=0 with Speed")
@@ -424,6 +447,22 @@ def signal_from_table(table: dict, where: str) -> Signal:
     if kind in ("angle", "speed", "pid") and not values:
         raise ModelError(where, f"a {kind!r} signal needs {keys[0]}")
     return cls(**values)
+
+
+class _ParameterSignal(Signal):
+    """A component's numeric parameter as a constant signal (a PID's numeric setpoint)."""
+
+    def __init__(self, owner: Any, attr: str):
+        self.owner, self.attr = owner, attr
+
+    def symbolic(self, ctx):
+        return ctx.param(self.owner, self.attr)
+
+    def symbolic_rate(self, ctx):
+        return 0
+
+    def describe(self):
+        return f"parameter({self.attr})"
 
 
 def _contains_speed(signal: Signal) -> bool:
