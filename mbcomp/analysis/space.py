@@ -49,6 +49,8 @@ def speed_vector(system, values: Any, what: str = "qd") -> np.ndarray:
     names = speed_names(system)
     if values is None:
         return np.zeros(len(names))
+    if hasattr(system, "speed_vector"):
+        return system.speed_vector(values, what)
     if len(names) == len(system.coords):
         return system.state_vector(values, what)
     if isinstance(values, dict):
@@ -186,11 +188,11 @@ class Chart:
 
     def rate(self, q: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``dx/dt`` of the tangent coordinates for speeds ``v`` at ``q = q(x)``: ``v`` itself
-        unless a speed is not a coordinate rate (a ``Ball``), then by a central difference of
-        ``difference(q0, integrate(q, s v))`` in s."""
+        unless a speed is not a coordinate rate (a ``Ball``), then by a fourth-order central
+        difference of ``difference(q0, integrate(q, s v))`` in s."""
         if len(speed_names(self.system)) == len(self.system.coords):
             return v.copy()
-        h = 1e-6
-        plus = difference(self.system, self.q0, integrate(self.system, q, h * v))
-        minus = difference(self.system, self.q0, integrate(self.system, q, -h * v))
-        return (plus - minus) / (2 * h)
+        h = 1e-3 / max(1.0, float(np.max(np.abs(v), initial=0.0)))
+        fm2, fm1, fp1, fp2 = (difference(self.system, self.q0, integrate(self.system, q, s * h * v))
+                              for s in (-2, -1, 1, 2))
+        return (fm2 - 8 * fm1 + 8 * fp1 - fp2) / (12 * h)
