@@ -274,6 +274,20 @@ def test_equilibrium_with_tau_and_of_the_four_bar(fourbars):
         assert np.max(np.abs(fb.accelerations(q, np.zeros(3)))) < 1e-7
 
 
+def test_equilibrium_and_inverse_dynamics_count_drive_torques():
+    """A geared drive with a constant torque T: it balances gravity at sin(theta) = n T / (m g L)
+    and adds n^2 J_r to the inertia."""
+    model = point_pendulum(length=1.0, name="driven")
+    model.add(mb.Drive("drive", "pivot", ratio=5.0, rotor_inertia=0.01, torque=0.1 * G))
+    system = model.compile()
+    q = system.equilibrium([0.0])
+    assert_close(np.sin(q), [0.5], rtol=1e-10, name="sin(theta)")
+    assert system.modes(q).stable
+    tau = system.inverse_dynamics([0.2], [0.3], [1.5])
+    assert_close(system.accelerations([0.2], [0.3], tau=tau), [1.5], rtol=1e-10, name="round trip")
+    assert_close(tau, [(1.0 + 25 * 0.01) * 1.5 + G * np.sin(0.2) - 0.5 * G], rtol=1e-10, name="tau")
+
+
 def test_equilibrium_reports_when_there_is_none():
     system = point_pendulum(length=1.0).compile()
     with pytest.raises(mb.SimulationError, match="no equilibrium found near"):

@@ -107,6 +107,15 @@ def force_vector(system, tau: Any, t: float, q: np.ndarray, v: np.ndarray) -> np
     return arr
 
 
+def model_forces(system, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, f)``: the tree's mass matrix and generalised forces, with the forces of drive
+    elements (constant drive torques, friction, motor currents at zero) included in ``f``."""
+    M, f = system.tree_dynamics(q, v, t)
+    if getattr(system, "has_drives", False):
+        f = f + system.drive_outputs(t, q, v, np.zeros(len(system.extra_states)))[0]
+    return M, f
+
+
 class Chart:
     """Independent tangent coordinates of the constraint manifold about ``q0`` at time ``t``.
 
