@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
 from pathlib import Path
@@ -86,15 +85,13 @@ def _version() -> str:
 # ----------------------------------------------------------------------------------------------
 def resolve_model_file(spec: str) -> Path:
     """A path that exists, else a library model of that name; ``CommandError`` otherwise."""
-    from .io import find_library_model, library_models
-    path = Path(spec)
+    from .io import library_models
+    from .library import resolve_model_path
+    path = resolve_model_path(spec)
     if path.is_file():
         return path
     if path.exists():
         raise CommandError(f"{spec}: not a file", EXIT_BAD_INPUT)
-    found = find_library_model(spec) if "/" not in spec and os.sep not in spec else None
-    if found is not None:
-        return found
     names = ", ".join(library_models()) or "none found"
     raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
                        EXIT_BAD_INPUT)

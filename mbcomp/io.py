@@ -28,7 +28,7 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .components._values import name_of
 from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
-from .library import find_library_model, library_dirs, library_models, read_description
+from .library import find_library_model, library_dirs, library_models, read_description, resolve_model_path
 from .model import Model
 
 __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
@@ -268,6 +268,9 @@ def _parse_toml(path: Path, label: str) -> dict:
 def load(path: str | os.PathLike) -> Model:
     """Read a TOML model file into a ``Model`` (schema: docs/files.md).
 
+    ``path`` is a file, or the name of a library model (``"double_pendulum"``, also
+    ``"library:double_pendulum"``; see ``mbcomp library``); an existing file wins.
+
     Every problem (unknown or missing key, wrong type, wrong vector length, non-finite
     number, reference to an undeclared body or joint, disallowed expression, TOML syntax)
     is collected and reported in one ``ModelError``, each with the file, table and key:
@@ -278,8 +281,12 @@ def load(path: str | os.PathLike) -> Model:
     "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
     ``path`` (the file read).
     """
-    path = Path(path)
+    path = resolve_model_path(path)
     label = str(path)
+    if not path.exists() and "/" not in label and os.sep not in label and not label.endswith(".toml"):
+        names = ", ".join(library_models()) or "none found"
+        raise ModelError(problems=[f"{label}: cannot read the file (no such file), and no library model "
+                                   f"of that name (library: {names})"])
     data = _parse_toml(path, label)
     reader = _Reader(label)
     model = _read_model(reader, data, path)
