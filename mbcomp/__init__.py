@@ -5,6 +5,9 @@ from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
 
+# What the 3D viewer draws for a body
+from .shapes import Box, Cylinder, Mesh, Sphere
+
 # The compiled system and its results
 from .system import BodyState, Energy, System
 from .result import Event, Result
@@ -20,7 +23,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]
 
 

@@ -49,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="CSV", help="write t, coordinates, speeds and energies as CSV")
     run.add_argument("--plot", metavar="PNG", help="save a plot of the coordinates and energy")
     run.add_argument("--animate", metavar="GIF", help="save an animation (GIF, or MP4 with ffmpeg)")
+    run.add_argument("--html", metavar="HTML", help="save a 3D viewer of the motion: one self-contained "
+                                                   "HTML page (opens offline in any browser)")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                      help="show a progress bar on stderr (default: on when stderr is a terminal)")
     run.set_defaults(handler=cmd_run)
@@ -187,6 +189,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.animate:
         _write(lambda: result.animate(args.animate), args.animate)
         outputs.append(f"wrote {args.animate}")
+    if args.html:
+        _write(lambda: result.view(args.html), args.html)
+        outputs.append(f"wrote {args.html} (open it in a browser)")
     for line in outputs:
         print(line)
     return EXIT_OK

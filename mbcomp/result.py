@@ -109,6 +109,12 @@ class Result:
         from .plotting import plot_result
         return plot_result(self, *args, **kwargs)
 
+    def view(self, path=None, **kwargs: Any):
+        """The motion in 3D as one self-contained HTML page (see ``mbcomp.viewer.view``): written
+        to ``path`` (returns the Path), or without a path a ``Viewer`` a notebook shows inline."""
+        from .viewer import view
+        return view(self, path, **kwargs)
+
     def animate(self, path, **kwargs: Any):
         """Save a 3D stick-and-ball animation (GIF with Pillow, MP4 with ffmpeg)."""
         from .plotting import animate_result

@@ -22,15 +22,22 @@ class Body(Component):
         the body frame. ``None`` or zeros make a point mass: no rotational terms are
         generated for it.  The matrix must be symmetric positive semi-definite and its
         principal moments must satisfy the triangle inequality.
+    shape : None, a shape (``mb.Box``, ``mb.Cylinder``, ``mb.Sphere``, ``mb.Mesh``) or a list of
+        them, in the body frame: what the 3D viewer draws.  Display data only: neither a
+        parameter nor structure (changing it never recompiles).
     """
 
     parameters = ("mass", "com", "inertia")
+    display = ("shape",)   #: structure-free display data (not parameters, not in structure())
 
-    def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None):
+    def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None,
+                 shape: Any = None):
         super().__init__(name)
         self.mass = scalar(mass, self, "mass", positive=True)
         self.com = vector3(com, self, "com")
         self.inertia = self._check_inertia(inertia)
+        from ..shapes import as_shapes
+        self.shape = as_shapes(shape, self)
 
     @property
     def is_point_mass(self) -> bool:
@@ -105,6 +112,7 @@ class Ground(Body):
         self.mass = 0.0
         self.com = (0.0, 0.0, 0.0)
         self.inertia = None
+        self.shape = ()
 
     def parameter_values(self) -> dict[str, Any]:
         return {}
