@@ -9,14 +9,22 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .shapes import Box, Cylinder, Mesh, Sphere
 
 # The compiled system and its results
-from .system import BodyState, Energy, System
-from .result import Event, Result
+from .result import Energy, Event, Result
+from .system import BodyState, System
 
 # Many simulations at once
 from .batch import sweep
 
 # Errors
 from .errors import CompileError, ModelError, SimulationError
+
+# Operations of the model layer implemented above it (see services.py)
+from . import services as _services
+from .io import save as _save
+from .system import compile_model as _compile_model
+
+_services.provide("compile", _compile_model)
+_services.provide("save", _save)
 
 __version__ = "0.1.0"
 

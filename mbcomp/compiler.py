@@ -1,7 +1,6 @@
 """Compilation: model -> topology, parameter layout and generated numeric functions (cached)."""
 from __future__ import annotations
 
-import copy
 import shutil
 import time
 from typing import Any
@@ -105,23 +104,3 @@ class CompiledModel:
 
 def _as_list(x):
     return x if isinstance(x, list) else [x]
-
-
-def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
-                  **options: Any):
-    """Model -> System (see ``Model.compile``)."""
-    from .formulations import get_formulation
-    from .system import System
-    formulation_class = get_formulation(formulation)
-    from .formulations.base import analyse
-    compiled = CompiledModel(model, cache=cache, backend=backend)
-    # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
-    analyse(system._formulation, system)
-    return system
-
-
-def rebuild_system(model, formulation, options, backend, parameters):
-    """Unpickle: compile the model again (a cache hit where the cache is shared)."""
-    return compile_model(model, formulation=formulation, backend=backend, **options).with_parameters(parameters)

@@ -6,6 +6,7 @@ from typing import Any
 from .components import Body, Component, Ground
 from .components._values import vector3
 from .errors import ModelError, describe
+from .services import service
 
 
 class Model:
@@ -79,13 +80,11 @@ class Model:
             ``"python"``.
         options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
         """
-        from .compiler import compile_model
-        return compile_model(self, formulation=formulation, cache=cache, backend=backend, **options)
+        return service("compile")(self, formulation=formulation, cache=cache, backend=backend, **options)
 
     def save(self, path) -> None:
         """Write the model as a declarative TOML file that ``mb.load`` reads back."""
-        from .io import save
-        save(self, path)
+        service("save")(self, path)
 
     def __repr__(self) -> str:
         return f"Model({self.name!r}, {len(self._components) - 1} components)"

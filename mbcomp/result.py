@@ -7,7 +7,18 @@ from typing import Any
 
 import numpy as np
 
-from .system import Energy
+
+
+@dataclass(frozen=True)
+class Energy:
+    """Kinetic, potential (gravity + springs) and total energy, J."""
+
+    kinetic: Any
+    potential: Any
+
+    @property
+    def total(self):
+        return self.kinetic + self.potential
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
 from typing import Any, Mapping
 
 import numpy as np
@@ -11,18 +11,7 @@ from .constraint_set import cross
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY
 from .errors import format_state, ModelError, SimulationError, describe
-
-
-@dataclass(frozen=True)
-class Energy:
-    """Kinetic, potential (gravity + springs) and total energy, J."""
-
-    kinetic: Any
-    potential: Any
-
-    @property
-    def total(self):
-        return self.kinetic + self.potential
+from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 
 
 class BodyState:
@@ -76,7 +65,6 @@ class System:
 
     def __reduce__(self):
         model, formulation, options, backend = self._compiled.recipe
-        from .compiler import rebuild_system
         return rebuild_system, (model, formulation, options, backend, self._parameters)
 
     # -- description -----------------------------------------------------------------
@@ -449,3 +437,23 @@ class System:
     def __repr__(self) -> str:
         return (f"System({self._compiled.model_name!r}, coords={list(self.coords)}, ndof={self.ndof}, "
                 f"formulation={self.formulation!r}, backend={self.backend!r})")
+
+
+def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
+                  **options: Any) -> System:
+    """Model -> System (see ``Model.compile``)."""
+    from .compiler import CompiledModel
+    from .formulations import get_formulation
+    from .formulations.base import analyse
+    formulation_class = get_formulation(formulation)
+    compiled = CompiledModel(model, cache=cache, backend=backend)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters).
+    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
+    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    analyse(system._formulation, system)
+    return system
+
+
+def rebuild_system(model, formulation, options, backend, parameters) -> System:
+    """Unpickle: compile the model again (a cache hit where the cache is shared)."""
+    return compile_model(model, formulation=formulation, backend=backend, **options).with_parameters(parameters)
