@@ -4,6 +4,7 @@
 from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
+from .components.frame import Frame, rpy
 
 # What the 3D viewer draws for a body
 from .shapes import Box, Cylinder, Mesh, Sphere
@@ -18,20 +19,30 @@ from .batch import sweep
 # Errors
 from .errors import CompileError, ModelError, SimulationError
 
-# Operations of the model layer implemented above it (see services.py)
+# Operations that lower layers offer as methods, implemented above them (see services.py)
 from . import services as _services
+from . import post as _post
 from .io import save as _save
+from .plotting import animate_result as _animate_result, plot_result as _plot_result
 from .system import compile_model as _compile_model
 
 _services.provide("compile", _compile_model)
 _services.provide("save", _save)
+_services.provide("energy", _post.energy)
+_services.provide("reactions", _post.reactions)
+_services.provide("constraint_violation", _post.constraint_violation)
+_services.provide("plot", _plot_result)
+_services.provide("animate", _animate_result)
+from .viewer import view as _view
+_services.provide("view", _view)
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError",
+    "SimulationError", "load", "sweep",
 ]
 
 

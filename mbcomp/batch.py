@@ -4,8 +4,6 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Iterable, Mapping
 
-import numpy as np
-
 from .errors import ModelError
 from .result import Result
 
@@ -26,13 +24,13 @@ def _check_case(case: Mapping[str, Any], index: int, defaults: Mapping[str, Any]
     return merged
 
 
-def _run(system, case: dict):
-    """One simulation; returns plain arrays (cheap to send between processes)."""
+def _run(system, case: dict) -> Result:
+    """One simulation; the Result without its System (plain data, cheap to send between
+    processes: the caller binds its own System with the case's parameters)."""
     case = dict(case)
     t_end, q0 = case.pop("t_end"), case.pop("q0")
     qd0 = case.pop("qd0", None)
-    result = system.simulate(t_end, q0, qd0, **case)
-    return result.t, result.q, result.qd, result.stats, result.events
+    return system.simulate(t_end, q0, qd0, **case).with_system(None)
 
 
 def _run_many(system, cases: list) -> list:
@@ -49,7 +47,9 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     out.  Without ``client`` the cases run on a thread pool (the compiled integrator
     releases the GIL); with a ``dask.distributed.Client`` they run on its workers (the
     System travels by pickling and is recompiled there, from the shared code cache
-    when there is one).  Results are identical to running the cases one by one.
+    when there is one).  Results are identical to running the cases one by one, derived
+    series included (reactions of resting contacts and motors: each Result records what
+    they need).
     """
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
     if client is None:
@@ -67,9 +67,4 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
         remote = client.scatter(system, broadcast=True, hash=False)
         futures = [client.submit(_run_many, remote, chunk, pure=False) for chunk in chunks]
         outputs = [output for chunk in client.gather(futures) for output in chunk]
-    results = []
-    for case, (t, q, qd, stats, events) in zip(cases, outputs):
-        parameters = case.get("parameters")
-        results.append(Result(system=system.with_parameters(parameters), t=np.asarray(t), q=np.asarray(q),
-                              qd=np.asarray(qd), stats=dict(stats), events=list(events), tau=case.get("tau")))
-    return results
+    return [result.with_system(system.with_parameters(case.get("parameters"))) for case, result in zip(cases, outputs)]

@@ -360,6 +360,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         pos = prog.lets([o + r for o, r in zip(kin.origin[parent], matvec(R, kin.param(joint, "parent_point")))])
         V, A = kin.V[parent], kin.A[parent]
         sl = topology.q_slice[joint.name]
+        R = _rotate_frame(prog, R, getattr(joint, "parent_rotation", None))
         for k, (kind, axis) in enumerate(joint._screws()):
             i = sl.start + k
             axis_world = prog.lets(matvec(R, [exact(a) for a in axis]))
@@ -374,6 +375,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
             kin.S[i] = S
             A = prog.lets([a + b * prog.qd[i] for a, b in zip(A, motion_cross(V, S))])
             V = prog.lets([a + b * prog.qd[i] for a, b in zip(V, S)])
+        R = _rotate_frame(prog, R, getattr(joint, "child_rotation", None), transpose=True)
         kin.R[body.name] = R
         kin.origin[body.name] = prog.lets([x - r for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
         kin.V[body.name], kin.A[body.name] = V, A
@@ -459,6 +461,15 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
 
 
 KINEMATICS_PER_BODY = 9 + 3 + 6 + 6
+
+
+def _rotate_frame(prog: Program, R, rotation, transpose: bool = False):
+    """``R @ rotation`` (or ``R @ rotation^T``) for a joint's constant frame rotation
+    (rotated ``Frame``s); ``None`` (identity) leaves ``R`` and the program untouched."""
+    if rotation is None:
+        return R
+    C = [[exact(rotation[j][i] if transpose else rotation[i][j]) for j in range(3)] for i in range(3)]
+    return [[prog.let(dot(R[r], [C[m][col] for m in range(3)])) for col in range(3)] for r in range(3)]
 
 
 def _body_inertia_symbols(body: Body, kin: Kinematics):

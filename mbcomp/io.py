@@ -30,6 +30,7 @@ from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
 from .library import find_library_model, library_dirs, library_models, read_description, resolve_model_path
 from .model import Model
+from .components.frame import Frame, rotation_matrix
 
 __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
            "library_dirs", "library_models", "find_library_model", "read_description"]
@@ -40,10 +41,12 @@ __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "Expressio
 TOP_KEYS = ("name", "description", "gravity", "parameters", "bodies", "joints", "forces", "constraints",
             "contacts", "initial", "simulation")
 BODY_KEYS = ("mass", "com", "inertia")
-JOINT_COMMON = ("type", "parent", "child", "parent_point", "child_point", "coords")
+JOINT_COMMON = ("type", "parent", "child", "parent_point", "child_point", "parent_rotation", "child_rotation",
+                "coords")
 JOINT_KEYS = {"revolute": JOINT_COMMON + ("axis",), "prismatic": JOINT_COMMON + ("axis",),
               "spherical": JOINT_COMMON + ("sequence",), "fixed": ("type", "parent", "child", "parent_point",
-                                                                    "child_point")}
+                                                                    "child_point", "parent_rotation",
+                                                                    "child_rotation")}
 FORCE_KEYS = {"spring": ("type", "a", "b", "stiffness", "rest_length", "damping"),
               "damper": ("type", "a", "b", "damping"),
               "force": ("type", "body", "point", "force"),
@@ -479,8 +482,35 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
     if any(v is BAD for v in values) or count is None:
         return None
     factory = {"revolute": Revolute, "prismatic": Prismatic, "spherical": Spherical, "fixed": Fixed}[kind]
+    rotations = {key: _read_rotation(r, label, key, table[key]) for key in ("parent_rotation", "child_rotation")
+                 if key in table}
+    if any(v is BAD for v in rotations.values()):
+        return None
+    if rotations:
+        try:
+            parent = Frame(parent, parent_point, rotations.get("parent_rotation"))
+            child = Frame(child, child_point, rotations.get("child_rotation"))
+        except ModelError as exc:
+            r.problem(label, None, str(exc))
+            return None
+        return _construct(r, label, factory, name, parent, child, **options)
     return _construct(r, label, factory, name, parent, child, parent_point=parent_point,
                       child_point=child_point, **options)
+
+
+def _read_rotation(r: _Reader, label: str, key: str, value: Any) -> Any:
+    """A 3x3 rotation matrix given as three rows of three numbers (the joint frame's axes
+    in the body frame)."""
+    if not isinstance(value, list) or len(value) != 3 or not all(isinstance(row, list) and len(row) == 3
+                                                                  for row in value):
+        return r.problem(label, key, f"must be a 3x3 matrix [[...], [...], [...]], got {_short(value)}")
+    rows = [r.vector(label, f"{key}[{i}]", row) for i, row in enumerate(value)]
+    if any(row is BAD for row in rows):
+        return BAD
+    try:
+        return rotation_matrix(rows, label, key)
+    except ModelError as exc:
+        return r.problem(label, key, str(exc))
 
 
 def _time_input(r: _Reader, label: str, key: str, value: Any, owner: str, *, vector: bool) -> Any:
@@ -759,6 +789,9 @@ def _component_table(comp: Any) -> tuple[str, dict]:
             table["parent_point"] = _floats(comp.parent_point)
         if any(comp.child_point):
             table["child_point"] = _floats(comp.child_point)
+        for key in ("parent_rotation", "child_rotation"):
+            if getattr(comp, key, None) is not None:
+                table[key] = [_floats(row) for row in getattr(comp, key)]
         if comp.n_coords:
             table["coords"] = comp.coords[0] if comp.n_coords == 1 else list(comp.coords)
         return "joints", table

@@ -9,6 +9,12 @@ from .errors import ModelError, describe
 from .services import service
 
 
+def _plain(body: Any) -> str:
+    """A body's name made fit for a component name."""
+    from .components._values import name_of
+    return name_of(body).replace(".", "_")
+
+
 class Model:
     """A mechanism description: a ground body, components and a uniform gravity field.
 
@@ -46,6 +52,31 @@ class Model:
                 raise ModelError(comp, f"name {comp.name!r} is already used by {describe(existing)}")
             self._components[comp.name] = comp
         return components[0]
+
+    def connect(self, a: Any, b: Any, name: str | None = None) -> Component:
+        """Weld two frames together: adds (and returns) a ``Fixed`` joint from ``a`` to ``b``,
+        named ``"weld_<body a>_<body b>"`` unless ``name`` is given.  Either frame may be
+        the one already connected to the ground: the compiler orients the joint."""
+        from .components import Fixed
+        from .components.frame import Frame
+        for role, frame in (("a", a), ("b", b)):
+            if not isinstance(frame, Frame):
+                raise ModelError(f"Model {self.name!r}", f"connect() takes two Frames (body.frame(...)); {role} is {frame!r}")
+        if name is None:
+            name = f"weld_{_plain(a.body)}_{_plain(b.body)}"
+        return self.add(Fixed(name, a, b))
+
+    def flat(self) -> "Model":
+        """The model the compiler reads: joints oriented along the spanning tree (the model
+        itself when nothing changes)."""
+        from .flatten import orient_joints
+        components = orient_joints(self._components, self.ground.name)
+        if components is self._components:
+            return self
+        flat = Model.__new__(Model)
+        flat.name, flat.gravity, flat.ground = self.name, self.gravity, self.ground
+        flat._components = components
+        return flat
 
     def __getitem__(self, name: str) -> Component:
         try:

@@ -1,11 +1,14 @@
-"""Result: simulated time series (plain data) with helpers."""
+"""Result, Event and Energy: plain data of a simulation (the derived series are computed in
+``post.py``, reached through the registered services so that this module imports nothing above it)."""
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+
+from .services import service
 
 
 
@@ -34,10 +37,17 @@ class Event:
 
 @dataclass
 class Result:
-    """Simulated time series.
+    """Simulated time series: plain data that pickles without its System.
 
     ``t`` (m,) s; ``q``, ``qd`` (m, nq) in ``coords`` order; ``res["name"]`` a coordinate's
-    series; ``stats`` holds the solver counters and wall time.
+    series; ``stats`` holds the solver counters and wall time.  Everything the derived
+    series need is recorded here: the parameter values (``parameters``), the speed
+    motors' start values (``offsets``) and the contacts held closed at each sample
+    (``closed_contacts``), so ``energy()``, ``reactions`` and ``constraint_violation()``
+    give the same numbers whichever System of the same model computes them.
+
+    ``system`` is the System that produced the result; it is left out when the result is
+    pickled (``with_system`` binds one again).
     """
 
     system: Any
@@ -50,11 +60,39 @@ class Result:
     offsets: dict = field(default_factory=dict, repr=False)
     persistent_contacts: list = field(default_factory=list)
     closed_contacts: list = field(default_factory=list, repr=False)  #: persistent contact indices per sample
-    _reactions: dict | None = field(default=None, repr=False)
+    coords: tuple = ()  #: coordinate names (from the System when not given)
+    parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
+    formulation: str = ""
+    _reactions: dict | None = field(default=None, repr=False, compare=False)
 
-    @property
-    def coords(self) -> tuple[str, ...]:
-        return self.system.coords
+    def __post_init__(self):
+        if self.system is not None:
+            if not self.coords:
+                self.coords = tuple(self.system.coords)
+            if not self.parameters:
+                self.parameters = self.system.parameters
+            if not self.formulation:
+                self.formulation = self.system.formulation
+        self.coords = tuple(self.coords)
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["system"] = None  # plain data: the System is not part of a pickled result
+        return state
+
+    def with_system(self, system) -> "Result":
+        """This result bound to ``system`` (the same model; its own parameter values are kept
+        in ``parameters``), e.g. after unpickling, for ``energy()``, ``reactions`` and plots."""
+        if system is not None and tuple(system.coords) != self.coords:
+            raise ValueError(f"with_system: the System's coordinates {list(system.coords)} are not this "
+                             f"result's {list(self.coords)}")
+        return replace(self, system=system, _reactions=None)
+
+    def _bound_system(self, what: str):
+        if self.system is None:
+            raise ValueError(f"Result.{what} needs the System that produced the result (this one has none, e.g. "
+                             f"after unpickling): use res.with_system(system)")
+        return self.system
 
     def __getitem__(self, name: str) -> np.ndarray:
         """The series of coordinate ``name`` (or ``name_d`` / ``"d" + name`` for its speed)."""
@@ -68,13 +106,11 @@ class Result:
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
-        values = np.array([self.system._call("energy", q, qd) for q, qd in zip(self.q, self.qd)]).reshape(-1, 2)
-        return Energy(values[:, 0], values[:, 1])
+        return service("energy")(self._bound_system("energy()"), self)
 
     def constraint_violation(self) -> np.ndarray:
         """max |C(q, t)| per sample (zeros for a model without constraints)."""
-        return np.array([self.system._formulation.constraint_violation(self.system, t, q, self.offsets)
-                         for t, q in zip(self.t, self.q)])
+        return service("constraint_violation")(self._bound_system("constraint_violation()"), self)
 
     @property
     def reactions(self) -> dict[str, np.ndarray]:
@@ -82,16 +118,7 @@ class Result:
         contact its normal force (N) while it rests closed (0 while open; impacts are
         impulses, in ``events``)."""
         if self._reactions is None:
-            series: dict[str, list] = {}
-            closed = self.closed_contacts or [()] * len(self.t)
-            contacts = [c.name for c in self.system.topology.contacts]
-            for t, q, qd, shut in zip(self.t, self.q, self.qd, closed):
-                values = self.system.reactions(q, qd, t, tau=self.tau, offsets=self.offsets, contacts=shut)
-                for name in contacts:
-                    values.setdefault(name, 0.0)
-                for name, value in values.items():
-                    series.setdefault(name, []).append(np.atleast_1d(value))
-            self._reactions = {k: np.array(v) for k, v in series.items()}
+            self._reactions = service("reactions")(self._bound_system("reactions"), self)
         return self._reactions
 
     def to_csv(self, path) -> None:
@@ -117,16 +144,13 @@ class Result:
 
     def plot(self, *args: Any, **kwargs: Any):
         """Coordinates, speeds and energy against time (a matplotlib Figure)."""
-        from .plotting import plot_result
-        return plot_result(self, *args, **kwargs)
+        return service("plot")(self, *args, **kwargs)
 
     def view(self, path=None, **kwargs: Any):
         """The motion in 3D as one self-contained HTML page (see ``mbcomp.viewer.view``): written
         to ``path`` (returns the Path), or without a path a ``Viewer`` a notebook shows inline."""
-        from .viewer import view
-        return view(self, path, **kwargs)
+        return service("view")(self, path, **kwargs)
 
     def animate(self, path, **kwargs: Any):
         """Save a 3D stick-and-ball animation (GIF with Pillow, MP4 with ffmpeg)."""
-        from .plotting import animate_result
-        return animate_result(self, path, **kwargs)
+        return service("animate")(self, path, **kwargs)

@@ -101,6 +101,11 @@ class System:
         return self._compiled.topology
 
     @property
+    def name(self) -> str:
+        """The name of the model this System was compiled from."""
+        return self._compiled.model_name
+
+    @property
     def parameters(self) -> dict[str, Any]:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
@@ -359,9 +364,10 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.assemble(self, q, qd, t)
 
-    def constraint_violation(self, q: Any, t: float = 0.0) -> float:
-        """max |g(q, t)| over the position-level constraint equations."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q))
+    def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
+        """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
+        values of speed motors, as a ``Result`` records them)."""
+        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
@@ -446,6 +452,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from .formulations import get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
+    model = model.flat()  # sub-models expanded, joints oriented along the tree
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)

@@ -65,3 +65,50 @@ def test_dask_cluster_on_loopback_matches_serial(chain):
         remote = mb.sweep(chain, cases, client=client, t_end=2.0)
     for a, b in zip(serial, remote):
         np.testing.assert_array_equal(a.q, b.q)
+
+
+def _motor_and_resting_block() -> mb.Model:
+    """A rod turned at constant speed by a motor (about y, gravity -z) beside a block on a
+    vertical prismatic joint resting on a floor contact."""
+    m = mb.Model("motor_and_block")
+    rod = m.add(mb.Body("rod", mass=2.0, com=(0.5, 0, 0), inertia=(1e-3, 1 / 6, 1 / 6)))
+    m.add(mb.Revolute("hinge", m.ground, rod, axis="y", coords="theta"))
+    m.add(mb.Motor("motor", "hinge", speed=1.5))
+    block = m.add(mb.Body("block", mass=1.0, inertia=(1e-3, 1e-3, 1e-3)))
+    m.add(mb.Prismatic("rail", m.ground, block, axis="z", parent_point=(3, 0, 0), coords="z"))
+    m.add(mb.Contact("floor", block, normal=(0, 0, 1), origin=(3, 0, 0), restitution=0.0))
+    return m
+
+
+def test_sweep_keeps_motor_and_resting_contact_reactions():
+    """Reactions after a sweep equal the serial run's: the block's floor force is its weight
+    m g (held closed all along), the motor's torque balances gravity on the rod."""
+    system = _motor_and_resting_block().compile()
+    cases = [{"q0": {"theta": 0.3 * k, "z": 0.0}, "parameters": {"block.mass": 1.0 + k}, "t_eval": np.linspace(0, 0.5, 11)}
+             for k in range(3)]
+    serial = [system.simulate(0.5, c["q0"], parameters=c["parameters"], t_eval=c["t_eval"]) for c in cases]
+    swept = mb.sweep(system, cases, t_end=0.5, threads=2)
+    for case, a, b in zip(cases, serial, swept):
+        np.testing.assert_array_equal(a.q, b.q)
+        assert b.closed_contacts == a.closed_contacts and b.offsets == a.offsets
+        for name in ("motor", "floor"):
+            np.testing.assert_allclose(b.reactions[name], a.reactions[name], rtol=1e-12, atol=1e-12)
+        mass = case["parameters"]["block.mass"]
+        np.testing.assert_allclose(b.reactions["floor"][:, 0], mass * 9.81, rtol=1e-9)
+        # Constant speed about a fixed axis: the motor torque is minus gravity's, m g (L/2) cos(theta).
+        theta = b["theta"]
+        np.testing.assert_allclose(np.abs(b.reactions["motor"][:, 0]), 2.0 * 9.81 * 0.5 * np.abs(np.cos(theta)),
+                                   rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(b.constraint_violation(), a.constraint_violation(), atol=1e-12)
+
+
+def test_result_pickles_without_its_system(chain):
+    res = chain.simulate(0.3, np.array([0.2, 0.1, 0.0]), parameters={"link0.mass": 2.0})
+    again = pickle.loads(pickle.dumps(res))
+    assert again.system is None and again.coords == res.coords
+    assert again.parameters["link0.mass"] == 2.0
+    np.testing.assert_array_equal(again.q, res.q)
+    with pytest.raises(ValueError, match="with_system"):
+        again.energy()
+    # Bound to the default-parameter System, it still uses the run's own parameter values.
+    np.testing.assert_allclose(again.with_system(chain).energy().total, res.energy().total, rtol=1e-14)

@@ -39,6 +39,12 @@ class Body(Component):
         from ..shapes import as_shapes
         self.shape = as_shapes(shape, self)
 
+    def frame(self, point: Any = (0.0, 0.0, 0.0), rotation: Any = None) -> "Frame":
+        """A ``Frame`` fixed on this body at ``point`` (m, body frame), optionally rotated
+        (``rotation``: 3x3 matrix of the frame's axes in the body frame, or ``mb.rpy(...)``)."""
+        from .frame import Frame
+        return Frame(self, point, rotation)
+
     @property
     def is_point_mass(self) -> bool:
         """True when the body has no rotational inertia (no rotational terms are generated)."""

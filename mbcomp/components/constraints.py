@@ -9,6 +9,7 @@ from ..errors import ModelError
 from ..rotations import AXIS_NAMES, unit_axis
 from .base import Constraint
 from .primitives import CoordinateEquation, DotEquation, PointEquation
+from .frame import split_frame
 from ._values import scalar, vector3
 
 WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
@@ -34,9 +35,9 @@ class Slider(Constraint):
     n_equations = 2
     parameters = ("point", "origin")
 
-    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), origin: Any = (0.0, 0.0, 0.0), axis: Any = "x"):
+    def __init__(self, name: str, body: Any, point: Any = None, origin: Any = (0.0, 0.0, 0.0), axis: Any = "x"):
         super().__init__(name)
-        self.body = body
+        self.body, point, _ = split_frame(body, point, self, "body")
         self.point = vector3(point, self, "point")
         self.origin = vector3(origin, self, "origin")
         self.axis = unit_axis(axis, owner=self)
@@ -104,23 +105,34 @@ class LoopClosure(Constraint):
         from .joints import Fixed, Prismatic, Revolute, Spherical
         j = self.joint
         a, b, pa, pb = j.parent, j.child, f"{j.name}.parent_point", f"{j.name}.child_point"
+        # Directions of the joint frames in their body frames (rotated frames: R_pf, R_cf).
+        Rp, Rc = j.parent_frame_rotation, j.child_frame_rotation
+        in_a = (lambda v: v) if j.parent_rotation is None else (lambda v: _rotated(Rp, v))
+        in_b = (lambda v: v) if j.child_rotation is None else (lambda v: _rotated(Rc, v))
         if isinstance(j, Prismatic):
-            eqs = [PointEquation(a, n, a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
-            return eqs + _orientation_lock(a, b)
+            eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
+            return eqs + _orientation_lock(a, b, in_a, in_b)
         eqs = [PointEquation(ground, n, a, pa, b, pb, "fxyz"[i + 1]) for i, n in enumerate(WORLD_AXES)]
         if isinstance(j, Fixed):
-            return eqs + _orientation_lock(a, b)
+            return eqs + _orientation_lock(a, b, in_a, in_b)
         if isinstance(j, Revolute) or isinstance(j, Spherical) and len(j.sequence) == 1:
             axis = j.axis if isinstance(j, Revolute) else AXIS_NAMES[j.sequence]
-            return eqs + [DotEquation(a, axis, b, n, f"t{i + 1}") for i, n in enumerate(normals(axis))]
+            return eqs + [DotEquation(a, in_a(axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(axis))]
         if isinstance(j, Spherical) and len(j.sequence) == 2:
-            return eqs + [DotEquation(a, AXIS_NAMES[j.sequence[0]], b, AXIS_NAMES[j.sequence[1]], "t")]
+            return eqs + [DotEquation(a, in_a(AXIS_NAMES[j.sequence[0]]), b, in_b(AXIS_NAMES[j.sequence[1]]), "t")]
         if isinstance(j, Spherical):
             return eqs
         raise ModelError(j, "this joint type cannot close a loop")
 
 
-def _orientation_lock(a, b):
-    """Three conditions keeping body b's axes parallel to body a's."""
+def _rotated(R, v):
+    """``R @ v`` as a tuple of floats (a joint-frame direction in its body frame)."""
+    return tuple(float(x) for x in np.asarray(R) @ np.asarray(v, dtype=float))
+
+
+def _orientation_lock(a, b, in_a=lambda v: v, in_b=lambda v: v):
+    """Three conditions keeping frame b's axes parallel to frame a's (``in_a``/``in_b`` map
+    joint-frame directions into the body frames)."""
     x, y, z = WORLD_AXES
-    return [DotEquation(a, x, b, y, "tz"), DotEquation(a, y, b, z, "tx"), DotEquation(a, z, b, x, "ty")]
+    return [DotEquation(a, in_a(x), b, in_b(y), "tz"), DotEquation(a, in_a(y), b, in_b(z), "tx"),
+            DotEquation(a, in_a(z), b, in_b(x), "ty")]

@@ -8,6 +8,7 @@ import numpy as np
 from ..errors import ModelError
 from ..rotations import unit_axis
 from .base import Component
+from .frame import split_frame
 from ._values import scalar, vector3
 
 
@@ -19,10 +20,10 @@ class Contact(Component):
 
     parameters = ("point", "origin", "restitution")
 
-    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), normal: Any = (0.0, 0.0, 1.0),
+    def __init__(self, name: str, body: Any, point: Any = None, normal: Any = (0.0, 0.0, 1.0),
                  origin: Any = (0.0, 0.0, 0.0), restitution: float = 0.0):
         super().__init__(name)
-        self.body = body
+        self.body, point, _ = split_frame(body, point, self, "body")
         self.point = vector3(point, self, "point")
         if isinstance(normal, str):
             self.normal = unit_axis(normal, owner=self)

@@ -15,10 +15,13 @@ import sympy as sp
 from ..errors import ModelError
 from .base import ForceElement
 from ._values import scalar, vector3
+from .frame import Frame, split_frame
 
 
 def _attachment(value: Any, owner: Any, role: str) -> tuple[Any, tuple[float, float, float]]:
-    """``(body, point)`` from ``(body, point)`` or a bare body (point = origin)."""
+    """``(body, point)`` from ``(body, point)``, a ``Frame`` or a bare body (point = origin)."""
+    if isinstance(value, Frame):
+        return value.body, vector3(value.point, owner, f"{role} point")
     if isinstance(value, (tuple, list)) and len(value) == 2 and not isinstance(value[0], (int, float)):
         return value[0], vector3(value[1], owner, f"{role} point")
     if isinstance(value, (tuple, list)):
@@ -124,9 +127,9 @@ class Force(ForceElement):
 
     parameters = ("point", "force")
 
-    def __init__(self, name: str, body: Any, point: Any = (0.0, 0.0, 0.0), force: Any = (0.0, 0.0, 0.0)):
+    def __init__(self, name: str, body: Any, point: Any = None, force: Any = (0.0, 0.0, 0.0)):
         super().__init__(name)
-        self.body = body
+        self.body, point, _ = split_frame(body, point, self, "body")
         self.point = vector3(point, self, "point")
         self.is_callable = callable(force)
         self.force = force if self.is_callable else vector3(force, self, "force")

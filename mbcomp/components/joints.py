@@ -14,6 +14,7 @@ from ..errors import ModelError
 from ..rotations import AXIS_NAMES, axis_angle, parse_sequence, unit_axis
 from .base import Component
 from ._values import vector3
+from .frame import split_frame
 
 
 class Joint(Component):
@@ -22,9 +23,12 @@ class Joint(Component):
 
     Parameters
     ----------
-    parent, child : Body or str
-    parent_point : (3,) m, joint location in the parent body frame
-    child_point : (3,) m, joint location in the child body frame
+    parent, child : Body, str or Frame.  A ``Frame`` carries the joint location and
+        may be rotated: the axis is then in the parent frame's rotated axes, and at
+        zero coordinates the child frame coincides with the parent frame
+        (``R_child = R_parent R_pf R_joint(q) R_cf^T``).
+    parent_point : (3,) m, joint location in the parent body frame (with a body)
+    child_point : (3,) m, joint location in the child body frame (with a body)
     coords : str or sequence of str, names of the joint coordinates (default from the
         joint name)
 
@@ -34,11 +38,11 @@ class Joint(Component):
     n_coords: ClassVar[int] = 0
     parameters = ("parent_point", "child_point")
 
-    def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = (0.0, 0.0, 0.0),
-                 child_point: Any = (0.0, 0.0, 0.0), coords: Any = None):
+    def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
+                 child_point: Any = None, coords: Any = None):
         super().__init__(name)
-        self.parent = parent
-        self.child = child
+        self.parent, parent_point, self.parent_rotation = split_frame(parent, parent_point, self, "parent")
+        self.child, child_point, self.child_rotation = split_frame(child, child_point, self, "child")
         self.parent_point = vector3(parent_point, self, "parent_point")
         self.child_point = vector3(child_point, self, "child_point")
         self.coords = self._coord_names(coords)
@@ -59,23 +63,38 @@ class Joint(Component):
         return {"parent": self.parent, "child": self.child}
 
     def structure(self) -> tuple:
-        return tuple(self._screws())
+        screws = tuple(self._screws())
+        if self.parent_rotation is None and self.child_rotation is None:
+            return screws
+        return screws + (("frames", self.parent_rotation, self.child_rotation),)
+
+    @property
+    def parent_frame_rotation(self) -> np.ndarray:
+        """(3, 3) rotation of the joint's parent frame in the parent body frame."""
+        return np.eye(3) if self.parent_rotation is None else np.array(self.parent_rotation)
+
+    @property
+    def child_frame_rotation(self) -> np.ndarray:
+        """(3, 3) rotation of the joint's child frame in the child body frame."""
+        return np.eye(3) if self.child_rotation is None else np.array(self.child_rotation)
 
     def relative_pose(self, q: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-        """``(R_PC, p_PC)``: child frame rotation and origin in the parent frame at ``q``.
+        """``(R_PC, p_PC)``: child body frame rotation and origin in the parent body frame.
 
-        ``p_PC = parent_point + translation(q) - R_PC child_point`` (m, parent frame).
+        ``R_PC = R_pf R_joint(q) R_cf^T`` and ``p_PC = parent_point + R_pf translation(q)
+        - R_PC child_point`` (m, parent body frame).
         """
         q = np.asarray(q, dtype=float).reshape(-1)
         if q.shape != (self.n_coords,):
             raise ModelError(self, f"needs {self.n_coords} coordinate(s), got {q.size}")
-        rotation = np.eye(3)
+        rotation = self.parent_frame_rotation
         translation = np.zeros(3)
         for (kind, axis), value in zip(self._screws(), q):
             if kind == "R":
                 rotation = rotation @ axis_angle(axis, value)
             else:
                 translation = translation + rotation @ (np.asarray(axis) * value)
+        rotation = rotation @ self.child_frame_rotation.T
         origin = np.asarray(self.parent_point) + translation - rotation @ np.asarray(self.child_point)
         return rotation, origin
 

@@ -171,6 +171,9 @@ class SceneBuilder:
         for joint in tuple(self.topology.tree_joints) + tuple(self.topology.cut_joints):
             kind = type(joint).__name__.lower()
             axis = getattr(joint, "axis", None)
+            if axis is not None and hasattr(joint, "child_frame_rotation"):
+                # The axis is in the joint frame, which sits rotated in the child body.
+                axis = np.asarray(joint.child_frame_rotation, dtype=float) @ np.asarray(axis, dtype=float)
             joints.append({"name": joint.name, "kind": kind, "body": self.body_of(joint.child),
                            "point": [*map(float, _value(system, joint, "child_point"))],
                            "parent": self.body_of(joint.parent),
@@ -213,6 +216,9 @@ def world_points(poses: np.ndarray, bodies: list[int], locals_: np.ndarray) -> n
 def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title: str | None = None) -> dict:
     """The whole page data of ``result`` as a JSON-ready dict (poses packed as base64 float32)."""
     system = result.system
+    if system is None:
+        raise ModelError("viewer", "this result has no System (e.g. after unpickling): "
+                                   "use res.with_system(system).view(...)")
     t = np.asarray(result.t, dtype=float)
     if t.size == 0:
         raise ModelError("viewer", "the result has no samples to show")
@@ -249,7 +255,7 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
 
     gravity = np.asarray(system.parameters.get("gravity", (0.0, 0.0, -9.81)), dtype=float)
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else np.array([0.0, 0.0, 1.0])
-    name = getattr(system, "name", None) or getattr(getattr(system, "_compiled", None), "model_name", None)
+    name = getattr(system, "name", None)
     scene = {
         "title": title or name or "mbcomp",
         "t0": float(times[0]), "t1": float(times[-1]), "frames": int(len(times)),

@@ -1,0 +1,52 @@
+"""Series derived from a simulation: functions of ``(system, result)``.
+
+Each reads what the run used from the result itself (parameter values, speed-motor start
+values, the contacts held closed at each sample), so a result computed elsewhere (a
+sweep on threads or on a cluster) gives the same numbers as the serial run.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .result import Energy
+
+
+def bound_system(system: Any, result: Any) -> Any:
+    """``system`` with the result's parameter values (itself when they already agree)."""
+    if not result.parameters or system.parameters == result.parameters:
+        return system
+    return system.with_parameters(result.parameters)
+
+
+def energy(system: Any, result: Any) -> Energy:
+    """Kinetic and potential energy (J) at every sample, arrays of shape (m,)."""
+    system = bound_system(system, result)
+    if len(result.t) == 0:
+        return Energy(np.zeros(0), np.zeros(0))
+    values = [system.energy(q, qd, t) for t, q, qd in zip(result.t, result.q, result.qd)]
+    return Energy(np.array([e.kinetic for e in values]), np.array([e.potential for e in values]))
+
+
+def constraint_violation(system: Any, result: Any) -> np.ndarray:
+    """max |C(q, t)| per sample (zeros for a model without constraints); speed motors are
+    measured from the run's own start values."""
+    system = bound_system(system, result)
+    return np.array([system.constraint_violation(q, t, offsets=result.offsets) for t, q in zip(result.t, result.q)])
+
+
+def reactions(system: Any, result: Any) -> dict[str, np.ndarray]:
+    """``{constraint name: (m, k) array}`` of reactions at every sample, and for every contact
+    its normal force (N) while the run held it closed (0 while open)."""
+    system = bound_system(system, result)
+    series: dict[str, list] = {}
+    closed = result.closed_contacts or [()] * len(result.t)
+    contacts = [c.name for c in system.topology.contacts]
+    for t, q, qd, shut in zip(result.t, result.q, result.qd, closed):
+        values = system.reactions(q, qd, t, tau=result.tau, offsets=result.offsets, contacts=shut)
+        for name in contacts:
+            values.setdefault(name, 0.0)
+        for name, value in values.items():
+            series.setdefault(name, []).append(np.atleast_1d(value))
+    return {k: np.array(v) for k, v in series.items()}
