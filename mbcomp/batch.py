@@ -1,10 +1,11 @@
 """Many simulations of one System: parameter studies on threads, processes or a Dask cluster."""
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Any, Iterable, Mapping
 
 from .errors import ModelError
+from .progress import ProgressBar
 from .result import Result
 
 _CASE_KEYS = {"q0", "qd0", "t_end", "parameters", "tau", "t_eval", "method", "rtol", "atol", "max_step", "dt",
@@ -39,7 +40,7 @@ def _run_many(system, cases: list) -> list:
 
 
 def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, threads: int | None = None,
-          **defaults: Any) -> list[Result]:
+          progress: bool = False, **defaults: Any) -> list[Result]:
     """Simulate ``system`` once per case and return the Results in case order.
 
     Each case is a mapping of ``System.simulate`` arguments (``q0``, ``qd0``, ``t_end``,
@@ -49,15 +50,31 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     System travels by pickling and is recompiled there, from the shared code cache
     when there is one).  Results are identical to running the cases one by one, derived
     series included (reactions of resting contacts and motors: each Result records what
-    they need).
+    they need).  ``progress=True`` shows a bar of the finished cases (it only counts them;
+    every case runs as without it).
     """
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
+    bar = ProgressBar(len(cases), bool(progress), desc="sweep", unit="cases")
+    try:
+        outputs = _sweep(system, cases, client, threads, bar)
+    finally:
+        bar.close()
+    return [result.with_system(system.with_parameters(case.get("parameters"))) for case, result in zip(cases, outputs)]
+
+
+def _sweep(system, cases: list, client: Any, threads: int | None, bar: ProgressBar) -> list:
     if client is None:
         if threads == 1 or len(cases) <= 1:
-            outputs = [_run(system, case) for case in cases]
+            outputs = []
+            for case in cases:
+                outputs.append(_run(system, case))
+                bar.update_to(len(outputs))
         else:
             with ThreadPoolExecutor(max_workers=threads) as pool:
-                outputs = list(pool.map(lambda case: _run(system, case), cases))
+                futures = [pool.submit(_run, system, case) for case in cases]
+                for done, _ in enumerate(as_completed(futures), start=1):
+                    bar.update_to(done)
+                outputs = [future.result() for future in futures]
     else:
         # Cases go to the workers in chunks (a few per worker): scheduling a task costs
         # milliseconds, more than a short compiled simulation.
@@ -66,5 +83,11 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
         chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
         remote = client.scatter(system, broadcast=True, hash=False)
         futures = [client.submit(_run_many, remote, chunk, pure=False) for chunk in chunks]
+        if bar.enabled:
+            from distributed import as_completed as finished
+            done = 0
+            for future in finished(futures):
+                done += len(chunks[futures.index(future)])
+                bar.update_to(done)
         outputs = [output for chunk in client.gather(futures) for output in chunk]
-    return [result.with_system(system.with_parameters(case.get("parameters"))) for case, result in zip(cases, outputs)]
+    return outputs

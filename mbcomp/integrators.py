@@ -361,25 +361,27 @@ class RankLost(Exception):
 
 
 def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None):
+                 atol: float, t_eval, tau, max_step: float, dt: float | None, monitor=None):
     """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
-    compiled code; returns ``(t, y, stats, wall)``."""
+    compiled code; returns ``(t, y, stats, wall)``.  ``monitor`` (a ``progress.Monitor``) gets
+    a probe reading the simulated time reached from the output the loop has written so far
+    (for a progress bar drawn from another thread; the run itself is unchanged)."""
     lib = system._compiled.functions.lib
     formulation = system._formulation
     if formulation.constraints is None:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor)
     configure = lib.dae_configure
     configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
     rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
     alpha, beta = formulation.baumgarte
     configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale)  # this thread only
     try:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor)
     finally:
         configure(-1, None, 0.0, 0.0, 0.0)
 
 
-def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor=None):
     run, rk4 = _bind(lib)
     n = system.nq
     p = system._p
@@ -415,6 +417,8 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = y
             i_out[0] = 1
+        if monitor is not None:   # the last sample written
+            monitor.probe = lambda: float(t_out[i_out[0] - 1]) if i_out[0] > 0 else 0.0
         status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
@@ -428,6 +432,9 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
             t_steps = np.empty(cap)
             y_steps = np.empty((cap, 2 * n))
             n_steps[0] = 0
+            if monitor is not None:   # the last step written
+                monitor.probe = (lambda t_steps=t_steps: float(t_steps[n_steps[0] - 1]) if n_steps[0] > 0
+                                 else float(state[0]))
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)

@@ -1,0 +1,113 @@
+"""Progress bars for long simulations and sweeps (``progress=True``).
+
+A bar only watches: it never changes how a run integrates.  A run in the compiled loop goes on
+in a worker thread exactly as without a bar (ctypes releases the GIL), while this thread reads
+how far the loop has written its output and draws that.  The bar is tqdm's when the optional
+``tqdm`` is installed (``pip install "mbcomp[progress]"``), else a one-line text bar on stderr.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Any, Callable
+
+#: How often (s) a watched run's progress is read.
+POLL = 0.1
+
+
+class ProgressBar:
+    """A bar from 0 to ``total`` (``unit``), drawn on stderr once ``delay`` seconds have passed
+    (so short runs stay quiet); ``enabled=False`` makes every call a no-op."""
+
+    def __init__(self, total: float, enabled: bool = True, *, desc: str = "simulating", unit: str = "s",
+                 delay: float = 0.0, width: int = 30):
+        self.total, self.enabled, self.desc, self.unit = float(total), bool(enabled), desc, unit
+        self.delay, self.width = float(delay), width
+        self.value, self.shown = 0.0, -1
+        self.started = time.monotonic()
+        self._tqdm = None
+        if self.enabled:
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                tqdm = None
+            if tqdm is not None:
+                self._tqdm = tqdm(total=self.total, desc=desc, unit=unit, delay=self.delay, leave=True,
+                                  file=sys.stderr, bar_format="{l_bar}{bar}| {n:.4g}/{total:.4g} " + unit
+                                  + " [{elapsed}<{remaining}]")
+
+    def update_to(self, value: float) -> None:
+        """Show progress up to ``value`` (clipped to [0, total]; never moves backwards)."""
+        if not self.enabled or value is None:
+            return
+        value = min(max(float(value), self.value), self.total)
+        if self._tqdm is not None:
+            if value > self.value:
+                self._tqdm.update(value - self.value)
+            self.value = value
+            return
+        self.value = value
+        if time.monotonic() - self.started < self.delay:
+            return
+        fraction = value / self.total if self.total > 0 else 1.0
+        percent = int(100 * fraction)
+        if percent != self.shown:
+            self.shown = percent
+            filled = int(self.width * fraction)
+            sys.stderr.write(f"\r{self.desc} [{'#' * filled}{'.' * (self.width - filled)}] {percent:3d}% "
+                             f"{value:.4g}/{self.total:.4g} {self.unit}")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        """Finish the line (or tqdm's bar)."""
+        if not self.enabled:
+            return
+        if self._tqdm is not None:
+            self._tqdm.close()
+        elif self.shown >= 0:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+        self.enabled = False
+
+
+class Monitor:
+    """Handed to a compiled run: the run sets ``probe`` to a function that reads how far it has
+    got (simulated time, s) from the buffers the compiled loop writes."""
+
+    def __init__(self) -> None:
+        self.probe: Callable[[], float] | None = None
+
+    def read(self) -> float | None:
+        probe = self.probe
+        return None if probe is None else probe()
+
+
+def run_watched(run: Callable[[Monitor], Any], bar: ProgressBar) -> Any:
+    """``run(monitor)`` in a worker thread while this thread draws ``bar`` from the monitor.
+
+    The run is the same call as without a bar, so its result is identical.  An exception in
+    the run is raised here; an interrupt here waits for the run to stop (its buffers must stay
+    alive while compiled code writes them) and is raised again.
+    """
+    monitor = Monitor()
+    outcome: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            outcome["value"] = run(monitor)
+        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+            outcome["error"] = exc
+
+    worker = threading.Thread(target=work, name="mbcomp-run", daemon=True)
+    worker.start()
+    try:
+        while worker.is_alive():
+            worker.join(POLL)
+            bar.update_to(monitor.read())
+    except BaseException:
+        worker.join()
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
