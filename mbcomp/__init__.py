@@ -42,11 +42,24 @@ __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError",
-    "SimulationError", "load", "sweep",
+    "SimulationError", "load", "load_urdf", "sweep",
 ]
 
 
 def load(path):
-    """Read a declarative TOML model file into a ``Model`` (see docs/files.md)."""
+    """Read a model: a declarative TOML model file (docs/files.md), a library model's name
+    (``mbcomp library``), or a URDF robot description (``.urdf``, see ``load_urdf``)."""
+    from .library import resolve_model_path
+    resolved = resolve_model_path(path)
+    if resolved.suffix.lower() == ".urdf":
+        return load_urdf(resolved)
     from .io import load as _load
     return _load(path)
+
+
+def load_urdf(path, floating: bool = False, **options):
+    """Read a URDF robot description into a ``Model`` (links, inertials, joints with their
+    rotated frames, axes and limits, visuals as shapes; ``floating=True`` adds a ``Free``
+    joint at the root).  Needs the optional ``yourdfpy`` (``pip install "mbcomp[urdf]"``)."""
+    from .urdf import load_urdf as _load_urdf
+    return _load_urdf(path, floating=floating, **options)

@@ -38,10 +38,34 @@ def library_models() -> dict[str, Path]:
     return dict(sorted(found.items()))
 
 
+#: Robot descriptions found in the optional ``example-robot-data`` package (URDF), by name.
+ROBOTS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf"}
+
+
+def robots_dir() -> Path | None:
+    """The ``robots`` folder of the installed ``example-robot-data`` package, or None."""
+    try:
+        from importlib.metadata import PackageNotFoundError, distribution
+        folder = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    except (ImportError, PackageNotFoundError):
+        return None
+    return folder if folder.is_dir() else None
+
+
+def library_robots() -> dict[str, Path]:
+    """``{name: URDF path}`` of the robots available (``example-robot-data`` installed)."""
+    folder = robots_dir()
+    if folder is None:
+        return {}
+    return {name: folder / rel for name, rel in ROBOTS.items() if (folder / rel).is_file()}
+
+
 def find_library_model(name: str) -> Path | None:
-    """The path of library model ``name`` (with or without ``.toml``), or None."""
+    """The path of library model ``name`` (with or without ``.toml``), or of a library robot
+    (``"ur5"``, ``"panda"``: URDF files of the optional ``example-robot-data``), or None."""
     stem = name[:-5] if name.endswith(".toml") else name
-    return library_models().get(stem)
+    found = library_models().get(stem)
+    return found if found is not None else library_robots().get(name)
 
 
 LIBRARY_PREFIX = "library:"

@@ -192,3 +192,29 @@ def test_cli_writes_the_page(tmp_path):
     out = tmp_path / "bb.html"
     assert main(["run", "bouncing_ball", "--t-end", "0.5", "--html", str(out)]) == 0
     assert out.stat().st_size > 500_000 and "bouncing_ball" in out.read_text()[:2000]
+
+
+def test_unreadable_mesh_falls_back_to_the_stick_figure(tmp_path):
+    m = mb.Model("meshy")
+    b = m.add(mb.Body("b", mass=1.0, com=(0, 0, -0.5), inertia=(0.1, 0.1, 0.01),
+                      shape=mb.Mesh(tmp_path / "gone.stl")))
+    m.add(mb.Revolute("j", m.ground, b, axis="x"))
+    with pytest.warns(UserWarning, match="gone.stl"):
+        scene = build_scene(m.compile().simulate(0.1, [0.2]))
+    assert [s["type"] for s in scene["bodies"][0]["shapes"]] == ["sphere", "rod"]
+
+
+def test_mesh_shape_from_a_file(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    path = tmp_path / "tetra.stl"
+    trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                    faces=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]).export(path)
+    m = mb.Model("tetra")
+    b = m.add(mb.Body("b", mass=1.0, com=(0, 0, -0.5), inertia=(0.1, 0.1, 0.01),
+                      shape=mb.Mesh(path, scale=0.5, origin=(0, 0, -0.5))))
+    m.add(mb.Revolute("j", m.ground, b, axis="x"))
+    (record,) = build_scene(m.compile().simulate(0.1, [0.2]))["bodies"][0]["shapes"]
+    vertices = np.frombuffer(base64.b64decode(record["vertices"]), dtype="<f4").reshape(-1, 3)
+    faces = np.frombuffer(base64.b64decode(record["faces"]), dtype="<u4").reshape(-1, 3)
+    assert record["type"] == "mesh" and faces.shape == (4, 3)
+    np.testing.assert_allclose(np.sort(vertices.sum(axis=1)), [0, 0.5, 0.5, 0.5])

@@ -7,6 +7,7 @@ own kinematics (``System.body_state``), so what it shows is what mbcomp computed
 from __future__ import annotations
 
 import base64
+import warnings
 from typing import Any
 
 import numpy as np
@@ -94,6 +95,18 @@ def shape_record(shape: Any, color: str) -> dict:
     else:  # pragma: no cover - as_shapes admits only the classes above
         raise ModelError("viewer", f"cannot draw {shape!r}")
     return record
+
+
+def _records(shapes: Any, color: str, owner: str) -> list[dict]:
+    """Shape records; a mesh that cannot be read is left out with a warning (the body is then
+    drawn from its other shapes, or as a stick figure), so one bad file does not stop the page."""
+    records = []
+    for shape in shapes:
+        try:
+            records.append(shape_record(shape, color))
+        except ModelError as exc:
+            warnings.warn(f"viewer: body {owner!r}: {exc}; drawn without it", UserWarning, stacklevel=3)
+    return records
 
 
 class SceneBuilder:
@@ -247,11 +260,13 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
     for k, body in enumerate(builder.bodies):
         shapes = getattr(body, "shape", ()) or ()
         color = PALETTE[k % len(PALETTE)]
-        if shapes:
-            records = [shape_record(s, color) for s in shapes]
-        else:
+        records = _records(shapes, color, body.name)
+        if not records:
             records = builder.default_shapes(k, size, points[k], masses[k] / masses.max())
         bodies.append({"name": body.name, "shapes": records})
+
+    ground_shapes = getattr(system.topology.ground, "shape", ()) or ()
+    ground = _records(ground_shapes, "#8c8c8c", system.topology.ground.name)
 
     gravity = np.asarray(system.parameters.get("gravity", (0.0, 0.0, -9.81)), dtype=float)
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else np.array([0.0, 0.0, 1.0])
@@ -259,7 +274,7 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
     scene = {
         "title": title or name or "mbcomp",
         "t0": float(times[0]), "t1": float(times[-1]), "frames": int(len(times)),
-        "nbodies": len(bodies), "bodies": bodies,
+        "nbodies": len(bodies), "bodies": bodies, "ground": ground,
         "poses": _b64(poses, "<f4"),
         "center": [*map(float, (low + high) / 2)], "low": [*map(float, low)], "high": [*map(float, high)],
         "size": size, "up": [*map(float, up)],

@@ -104,6 +104,7 @@ for (const b of S.bodies) {
   groups.push(g);
 }
 function holder(k) { return k < 0 ? scene : groups[k]; }
+for (const s of S.ground || []) scene.add(shapeObject(s));   // shapes fixed to the ground
 
 // ---- marks: joints, ground anchors, springs, sliders, contacts ---------------------------------
 const markSize = S.mark_size;
