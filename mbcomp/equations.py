@@ -94,7 +94,7 @@ def input_layout(topology) -> dict[str, tuple[int, int]]:
     """Run-time inputs (callable forces and torques): ``{component name: (start, size)}``."""
     layout, size = {}, 0
     for comp in topology.forces:
-        width = comp.input_size() if hasattr(comp, "input_size") else 0
+        width = topology.input_sizes.get(comp.name, 0)
         if width:
             layout[comp.name] = (size, width)
             size += width

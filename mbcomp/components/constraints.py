@@ -6,11 +6,11 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import ModelError
-from ..rotations import AXIS_NAMES, unit_axis
+from ..params import ParameterSpec, unit_vector
+from ..rotations import AXIS_NAMES
 from .base import Constraint
 from .primitives import CoordinateEquation, DotEquation, PointEquation
 from .frame import split_frame
-from ._values import scalar, vector3
 
 WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
@@ -32,15 +32,20 @@ class Slider(Constraint):
     Reaction: the force (N) the line exerts on the body, along those two normals.
     """
 
+    kind = "slider"
+    section = "constraints"
     n_equations = 2
-    parameters = ("point", "origin")
+    params = (ParameterSpec("point", (3,), "m", default=(0.0, 0.0, 0.0), doc="body point, body frame"),
+              ParameterSpec("origin", (3,), "m", default=(0.0, 0.0, 0.0), doc="a point of the line, world frame"),
+              ParameterSpec("axis", (3,), "", unit_vector, default="x", structural=True,
+                            doc="direction of the line, world frame"))
 
     def __init__(self, name: str, body: Any, point: Any = None, origin: Any = (0.0, 0.0, 0.0), axis: Any = "x"):
         super().__init__(name)
         self.body, point, _ = split_frame(body, point, self, "body")
-        self.point = vector3(point, self, "point")
-        self.origin = vector3(origin, self, "origin")
-        self.axis = unit_axis(axis, owner=self)
+        self.point = point
+        self.origin = origin
+        self.axis = axis
 
     def references(self):
         return {"body": self.body}
@@ -60,8 +65,11 @@ class Motor(Constraint):
     force (N) the motor applies along the joint coordinate.
     """
 
+    kind = "motor"
+    section = "constraints"
     n_equations = 1
-    parameters = ()
+    params = (ParameterSpec("speed", (), "rad/s or m/s", default=None, optional=True,
+                            doc="constant speed of the joint coordinate (None when position is given)"),)
 
     def __init__(self, name: str, joint: Any, position: Callable[[float], float] | None = None,
                  speed: float | None = None):
@@ -72,9 +80,7 @@ class Motor(Constraint):
         if position is not None and not callable(position):
             raise ModelError(self, f"position must be a callable of t, got {position!r}")
         self.position = position
-        self.speed = None if speed is None else scalar(speed, self, "speed")
-        if speed is not None:
-            self.parameters = ("speed",)
+        self.speed = speed
 
     def references(self):
         return {"joint": self.joint}

@@ -11,10 +11,13 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from ..errors import ModelError
-from ..rotations import AXIS_NAMES, axis_angle, parse_sequence, unit_axis
+from ..params import ParameterSpec, unit_vector
+from ..rotations import AXIS_NAMES, axis_angle, parse_sequence
 from .base import Component
-from ._values import vector3
 from .frame import split_frame
+
+AXIS = ParameterSpec("axis", (3,), "", unit_vector, structural=True,
+                     doc="'x', 'y', 'z' (optionally signed) or a 3-vector in the parent frame; stored as a unit vector")
 
 
 class Joint(Component):
@@ -36,15 +39,18 @@ class Joint(Component):
     """
 
     n_coords: ClassVar[int] = 0
-    parameters = ("parent_point", "child_point")
+    section = "joints"
+    coord_unit: ClassVar[str] = "rad"
+    params = (ParameterSpec("parent_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the parent body frame"),
+              ParameterSpec("child_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the child body frame"))
 
     def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
                  child_point: Any = None, coords: Any = None):
         super().__init__(name)
         self.parent, parent_point, self.parent_rotation = split_frame(parent, parent_point, self, "parent")
         self.child, child_point, self.child_rotation = split_frame(child, child_point, self, "child")
-        self.parent_point = vector3(parent_point, self, "parent_point")
-        self.child_point = vector3(child_point, self, "child_point")
+        self.parent_point = parent_point
+        self.child_point = child_point
         self.coords = self._coord_names(coords)
 
     # -- contract -----------------------------------------------------------
@@ -57,6 +63,11 @@ class Joint(Component):
         """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
+
+    @property
+    def coord_units(self) -> tuple[str, ...]:
+        """Unit of each coordinate (``"rad"`` or ``"m"``), for plots and tables."""
+        return (self.coord_unit,) * self.n_coords
 
     # -- derived ------------------------------------------------------------
     def references(self) -> dict[str, Any]:
@@ -115,11 +126,13 @@ class Revolute(Joint):
     Coordinate: the angle in rad, positive right-handed about ``axis``.
     """
 
+    kind = "revolute"
     n_coords = 1
+    params = Joint.params + (AXIS,)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
-        self.axis = unit_axis(axis, owner=f"Revolute {name!r}")
         super().__init__(name, parent, child, **options)
+        self.axis = axis
 
     def _screws(self):
         return [("R", self.axis)]
@@ -128,11 +141,14 @@ class Revolute(Joint):
 class Prismatic(Joint):
     """Translation of the child by ``q`` (m) along ``axis`` (parent frame)."""
 
+    kind = "prismatic"
     n_coords = 1
+    coord_unit = "m"
+    params = Joint.params + (AXIS,)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "x", **options: Any):
-        self.axis = unit_axis(axis, owner=f"Prismatic {name!r}")
         super().__init__(name, parent, child, **options)
+        self.axis = axis
 
     def _screws(self):
         return [("P", self.axis)]
@@ -145,6 +161,8 @@ class Spherical(Joint):
     coordinates are the angles in rad.  The mass matrix is singular where the first
     and last axes of a 3-axis sequence align (gimbal lock).
     """
+
+    kind = "spherical"
 
     def __init__(self, name: str, parent: Any, child: Any, sequence: str = "xyz", **options: Any):
         self.sequence = parse_sequence(sequence, owner=f"Spherical {name!r}")
@@ -168,6 +186,7 @@ class Spherical(Joint):
 class Fixed(Joint):
     """Rigid connection: the child frame keeps the parent frame's orientation."""
 
+    kind = "fixed"
     n_coords = 0
 
     def _screws(self):
