@@ -110,4 +110,5 @@ def run_watched(run: Callable[[Monitor], Any], bar: ProgressBar) -> Any:
         raise
     if "error" in outcome:
         raise outcome["error"]
+    bar.update_to(monitor.read())   # where the run ended (it may end before the first look)
     return outcome["value"]

@@ -115,3 +115,16 @@ def test_sweep_with_a_bar_counts_cases(watched, capsys):
     for a, b in zip(plain, barred):
         assert np.array_equal(a.q, b.q)
     assert max(watched) == 4 and "cases" in capsys.readouterr().err
+
+
+def test_a_run_over_before_the_first_look_still_ends_the_bar(monkeypatch):
+    monkeypatch.setattr(progress_module, "POLL", 10.0)
+    shown = []
+
+    def instant(monitor: Monitor):
+        monitor.probe = lambda: 2.5
+        return "done"
+
+    bar = ProgressBar(2.5, enabled=False)
+    monkeypatch.setattr(bar, "update_to", lambda v: shown.append(v))
+    assert run_watched(instant, bar) == "done" and shown[-1] == 2.5

@@ -218,3 +218,14 @@ def test_mesh_shape_from_a_file(tmp_path):
     faces = np.frombuffer(base64.b64decode(record["faces"]), dtype="<u4").reshape(-1, 3)
     assert record["type"] == "mesh" and faces.shape == (4, 3)
     np.testing.assert_allclose(np.sort(vertices.sum(axis=1)), [0, 0.5, 0.5, 0.5])
+
+
+def test_joint_marks_follow_rotated_joint_frames():
+    """A hinge between rotated frames: its axis (given in the joint frame) is drawn in the child
+    body's frame, turned by the child frame's rotation."""
+    m = mb.Model("tilted")
+    b = m.add(mb.Body("b", mass=1.0, com=(0, 0, -0.5), inertia=(0.1, 0.1, 0.01)))
+    turn = mb.rpy(0.0, 0.0, np.pi / 2)                  # the joint's x axis is the body's y axis
+    m.add(mb.Revolute("j", m.ground.frame((0, 0, 0), turn), b.frame((0, 0, 0), turn), axis="x"))
+    (joint,) = build_scene(m.compile().simulate(0.1, [0.2]))["joints"]
+    np.testing.assert_allclose(joint["axis"], [0.0, 1.0, 0.0], atol=1e-15)
