@@ -4,6 +4,8 @@
 from .model import Model
 from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
                          Slider, Spherical, Spring, TorsionSpring)
+from .components import DCMotor, Drive, JointFriction, JointLimit
+from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
 
 # What the 3D viewer draws for a body
@@ -43,6 +45,7 @@ __all__ = [
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError",
     "SimulationError", "load", "load_urdf", "sweep",
+    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 
 

@@ -11,6 +11,7 @@ from . import cache, codegen
 from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
+from .drive_equations import drive_layout
 from .errors import ModelError
 from .flatten import flatten
 from .params import ParameterSpec
@@ -19,7 +20,7 @@ GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world fr
 from .topology import build_topology
 
 
-def structure_description(model, topology, layout, inputs) -> str:
+def structure_description(model, topology, layout, inputs, drives=None) -> str:
     """Everything that decides the generated code, as text (names included)."""
     parts = [f"gravity|{len(topology.coords)}"]
     for comp in topology.components.values():
@@ -29,6 +30,8 @@ def structure_description(model, topology, layout, inputs) -> str:
     parts.append("coords|" + ",".join(topology.coords))
     parts.append("params|" + ",".join(f"{k}:{v}" for k, v in layout.entries.items()))
     parts.append("inputs|" + ",".join(f"{k}:{v}" for k, v in inputs.items()))
+    if drives is not None:
+        parts.append(drives.description())
     return "\n".join(parts)
 
 
@@ -44,6 +47,7 @@ class CompiledModel:
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
         self.inputs = input_layout(self.topology)
+        self.drives = drive_layout(self.topology)
         from .constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
@@ -51,7 +55,7 @@ class CompiledModel:
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nq)
         #: Everything about the model that decides the generated code (part of the cache key).
-        self.description = structure_description(model, self.topology, self.layout, self.inputs)
+        self.description = structure_description(model, self.topology, self.layout, self.inputs, self.drives)
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
@@ -60,7 +64,7 @@ class CompiledModel:
         ng = len(self.geometric_rows)
         self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
                       "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
-                      "contacts": len(self.topology.contacts) * (nq + 2)}
+                      "contacts": len(self.topology.contacts) * (nq + 2), "drives": nq + self.drives.nz}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -79,7 +83,7 @@ class CompiledModel:
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations)
+            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
 

@@ -49,7 +49,8 @@ def contact_indices(system, contacts) -> list[int]:
 
 def restitution_of(system, index: int) -> float:
     """The contact's restitution as currently bound (a parameter, so it can be rebound)."""
-    return float(system._parameters[f"{system.topology.contacts[index].name}.restitution"])
+    contact = system.topology.contacts[index]
+    return float(system._parameters[getattr(contact, "restitution_key", f"{contact.name}.restitution")])
 
 
 def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[int], restitution=None,

@@ -300,6 +300,10 @@ def why_not_compiled(system, method, tau) -> str | None:
         return "the model has contacts"
     if system._compiled.n_inputs:
         return "the model has callable forces or torques"
+    if system._compiled.drives.callables:
+        return "the model's drives or signals use Python callables"
+    if system._compiled.drives.elements:
+        return "drive elements step in Python"
     if callable(tau):
         return "tau is a callable"
     return None

@@ -64,6 +64,13 @@ class Result:
     parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
     formulation: str = ""
     _reactions: dict | None = field(default=None, repr=False, compare=False)
+    z: np.ndarray | None = field(default=None, repr=False)  #: (m, nz) drive-element states
+    extra_states: tuple = ()  #: names of the columns of ``z`` (motor currents, PID integrals)
+
+    def _z(self) -> np.ndarray:
+        if self.z is None or self.z.shape != (len(self.t), len(self.extra_states)):
+            return np.zeros((len(self.t), len(self.extra_states)))
+        return self.z
 
     def __post_init__(self):
         if self.system is not None:
@@ -73,7 +80,10 @@ class Result:
                 self.parameters = self.system.parameters
             if not self.formulation:
                 self.formulation = self.system.formulation
+            if not self.extra_states:
+                self.extra_states = tuple(getattr(self.system, "extra_states", ()))
         self.coords = tuple(self.coords)
+        self.extra_states = tuple(self.extra_states)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -99,10 +109,13 @@ class Result:
         coords = list(self.coords)
         if name in coords:
             return self.q[:, coords.index(name)]
+        if name in self.extra_states:
+            return self._z()[:, self.extra_states.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
             if speed in coords:
                 return self.qd[:, coords.index(speed)]
-        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}")
+        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}"
+                       + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
@@ -124,12 +137,15 @@ class Result:
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
-        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + ["kinetic", "potential", "total"]
+        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + list(self.extra_states) + \
+            ["kinetic", "potential", "total"]
+        z = self._z()
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for i in range(len(self.t)):
-                row = [self.t[i], *self.q[i], *self.qd[i], energy.kinetic[i], energy.potential[i], energy.total[i]]
+                row = [self.t[i], *self.q[i], *self.qd[i], *z[i], energy.kinetic[i], energy.potential[i],
+                       energy.total[i]]
                 writer.writerow([repr(float(v)) for v in row])
 
     def to_dataframe(self):
@@ -140,6 +156,7 @@ class Result:
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
         data.update({f"{c}_d": self.qd[:, i] for i, c in enumerate(self.coords)})
+        data.update({name: self._z()[:, i] for i, name in enumerate(self.extra_states)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 
     def plot(self, *args: Any, **kwargs: Any):

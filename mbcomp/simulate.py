@@ -12,6 +12,7 @@ from .errors import ModelError, SimulationError
 from .events import ContactWatch
 from .formulations.lagrange import TrialStateError
 from .impact import GAP_TOLERANCE
+from .drive_runtime import DriveTorque, DriveWorkspace
 from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
 from .progress import ProgressBar, run_watched
 
@@ -58,9 +59,11 @@ def check_settings(t_end, rtol, atol, t_eval):
 class _Recorder:
     """Collects output samples: every step, or the requested ``t_eval`` times."""
 
-    def __init__(self, t_eval, closed=lambda: ()):
+    def __init__(self, t_eval, closed=lambda: (), states=lambda: ()):
         self.t_eval = t_eval
         self.closed_now = closed
+        self.states_now = states  # drive-element states at the sample (set by full_state)
+        self.z: list[np.ndarray] = []
         self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
         self.t: list[float] = []
@@ -69,6 +72,7 @@ class _Recorder:
 
     def add(self, t, q, qd):
         self.closed.append(tuple(self.closed_now()))
+        self.z.append(np.array(self.states_now(), dtype=float))
         self.t.append(float(t))
         self.q.append(np.array(q, dtype=float))
         self.qd.append(np.array(qd, dtype=float))
@@ -113,11 +117,12 @@ class _Recorder:
 def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-             dt: float | None = None) -> Result:
+             dt: float | None = None, x0: Any = None) -> Result:
     """Integrate ``system`` from ``(q0, qd0)`` at t = 0 to ``t_end``; see ``System.simulate``."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
     q0 = system.state_vector(q0, "q0")
     qd0 = system._velocity(qd0)
+    z0 = system.extra_state_vector(x0)
     if tau is not None and not callable(tau):
         system._tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
@@ -159,16 +164,22 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)
     formulation = system._formulation
+    drive = None
+    if system.has_drives:  # drive elements: their forces join tau, their states y
+        drive = tau = DriveTorque(system, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
     watch = ContactWatch(system, rest_speed, offsets, tau) if system.topology.contacts else None
     if watch is not None:
         qd0 = watch.start(q0, qd0)
     workspace = formulation.start(system, 0.0, q0, qd0, tau, watch.persistent if watch else ())
+    if drive is not None:
+        workspace = DriveWorkspace(workspace, drive)
     if watch is not None and workspace.y0.size == 0:
         max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
     bar = ProgressBar(t_end, bool(progress), desc="simulating", unit="s", delay=_delay(progress))
-    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()))
+    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()),
+                         (lambda: drive.z) if drive is not None else (lambda: ()))
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
 
     def fun(t, y):
@@ -241,6 +252,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             if t_restart >= t_end:
                 break
             workspace = formulation.start(system, t_restart, q_r, qd_r, tau, watch.persistent)
+            if drive is not None:
+                workspace = DriveWorkspace(workspace, drive)
             workspace.offsets = offsets
             solver = make_solver(t_restart, workspace.y0)
     except SimulationError as exc:
@@ -257,7 +270,9 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
              "message": "The solver successfully reached the end of the integration interval.",
              "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
     events = watch.events if watch else []
-    return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
+    z = np.array(recorder.z).reshape(len(recorder.t), -1)
+    return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, z=z, stats=stats,
+                  tau=tau if drive is None else drive.tau, offsets=offsets,
                   events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
                   closed_contacts=recorder.closed)
 
@@ -279,8 +294,10 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
         corrected = workspace.after_step(t, solver.y)
         recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
         return t, None, corrected, watch.gaps(q, qd).g
-    q, qd = workspace.full_state(te, dense(te) if te != t else solver.y)
+    y_event = dense(te) if te != t else solver.y
+    q, qd = workspace.full_state(te, y_event)
     recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
+    workspace.full_state(te, y_event)  # samples moved the drive states: back to the event's
     if te == t_close:
         qd, changed = watch.impact(te, q, qd)
         if not changed:  # closed but not closing: it rests on its surface

@@ -77,6 +77,75 @@ class System:
         return self._compiled.topology.nq
 
     @property
+    def extra_states(self) -> tuple[str, ...]:
+        """States of drive elements (motor currents, PID integrals): ``"component.state"``."""
+        return self._compiled.drives.states
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """Every state of a simulation: coordinates, their speeds (``NAME_d``), then the
+        states of drive elements (``extra_states``)."""
+        return tuple(self.coords) + tuple(f"{c}_d" for c in self.coords) + self.extra_states
+
+    def extra_state_vector(self, x0: Any = None) -> np.ndarray:
+        """Initial values of ``extra_states`` from ``{name: value}`` (missing ones 0)."""
+        names = self.extra_states
+        z = np.zeros(len(names))
+        if x0 is None:
+            return z
+        if not isinstance(x0, Mapping):
+            raise ModelError("x0", f"must be a dict {{state name: value}}, got {x0!r}")
+        for key, value in x0.items():
+            if key not in names:
+                raise ModelError("x0", f"unknown state {key!r}; the states of drive elements are {list(names)}")
+            try:
+                z[names.index(key)] = float(value)
+            except (TypeError, ValueError):
+                raise ModelError("x0", f"{key!r} must be a number, got {value!r}") from None
+            if not np.isfinite(z[names.index(key)]):
+                raise ModelError("x0", f"{key!r} must be finite, got {value!r}")
+        return z
+
+    def integration_path(self, method: str = "DOP853", tau: Any = None) -> str:
+        """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
+        ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
+        from .integrators import why_not_compiled
+        reason = why_not_compiled(self, method, tau)
+        return "compiled" if reason is None else f"python: {reason}"
+
+    @property
+    def has_drives(self) -> bool:
+        """True when drive elements (drives, motors, signal torques, PIDs) act on the model."""
+        return bool(self._compiled.drives.elements)
+
+    def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nq, speed space)
+        and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
+        ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
+        drives = self._compiled.drives
+        out = self._call("drives", q, qd, drives.inputs(t, z, q, qd))
+        total = float(out.sum())
+        if total - total != 0.0:
+            raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
+                                  f"{format_state(q)}, states {format_state(z)}")
+        return out[: self.nq], out[self.nq:]
+
+    def _applied(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray, states: Any = None):
+        """``tau`` plus the drive elements' generalised forces (their states from ``states``:
+        a dict by name or an array in ``extra_states`` order; 0 when not given)."""
+        tau = self._tau(tau, t, q, qd)
+        if not self._compiled.drives.elements:
+            return tau
+        if states is None or isinstance(states, Mapping):
+            z = self.extra_state_vector(states)
+        else:
+            z = np.asarray(states, dtype=float).reshape(-1)
+            if z.shape != (len(self.extra_states),):
+                raise ModelError("states", f"must give {len(self.extra_states)} values {list(self.extra_states)}")
+        drive = self.drive_outputs(t, q, qd, z)[0]
+        return drive if tau is None else tau + drive
+
+    @property
     def ndof(self) -> int:
         """Degrees of freedom left after constraints."""
         return self._formulation.ndof
@@ -272,13 +341,14 @@ class System:
         M, _ = self._dynamics(t, q, np.zeros(self.nq))
         return self._check_finite(M, "mass matrix", q)
 
-    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
-        """(nq,) coordinate accelerations, consistent with every constraint."""
+    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
+        """(nq,) coordinate accelerations, consistent with every constraint (drive elements
+        act with their ``states``, by name; 0 when not given)."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
+        return self._formulation.accelerations(self, t, q, qd, self._applied(tau, t, q, qd, states))
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
-                  contacts: Any = ()) -> dict[str, np.ndarray]:
+                  contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
@@ -287,7 +357,7 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self, contacts)) if contacts else ()
-        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets, closed)
+        return self._formulation.reactions(self, t, q, qd, self._applied(tau, t, q, qd, states), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nq,) generalised forces that, applied, hold the system at rest at ``q``
@@ -370,7 +440,7 @@ class System:
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
                  max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-                 dt: float | None = None):
+                 dt: float | None = None, x0: Mapping[str, float] | None = None):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
@@ -381,12 +451,13 @@ class System:
         (C backend; a tree, or a ``dae`` model whose constraints are all loops and sliders; no
         contacts, motors or callable inputs); ``"scipy"``
         forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
+        ``x0`` gives initial values of ``extra_states`` by name (default 0).
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
         return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
                         tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed,
-                        integrator=integrator, dt=dt)
+                        integrator=integrator, dt=dt, x0=x0)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every

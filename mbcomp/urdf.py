@@ -147,12 +147,15 @@ def _shapes(link: Any, T_body_link: np.ndarray, urdf_dir: Path, materials: dict,
     return out
 
 
-def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any = GRAVITY) -> Model:
+def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any = GRAVITY,
+              limits: bool = False) -> Model:
     """Read a URDF file into a ``Model`` (see the module docstring for the mapping).
 
     ``floating=True`` joins the root link to the ground with a ``Free`` joint (a mobile or
     flying robot); otherwise the root link is the ground.  ``gravity`` (m/s^2, world frame)
-    defaults to ``(0, 0, -9.81)``.  Coordinates are named after the URDF joints.  Raises
+    defaults to ``(0, 0, -9.81)``.  ``limits=True`` enforces the joints' position limits as
+    ``JointLimit`` stops (named ``JOINT_limit``; inelastic); by default they are only kept in
+    ``model.joint_limits``.  Coordinates are named after the URDF joints.  Raises
     ``ModelError`` for an unreadable file, a moving link without mass, or an unsupported
     joint type; warns (``UserWarning``) naming every URDF feature that is not modelled.
     """
@@ -188,7 +191,7 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
     taken = {model.ground.name}
     unmodelled: dict[str, list[str]] = {}
     skipped_meshes: list[str] = []
-    limits: dict[str, tuple[float, float]] = {}
+    joint_limits: dict[str, tuple[float, float]] = {}
 
     def note(kind: str, what: str) -> None:
         unmodelled.setdefault(kind, []).append(what)
@@ -260,7 +263,7 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
         model.add(kind(name, parent, bodies[joint.child], axis=tuple(axis), coords=name))
         limit = getattr(joint, "limit", None)
         if limit is not None and joint.type != "continuous" and limit.lower is not None and limit.upper is not None:
-            limits[name] = (float(limit.lower), float(limit.upper))
+            joint_limits[name] = (float(limit.lower), float(limit.upper))
         dynamics = getattr(joint, "dynamics", None)
         if dynamics is not None and any(float(getattr(dynamics, k) or 0) != 0 for k in ("damping", "friction")):
             note("joint damping and friction", joint.name)
@@ -270,8 +273,13 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
             note("safety controllers", joint.name)
         if getattr(joint, "calibration", None) is not None:
             note("calibration", joint.name)
-    if limits:
-        note("joint position limits (not enforced; kept in model.joint_limits)", ", ".join(limits))
+    if joint_limits and limits:
+        from .components import JointLimit
+        for name, (lower, upper) in joint_limits.items():
+            model.add(JointLimit(_name(f"{name}_limit", taken), name, lower=lower, upper=upper))
+    elif joint_limits:
+        note("joint position limits (not enforced: load_urdf(..., limits=True) does; kept in "
+             "model.joint_limits)", ", ".join(joint_limits))
     if any(getattr(link, "collisions", None) for link in robot.links):
         note("collision geometry", ", ".join(link.name for link in robot.links if getattr(link, "collisions", None)))
     if getattr(robot, "transmission", None):
@@ -289,5 +297,5 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
     model.initial = {"q": {}, "qd": {}}
     model.simulation = {}
     model.path = path
-    model.joint_limits = limits
+    model.joint_limits = joint_limits
     return model

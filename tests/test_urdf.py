@@ -188,3 +188,21 @@ def test_bad_urdf_is_a_model_error(tmp_path, edit, message):
 def test_missing_file():
     with pytest.raises(mb.ModelError, match="no such file"):
         mb.load_urdf("/nonexistent/robot.urdf")
+
+
+def test_limits_can_be_enforced(small):
+    path = small[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = mb.load_urdf(path, limits=True)
+    assert not any("position limits" in str(w.message) for w in caught)
+    system = model.compile()
+    stops = {c.name: (c.lower, c.upper) for c in system.topology.components.values()
+             if isinstance(c, mb.JointLimit)}
+    assert stops == {"shoulder_limit": (-1.5, 1.5), "rail_limit": (-0.2, 0.2)}
+    from mbcomp.viewer import build_scene
+    assert build_scene(system.simulate(0.05, [0.0, 0.0, 0.0]))["contacts"] == []   # stops are no spatial marks
+    # Thrown against its upper stop, the shoulder stays within it (inelastic stop).
+    res = system.simulate(0.5, [1.4, 0.0, 0.0], [3.0, 0.0, 0.0])
+    assert res["shoulder"].max() <= 1.5 + 1e-6 and res["shoulder"].max() > 1.5 - 1e-3
+    assert any(str(e.contact).startswith("shoulder_limit") for e in res.events)

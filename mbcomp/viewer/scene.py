@@ -201,6 +201,8 @@ class SceneBuilder:
                                 "pb": [*map(float, _value(system, comp, "point_b"))]})
         contacts, sliders = [], []
         for comp in self.topology.contacts:
+            if not all(hasattr(comp, a) for a in ("body", "point", "origin", "normal")):
+                continue   # e.g. a joint stop: a coordinate gap, nothing to mark in space
             contacts.append({"name": comp.name, "body": self.body_of(comp.body),
                              "point": [*map(float, _value(system, comp, "point"))],
                              "origin": [*map(float, _value(system, comp, "origin"))],
