@@ -7,6 +7,7 @@ from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor
 from .components import DCMotor, Drive, JointFriction, JointLimit
 from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
+from .compose import Option, Parameter, Submodel
 
 # What the 3D viewer draws for a body
 from .shapes import Box, Cylinder, Mesh, Sphere
@@ -43,8 +44,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "Frame", "rpy", "Box", "Cylinder", "Sphere", "Mesh", "ModelError", "CompileError",
-    "SimulationError", "load", "load_urdf", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Mesh",
+    "ModelError", "CompileError", "SimulationError", "load", "load_urdf", "sweep",
     "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 

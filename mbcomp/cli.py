@@ -364,6 +364,12 @@ def cmd_info(args: argparse.Namespace) -> int:
     cut = [j.name for j in getattr(system.topology, "cut_joints", ())]
     for line in describe_components(model, cut):
         print(line)
+    tree = model.tree()
+    if tree.children:   # sub-model instances with their parameters
+        print("instances")
+        for child in tree.children:
+            for line in child.lines("  "):
+                print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     print(f"degrees of freedom  {system.ndof}")
     if system.constraint_names:
@@ -427,10 +433,15 @@ def cmd_library(args: argparse.Namespace) -> int:
     width = max(len(name) for name in models)
     for name, path in models.items():
         print(f"{name.ljust(width)}  {read_description(path) or '(no description)'}")
-    from .library import library_robots
+    from .library import library_parts, library_robots
     robots = library_robots()
     for name, path in robots.items():
         print(f"{name.ljust(width)}  robot arm from URDF ({path.name}, example-robot-data package)")
+    parts = library_parts()
+    if parts:
+        print("\nparts (for [submodels] in model files, see docs/composition.md):")
+        for name, path in parts.items():
+            print(f"  {name.ljust(width - 2)}  {read_description(path) or '(no description)'}")
     print(f"\n{len(models)} models in {', '.join(str(d) for d in library_dirs())}"
           f"{f' and {len(robots)} URDF robots' if robots else ''}; "
           "run one with 'mbcomp run NAME', copy one with 'mbcomp library NAME > my.toml'")

@@ -1,6 +1,7 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
+import copy
 from typing import Any, Mapping
 
 import numpy as np
@@ -195,7 +196,15 @@ class System:
         the attribute."""
         if not values:
             return self
+        derivation = getattr(self._compiled, "derivation", None)
         merged = dict(self._parameters)
+        if derivation is not None and any(key in derivation.parameters for key in values):
+            # Sub-model parameters: every component value derived from them follows, as a
+            # fresh build gives it (the components' constructors validated those values);
+            # component values given in the same call win.
+            changes = {k: v for k, v in values.items() if k in derivation.parameters}
+            merged.update(derivation.apply(self._parameters, changes))
+            values = {k: v for k, v in values.items() if k not in changes}
         for key, value in values.items():
             found = self._compiled.parameter_spec(key) if key in merged else None
             if found is None:
@@ -523,8 +532,16 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     compiled = CompiledModel(model, cache=cache, backend=backend)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (compiled.flat_model, formulation, dict(options), backend)
-    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
+    derivation = getattr(model, "derivation", None)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters); a
+    # model with sub-models keeps how its values follow their parameters.
+    compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
+                       dict(options), backend)
+    compiled.derivation = derivation
+    parameters = dict(compiled.default_parameters)
+    if derivation is not None:
+        parameters.update(derivation.values())  # sub-model parameters, by path
+    system = System(compiled, formulation_class(compiled, **options), parameters)
     analyse(system._formulation, system)
     return system
 

@@ -39,3 +39,19 @@ def test_extra_library_folder_from_environment(tmp_path, monkeypatch):
     model = mb.load("my_part")
     assert model.description == "one body"
     assert "mass = 3.0" in dumps(model)
+
+
+def test_library_lists_models_parts_and_robots(capsys):
+    from mbcomp.cli import main
+    from mbcomp.library import library_parts, library_robots, read_description
+    assert main(["library"]) == 0
+    out = capsys.readouterr().out
+    parts = library_parts()
+    assert parts, "the library ships parts"
+    models_part, parts_part = out.split("\nparts")
+    for text, entries in ((models_part, library_models()), (parts_part, parts)):
+        for name, path in entries.items():
+            line = next(line for line in text.splitlines() if line.split() and line.split()[0] == name)
+            assert read_description(path) in line
+    for name in library_robots():
+        assert any(line.startswith(name) and "URDF" in line for line in out.splitlines())
