@@ -490,6 +490,54 @@ class System:
         values = contact_values(self, q, np.zeros(self.nq))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
+    # -- analysis (mbcomp.analysis) ----------------------------------------------------------
+    def tree_dynamics(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(M, f)``: tree mass matrix and generalised forces (gravity, springs, applied forces,
+        velocity terms) with ``M qdd = f + tau + J^T lam``; constraints are not applied."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        M, f = self._dynamics(t, q, qd)
+        return self._check_finite(M, "mass matrix", q), self._check_finite(f, "generalised forces", q)
+
+    def constraint_values(self, q: Any, qd: Any = None, t: float = 0.0):
+        """Every constraint equation at a state: ``.g`` (residuals), ``.J`` (Jacobian, one column
+        per speed), ``.g_t`` (``gdot = J qd + g_t``) and ``.bias`` (``gddot = J qdd + bias``).
+        Rows are in ``constraint_rows`` order; a speed motor holds its present position."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        offsets = self._formulation.motor_offsets(q, t)
+        return self._formulation.constraint_values(self, t, q, qd, offsets)
+
+    @property
+    def constraint_rows(self) -> list[str]:
+        """The constraint owning each row of ``constraint_values`` (by name)."""
+        cs = self._formulation.constraints
+        return [] if cs is None else list(cs.owner)
+
+    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0) -> np.ndarray:
+        """``q`` at rest with every constraint met, near ``q_guess`` (see ``mbcomp.analysis``)."""
+        from .analysis import equilibrium
+        return equilibrium(self, q_guess, tau=tau, t=t)
+
+    def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
+                  independent: Any = None):
+        """State-space ``.A``, ``.B`` in the independent coordinates (see ``mbcomp.analysis``)."""
+        from .analysis import linearize
+        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent)
+
+    def modes(self, q: Any, t: float = 0.0, tau: Any = None):
+        """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
+        from .analysis import modes
+        return modes(self, q, t=t, tau=tau)
+
+    def jacobian(self, frame: Any, q: Any, point: Any = None) -> np.ndarray:
+        """(6, n) angular then linear velocity (world) of a body point per speed (see ``mbcomp.analysis``)."""
+        from .analysis import jacobian
+        return jacobian(self, frame, q, point=point)
+
+    def inverse_dynamics(self, q: Any, qd: Any, qdd: Any, t: float = 0.0, actuated: Any = None):
+        """Generalised forces producing ``qdd`` (and the reactions; see ``mbcomp.analysis``)."""
+        from .analysis import inverse_dynamics
+        return inverse_dynamics(self, q, qd, qdd, t=t, actuated=actuated)
+
     # -- display ----------------------------------------------------------------------------------
     def equations(self):
         """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, qd and parameter symbols."""
