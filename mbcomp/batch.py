@@ -1,10 +1,12 @@
 """Many simulations of one System: parameter studies on threads, processes or a Dask cluster."""
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Any, Iterable, Mapping
 
 from .errors import ModelError
+from .integrators import step_hook
 from .progress import ProgressBar
 from .result import Result
 
@@ -34,6 +36,12 @@ def _run(system, case: dict) -> Result:
     return system.simulate(t_end, q0, qd0, **case).with_system(None)
 
 
+def _run_stoppable(system, case: dict, stop: threading.Event) -> Result:
+    """One simulation on a worker thread that ends early (SimulationError) once ``stop`` is set."""
+    with step_hook(lambda t: stop.is_set()):
+        return _run(system, case)
+
+
 def _run_many(system, cases: list) -> list:
     """Several simulations in one task."""
     return [_run(system, case) for case in cases]
@@ -53,6 +61,10 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     they need).  ``progress=True`` shows a bar of the finished cases (it only counts them;
     every case runs as without it).
     """
+    if isinstance(cases, (str, bytes, Mapping)) or not isinstance(cases, Iterable):
+        raise ModelError("sweep", f"cases must be a sequence of mappings of simulate() arguments, got {cases!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ModelError("sweep", f"threads must be a positive whole number or None, got {threads!r}")
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
     bar = ProgressBar(len(cases), bool(progress), desc="sweep", unit="cases")
     try:
@@ -70,11 +82,19 @@ def _sweep(system, cases: list, client: Any, threads: int | None, bar: ProgressB
                 outputs.append(_run(system, case))
                 bar.update_to(len(outputs))
         else:
+            stop = threading.Event()
             with ThreadPoolExecutor(max_workers=threads) as pool:
-                futures = [pool.submit(_run, system, case) for case in cases]
-                for done, _ in enumerate(as_completed(futures), start=1):
-                    bar.update_to(done)
-                outputs = [future.result() for future in futures]
+                futures = [pool.submit(_run_stoppable, system, case, stop) for case in cases]
+                try:
+                    for done, future in enumerate(as_completed(futures), start=1):
+                        if future.exception() is not None:
+                            future.result()   # a failed case: stop the others now
+                        bar.update_to(done)
+                    outputs = [future.result() for future in futures]
+                except BaseException:
+                    stop.set()  # Ctrl-C or a failed case: running cases stop at their next check
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    raise
     else:
         # Cases go to the workers in chunks (a few per worker): scheduling a task costs
         # milliseconds, more than a short compiled simulation.

@@ -11,7 +11,10 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
-FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST = 0, 1, -1, -2, -3, -5
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
+#: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
+#: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
+COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
 
 
 def _array(name: str, values) -> str:
@@ -27,6 +30,9 @@ def c_integrators(nq: int) -> str:
         "#include <stdlib.h>",
         "#include <string.h>",
         "#include <float.h>",
+        "#include <time.h>",
+        f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
+        f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
         f"#define NY {2 * nq}",
         f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
@@ -52,6 +58,30 @@ static int rhs(double t, const double *y, double *f, const double *p, const doub
     }
 #endif
     return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+}
+
+/* The step hook: called with the simulated time about every `hook_interval` s of processor
+   time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
+   around each run to react to Ctrl-C, to stop requests and to show progress. */
+typedef int (*step_hook_t)(double);
+static __thread step_hook_t step_hook = 0;
+static __thread double hook_interval = 0.0;
+static __thread clock_t hook_last = 0;
+static __thread long hook_tick = 0;
+
+void set_step_hook(step_hook_t hook, double interval) {
+    step_hook = hook;
+    hook_interval = interval;
+    hook_last = clock();
+    hook_tick = 0;
+}
+
+static int hook_says_stop(double t) {
+    if (!step_hook || (++hook_tick & 15)) return 0;
+    clock_t now = clock();
+    if ((double)(now - hook_last) < hook_interval * CLOCKS_PER_SEC) return 0;
+    hook_last = now;
+    return step_hook(t) != 0;
 }
 
 static int all_finite(const double *v, int n) {
@@ -107,7 +137,8 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
     double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
     double *F = malloc(sizeof(double) * 7 * NY);
     int status = FINISHED_CODE;
-    double t = state[0], h_abs = state[1];
+    double t = state[0], h_abs = state[1], window_t0 = state[0];
+    long window_n = 0;
     if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
     if (h_abs <= 0) {
         RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
@@ -122,6 +153,7 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
         int rejected = 0;
         double h, t_new, err;
         for (;;) {
+            if (hook_says_stop(t)) { status = -6; goto done; }
             if (h_abs < min_step) { status = -1; goto done; }
             t_new = t + h_abs;
             if (t_new > t_end) t_new = t_end;
@@ -211,6 +243,14 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
             memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
             ++*n_steps;
         }
+        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
+            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
+                status = -7;
+                goto done;
+            }
+            window_n = 0;
+            window_t0 = t;
+        }
     }
 done:
     state[0] = t;
@@ -250,6 +290,7 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
     for (long s = 0; s < n; ++s) {
         const double *y = y_out + s * NY;
         double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        if (hook_says_stop(t)) { status = -6; goto done; }
         RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
@@ -271,8 +312,12 @@ done:
 
 
 # -- Python drivers ------------------------------------------------------------------------------
+import contextlib  # noqa: E402
 import ctypes  # noqa: E402
+import signal  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
+from typing import Callable, Iterator  # noqa: E402
 
 from .errors import ModelError, SimulationError  # noqa: E402
 
@@ -307,6 +352,112 @@ def why_not_compiled(system, method, tau) -> str | None:
     if callable(tau):
         return "tau is a callable"
     return None
+
+
+# -- the step hook: Ctrl-C, stop requests and progress inside compiled loops -------------------
+#: Processor time (s) between two calls of the hook from a compiled loop.
+HOOK_INTERVAL = 0.05
+_HOOK_TYPE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
+_hooks = threading.local()  # this thread's callbacks (step_hook)
+try:
+    _check_signals = ctypes.pythonapi.PyErr_CheckSignals  # runs Python's handlers: Ctrl-C raises here
+    _check_signals.argtypes, _check_signals.restype = [], ctypes.c_int
+except AttributeError:  # not CPython: handlers still run when the hook's own code executes
+    _check_signals = None
+
+
+@contextlib.contextmanager
+def step_hook(callback: Callable[[float], bool], interval: float = HOOK_INTERVAL) -> Iterator[None]:
+    """Within the block, compiled loops run by this thread call ``callback(t)`` (t: the
+    simulated time reached, s) about every ``interval`` seconds of processor time; a true
+    return stops the run with a ``SimulationError``.  For progress displays and for stopping
+    runs from another thread (``sweep`` uses it to stop its workers)."""
+    stack = _hooks.__dict__.setdefault("stack", [])
+    stack.append((callback, float(interval)))
+    try:
+        yield
+    finally:
+        stack.remove((callback, float(interval)))
+
+
+def poll_step_hooks(t: float) -> None:
+    """For Python-stepped loops: call this thread's ``step_hook`` callbacks once; raise
+    ``SimulationError`` when one asks to stop."""
+    for callback, _ in getattr(_hooks, "stack", ()):
+        if callback(t):
+            raise SimulationError(f"stopped at t = {t:.6g} s by a step hook")
+
+
+class _Hook:
+    """What a compiled loop calls back: notes Ctrl-C (main thread), then asks this thread's
+    ``step_hook`` callbacks.  Python runs signal handlers when the hook's code starts, where
+    an exception could not cross the C loop: so during a run SIGINT only sets a flag, and
+    the previous handler (``KeyboardInterrupt`` by default) gets the signal once the loop has
+    returned."""
+
+    def __init__(self):
+        self.callbacks = list(getattr(_hooks, "stack", ()))
+        self.interval = min([HOOK_INTERVAL] + [interval for _, interval in self.callbacks])
+        self.main = threading.current_thread() is threading.main_thread()
+        self.previous = None      # the SIGINT handler to restore (when one was replaced)
+        self.signal = None        # (signum, frame) of a SIGINT received during the run
+        self.error: BaseException | None = None
+        self.pointer = _HOOK_TYPE(self)  # kept alive with this object
+
+    def __call__(self, t: float) -> int:
+        try:
+            if self.main and _check_signals is not None:
+                _check_signals()
+            if self.signal is not None:
+                return 1
+            return int(any(callback(t) for callback, _ in self.callbacks))
+        except BaseException as exc:  # noqa: BLE001 - re-raised by stopped()
+            self.error = exc
+            return 1
+
+    def _on_sigint(self, signum, frame) -> None:
+        self.signal = (signum, frame)
+
+    def install(self, lib) -> None:
+        if self.main:
+            try:
+                previous = signal.getsignal(signal.SIGINT)
+                if callable(previous):
+                    signal.signal(signal.SIGINT, self._on_sigint)
+                    self.previous = previous
+            except ValueError:  # not the main interpreter
+                pass
+        setter = lib.set_step_hook
+        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
+        setter(self.pointer, self.interval)
+
+    def remove(self, lib) -> None:
+        """Unset the hook, restore the SIGINT handler and deliver a pending Ctrl-C to it."""
+        lib.set_step_hook(_HOOK_TYPE(), 0.0)
+        self._deliver()
+
+    def _deliver(self, where: str = "") -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+        previous, self.previous = self.previous, None
+        pending, self.signal = self.signal, None
+        if pending is not None and previous is not None:
+            try:
+                previous(*pending)  # the default handler raises KeyboardInterrupt
+            except BaseException as exc:
+                if where and hasattr(exc, "add_note"):
+                    exc.add_note(where)
+                raise
+
+    def stopped(self, t: float, method: str):
+        """Raise for a run the hook stopped at simulated time ``t``."""
+        where = f"compiled {method} interrupted at t = {t:.6g} s"
+        self._deliver(where)
+        if self.error is not None:
+            if hasattr(self.error, "add_note"):
+                self.error.add_note(where)
+            raise self.error
+        raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
 
 
 def _bind(lib):
@@ -345,6 +496,21 @@ def compiled_jacobian(system, tau):
     return jac
 
 
+def _diagnose(system, t: float, y: np.ndarray, method: str) -> None:
+    """Evaluate the accelerations at the state the compiled loop stopped at through the
+    checked Python path, which names the cause (a zero-length spring, a singular joint)."""
+    n = system.nq
+    if not np.all(np.isfinite(y)):
+        return
+    when = f"at t = {t:.6g} s" if np.isfinite(t) else "during the run"
+    try:
+        system.accelerations(y[:n], y[n:], t if np.isfinite(t) else 0.0)
+    except SimulationError as exc:
+        raise SimulationError(f"compiled {method} stopped {when}: {exc}") from None
+    except ModelError:
+        pass
+
+
 def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     n = system.nq
     if status == RANK_LOST:
@@ -352,12 +518,50 @@ def _fail(system, status: int, t: float, y: np.ndarray, method: str):
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
+    if status in (SINGULAR, NOT_FINITE):
+        _diagnose(system, t, y, method)
     if status == SINGULAR:
-        system._solve_tree(*system._dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
+    if status == COLLAPSED:
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], system.coords))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
+
+
+class CollapseWatch:
+    """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
+    that window's pace the rest of the interval would need more than ``limit`` steps, or more
+    than ``limit / 10`` while the pace has fallen a thousandfold below the run's best (a state
+    running away, not a model that needs small steps throughout)."""
+
+    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
+        self.t_end, self.window, self.limit = t_end, window, limit
+        self.t0, self.n, self.best = t0, 0, 0.0
+        self.projected = 0.0  # steps the rest of the run would need at the last window's pace
+
+    def collapsed(self, t: float) -> bool:
+        self.n += 1
+        if self.n < self.window:
+            return False
+        pace, self.t0, self.n = (t - self.t0) / self.window, t, 0
+        self.best = max(self.best, pace)
+        rest = self.t_end - t
+        self.projected = rest / pace if pace > 0 else float("inf")
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 10 * pace and pace < 1e-3 * self.best))
+
+
+def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
+                     projected: float = COLLAPSE_STEPS) -> str:
+    """Why a run whose step size collapsed gave up, and the largest speed it reached."""
+    speeds = np.abs(np.asarray(speeds, dtype=float))
+    largest = ""
+    if speeds.size:
+        i = int(speeds.argmax())
+        largest = f"; largest speed {speeds[i]:.3g} ({names[i] if len(names) == speeds.size else f'speed {i}'})"
+    return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
+            f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
+            f"(check the initial state and the forces)")
 
 
 class RankLost(Exception):
@@ -365,27 +569,34 @@ class RankLost(Exception):
 
 
 def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None, monitor=None):
+                 atol: float, t_eval, tau, max_step: float, dt: float | None):
     """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
-    compiled code; returns ``(t, y, stats, wall)``.  ``monitor`` (a ``progress.Monitor``) gets
-    a probe reading the simulated time reached from the output the loop has written so far
-    (for a progress bar drawn from another thread; the run itself is unchanged)."""
+    compiled code; returns ``(t, y, stats, wall)``."""
     lib = system._compiled.functions.lib
     formulation = system._formulation
     if formulation.constraints is None:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
     configure = lib.dae_configure
     configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
     rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
     alpha, beta = formulation.baumgarte
     configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale)  # this thread only
     try:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
     finally:
         configure(-1, None, 0.0, 0.0, 0.0)
 
 
-def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, monitor=None):
+def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        return _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+    finally:
+        hook.remove(lib)
+
+
+def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
     n = system.nq
     p = system._p
@@ -403,8 +614,10 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         counts = np.zeros(3, dtype=np.int64)
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(system, status, float("nan"), y, method)
+            _fail(system, status, counts[1] * dt, out[counts[1]], method)
         t = np.arange(steps + 1) * dt
         if t_eval is not None:
             out, t = _hermite(system, t, out, t_eval, tau_arr), np.asarray(t_eval)
@@ -421,11 +634,11 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = y
             i_out[0] = 1
-        if monitor is not None:   # the last sample written
-            monitor.probe = lambda: float(t_out[i_out[0] - 1]) if i_out[0] > 0 else 0.0
         status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(state[0], method)
         if status:
             _fail(system, status, state[0], y, method)
         times, values = t_out, y_out
@@ -436,9 +649,6 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
             t_steps = np.empty(cap)
             y_steps = np.empty((cap, 2 * n))
             n_steps[0] = 0
-            if monitor is not None:   # the last step written
-                monitor.probe = (lambda t_steps=t_steps: float(t_steps[n_steps[0] - 1]) if n_steps[0] > 0
-                                 else float(state[0]))
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
@@ -447,6 +657,8 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
             if status == BUFFER_FULL:
                 cap = min(cap * 4, 1 << 20)
                 continue
+            if status == STOPPED:
+                hook.stopped(state[0], method)
             if status:
                 _fail(system, status, state[0], y, method)
             break

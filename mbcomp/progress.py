@@ -1,19 +1,14 @@
 """Progress bars for long simulations and sweeps (``progress=True``).
 
-A bar only watches: it never changes how a run integrates.  A run in the compiled loop goes on
-in a worker thread exactly as without a bar (ctypes releases the GIL), while this thread reads
-how far the loop has written its output and draws that.  The bar is tqdm's when the optional
-``tqdm`` is installed (``pip install "mbcomp[progress]"``), else a one-line text bar on stderr.
+A bar only watches: it never changes how a run integrates.  A compiled loop reports the time it
+has reached through its step hook (``integrators.step_hook``), a scipy-stepped run after each
+step; the bar draws that.  It is tqdm's when the optional ``tqdm`` is installed
+(``pip install "mbcomp[progress]"``), else a one-line text bar on stderr.
 """
 from __future__ import annotations
 
 import sys
-import threading
 import time
-from typing import Any, Callable
-
-#: How often (s) a watched run's progress is read.
-POLL = 0.1
 
 
 class ProgressBar:
@@ -69,46 +64,3 @@ class ProgressBar:
             sys.stderr.write("\n")
             sys.stderr.flush()
         self.enabled = False
-
-
-class Monitor:
-    """Handed to a compiled run: the run sets ``probe`` to a function that reads how far it has
-    got (simulated time, s) from the buffers the compiled loop writes."""
-
-    def __init__(self) -> None:
-        self.probe: Callable[[], float] | None = None
-
-    def read(self) -> float | None:
-        probe = self.probe
-        return None if probe is None else probe()
-
-
-def run_watched(run: Callable[[Monitor], Any], bar: ProgressBar) -> Any:
-    """``run(monitor)`` in a worker thread while this thread draws ``bar`` from the monitor.
-
-    The run is the same call as without a bar, so its result is identical.  An exception in
-    the run is raised here; an interrupt here waits for the run to stop (its buffers must stay
-    alive while compiled code writes them) and is raised again.
-    """
-    monitor = Monitor()
-    outcome: dict[str, Any] = {}
-
-    def work() -> None:
-        try:
-            outcome["value"] = run(monitor)
-        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
-            outcome["error"] = exc
-
-    worker = threading.Thread(target=work, name="mbcomp-run", daemon=True)
-    worker.start()
-    try:
-        while worker.is_alive():
-            worker.join(POLL)
-            bar.update_to(monitor.read())
-    except BaseException:
-        worker.join()
-        raise
-    if "error" in outcome:
-        raise outcome["error"]
-    bar.update_to(monitor.read())   # where the run ended (it may end before the first look)
-    return outcome["value"]

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import csv
+import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from .errors import ModelError, UnknownNameError
 from .services import service
 
 
@@ -107,6 +109,9 @@ class Result:
     def __getitem__(self, name: str) -> np.ndarray:
         """The series of coordinate ``name`` (or ``name_d`` / ``"d" + name`` for its speed)."""
         coords = list(self.coords)
+        if not isinstance(name, str):
+            raise UnknownNameError("Result", f"a series is named by a coordinate name (str), got {name!r}; "
+                                             f"coordinates are {coords}")
         if name in coords:
             return self.q[:, coords.index(name)]
         if name in self.extra_states:
@@ -114,7 +119,7 @@ class Result:
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
             if speed in coords:
                 return self.qd[:, coords.index(speed)]
-        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}"
+        raise UnknownNameError("Result", f"no coordinate {name!r}; coordinates are {coords}"
                        + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
@@ -140,6 +145,8 @@ class Result:
         header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + list(self.extra_states) + \
             ["kinetic", "potential", "total"]
         z = self._z()
+        if not isinstance(path, (str, os.PathLike)):
+            raise ModelError("to_csv", f"path must be a file name (str or path), got {path!r}")
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)

@@ -8,17 +8,23 @@ import numpy as np
 from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.ivp import METHODS
 
+from . import checks
 from .errors import ModelError, SimulationError
 from .events import ContactWatch
 from .formulations.lagrange import TrialStateError
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
-from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
-from .progress import ProgressBar, run_watched
+from .integrators import (CollapseWatch, RankLost, collapse_message, compiled_jacobian, poll_step_hooks, run_compiled,
+                          step_hook, why_not_compiled)
+from .progress import ProgressBar
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
 from .result import Result
+
+
+#: Processor seconds between progress updates from a compiled loop.
+PROGRESS_INTERVAL = 0.1
 
 
 def _delay(progress: Any) -> float:
@@ -39,20 +45,17 @@ def solver_class(method: Any) -> type[OdeSolver]:
     raise ModelError("simulate", f"method must be one of {sorted(METHODS)} or an OdeSolver subclass, got {method!r}")
 
 
-def check_settings(t_end, rtol, atol, t_eval):
-    try:
-        t_end = float(t_end)
-    except (TypeError, ValueError):
-        raise ModelError("simulate", f"t_end must be a number, got {t_end!r}") from None
-    if not np.isfinite(t_end) or t_end <= 0:
-        raise ModelError("simulate", f"t_end must be positive and finite, got {t_end}")
-    for name, value in (("rtol", rtol), ("atol", atol)):
-        if not (np.isfinite(value) and value > 0):
-            raise ModelError("simulate", f"{name} must be positive, got {value}")
+def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_speed=1e-4):
+    """The numeric settings of a run, checked (``ModelError`` naming the argument)."""
+    t_end = checks.number(t_end, "t_end", positive=True)
+    rtol = checks.number(rtol, "rtol", positive=True)
+    atol = checks.number(atol, "atol", positive=True)
+    checks.number(max_step, "max_step", positive=True, finite=False)
+    checks.number(rest_speed, "rest_speed", nonnegative=True)
+    if dt is not None:
+        dt = checks.number(dt, "dt", positive=True)
     if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float).reshape(-1)
-        if np.any(t_eval < 0) or np.any(t_eval > t_end) or np.any(np.diff(t_eval) <= 0):
-            raise ModelError("simulate", "t_eval must be increasing times within [0, t_end]")
+        t_eval = checks.time_grid(t_eval, t_end)
     return t_end, t_eval
 
 
@@ -119,7 +122,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
              dt: float | None = None, x0: Any = None) -> Result:
     """Integrate ``system`` from ``(q0, qd0)`` at t = 0 to ``t_end``; see ``System.simulate``."""
-    t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
+    t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
     q0 = system.state_vector(q0, "q0")
     qd0 = system._velocity(qd0)
     z0 = system.extra_state_vector(x0)
@@ -127,8 +130,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         system._tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
         raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
-    if not (max_step > 0):
-        raise ModelError("simulate", f"max_step must be positive, got {max_step}")
+    if dt is not None:  # fixed steps: every step is stored
+        checks.output_size(t_end / dt + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
     reason = why_not_compiled(system, method, tau) if integrator != "scipy" else "integrator='scipy'"
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
@@ -136,14 +139,18 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     if reason is None:
         q_start, qd_start = system._formulation.assemble(system, q0, qd0, 0.0)
 
-        def run(monitor=None):
+        def run():
             return run_compiled(system, t_end, q_start, qd_start, method=method, rtol=rtol, atol=atol,
-                                t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, monitor=monitor)
+                                t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
         try:
-            if progress:   # the same run, watched from here: the bar never changes the result
+            if progress:
+                # The compiled loop's step hook reports the time reached; the bar only reads it
+                # (the callback never asks to stop), so the run and its result are unchanged.
                 bar = ProgressBar(t_end, desc="simulating", unit="s", delay=_delay(progress))
                 try:
-                    compiled = run_watched(run, bar)
+                    with step_hook(lambda t: bar.update_to(t) and False, interval=PROGRESS_INTERVAL):
+                        compiled = run()
+                    bar.update_to(t_end)
                 finally:
                     bar.close()
             else:
@@ -207,6 +214,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
     gaps_old = watch.gaps(q0, qd0).g if watch else None
+    collapse = CollapseWatch(0.0, t_end)
     try:
         solver = make_solver(0.0, workspace.y0)
         retries = 0
@@ -238,6 +246,11 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                 corrected = workspace.after_step(t, solver.y)
                 recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
             bar.update_to(t)
+            poll_step_hooks(t)
+            if collapse.collapsed(t):
+                q_now, qd_now = workspace.full_state(t, solver.y)
+                raise SimulationError(collapse_message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
+                                                       system.coords, collapse.window, collapse.projected))
             if restart is None and solver.status == "finished":
                 break
             if restart is None:

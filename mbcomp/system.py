@@ -10,6 +10,7 @@ from .components import Spherical
 from .constraint_set import cross
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY
+from . import checks
 from .errors import format_state, ModelError, SimulationError, describe
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 from .params import validate
@@ -180,6 +181,10 @@ class System:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
 
+    def parameter(self, key: str, default: Any = None) -> Any:
+        """The value of one parameter ``"component.attribute"`` (no copy of the whole table)."""
+        return self._parameters.get(key, default)
+
     @property
     def backend(self) -> str:
         return self._compiled.functions.name
@@ -194,6 +199,8 @@ class System:
         Each value is checked by the same ``ParameterSpec`` validation as the component's
         constructor (``mbcomp.params.validate``); a ``ModelError`` names the component and
         the attribute."""
+        if values is not None and not isinstance(values, Mapping):
+            raise ModelError("parameters", f"must be a mapping {{'component.attribute': value}}, got {values!r}")
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)
@@ -261,7 +268,10 @@ class System:
         if callable(tau):
             from .components.forces import checked_output
             return checked_output("tau", tau(t, q, qd), self.nq)
-        arr = np.asarray(tau, dtype=float).reshape(-1)
+        try:
+            arr = np.asarray(tau, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}") from None
         if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
             raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}")
         return arr
@@ -382,6 +392,30 @@ class System:
         kinetic, potential = self._call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
 
+    def evaluate_series(self, name: str, q: Any, qd: Any = None, what: str = "evaluate_series") -> np.ndarray:
+        """The generated function ``name`` ("energy", "constraints", "kinematics", ...) at many
+        states (rows of ``q``, ``qd``; zero speeds when None) in one call: (m, size)."""
+        q = np.asarray(q, dtype=float)
+        qd = np.zeros_like(q) if qd is None else np.asarray(qd, dtype=float)
+        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq:
+            raise ModelError(what, f"q and qd must be (m, {self.nq}) arrays of states, got shapes "
+                             f"{q.shape} and {qd.shape}")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise ModelError(what, "the states must be finite")
+        return self._compiled.functions.many(name, q, qd, self._p, np.zeros(self._compiled.n_inputs))
+
+    def energy_series(self, q: Any, qd: Any) -> Energy:
+        """Kinetic and potential energy (J) at many states (rows of ``q``, ``qd``): arrays of
+        shape (m,), from one call of the generated code."""
+        out = self.evaluate_series("energy", q, qd, what="energy_series")
+        return Energy(out[:, 0].copy(), out[:, 1].copy())
+
+    def constraint_violation_series(self, t: Any, q: Any, offsets: dict | None = None) -> np.ndarray:
+        """max |g(q, t)| at many samples (``t`` (m,), rows of ``q``): the geometric rows
+        from one call of the generated code."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        return self._formulation.constraint_violation_series(self, t, np.asarray(q, dtype=float), offsets)
+
     def _kinematics(self, q, qd):
         out = self._call("kinematics", q, qd)
         nb = len(self.topology.bodies)
@@ -398,7 +432,8 @@ class System:
             raise ModelError(f"body {name!r}", "is not a body of this model")
         q, qd = self.state_vector(q), self._velocity(qd)
         comp = self.topology.components[name]
-        local = np.asarray(comp.com if point is None else point, dtype=float)
+        local = np.asarray(comp.com, dtype=float) if point is None else checks.vector(
+            point, 3, "point", where=f"body_state of {name!r}")
         if point is None and name in (b.name for b in self.topology.bodies):
             local = np.asarray(self._parameters[f"{name}.com"], dtype=float)
         if comp is self.topology.ground:
@@ -518,15 +553,15 @@ class System:
         return equilibrium(self, q_guess, tau=tau, t=t)
 
     def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
-                  independent: Any = None):
+                  independent: Any = None, states: Any = None):
         """State-space ``.A``, ``.B`` in the independent coordinates (see ``mbcomp.analysis``)."""
         from .analysis import linearize
-        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent)
+        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent, states=states)
 
-    def modes(self, q: Any, t: float = 0.0, tau: Any = None):
+    def modes(self, q: Any, t: float = 0.0, tau: Any = None, states: Any = None):
         """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
         from .analysis import modes
-        return modes(self, q, t=t, tau=tau)
+        return modes(self, q, t=t, tau=tau, states=states)
 
     def jacobian(self, frame: Any, q: Any, point: Any = None) -> np.ndarray:
         """(6, n) angular then linear velocity (world) of a body point per speed (see ``mbcomp.analysis``)."""

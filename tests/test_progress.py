@@ -3,16 +3,16 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import progress as progress_module
-from mbcomp.progress import Monitor, ProgressBar, run_watched
+from mbcomp import simulate as simulate_module
+from mbcomp.progress import ProgressBar
 
 
 @pytest.fixture
 def watched(monkeypatch):
-    """Poll fast (so even a short run is watched many times) and record what the bar shows."""
+    """Report often (so even a short run is watched many times) and record what the bar shows."""
     shown = []
     original = ProgressBar.update_to
-    monkeypatch.setattr(progress_module, "POLL", 0.0005)
+    monkeypatch.setattr(simulate_module, "PROGRESS_INTERVAL", 1e-4)
 
     def spy(self, value):
         if value is not None:
@@ -98,15 +98,6 @@ def _without(module):
     return guarded
 
 
-def test_errors_in_a_watched_run_reach_the_caller():
-    def failing(monitor: Monitor):
-        monitor.probe = lambda: 0.5
-        raise mb.SimulationError("boom at t = 0.5 s")
-
-    with pytest.raises(mb.SimulationError, match="boom"):
-        run_watched(failing, ProgressBar(1.0, enabled=False))
-
-
 def test_sweep_with_a_bar_counts_cases(watched, capsys):
     system = mb.load("double_pendulum").compile()
     cases = [{"q0": [a, 0.0]} for a in (0.1, 0.2, 0.3, 0.4)]
@@ -117,14 +108,7 @@ def test_sweep_with_a_bar_counts_cases(watched, capsys):
     assert max(watched) == 4 and "cases" in capsys.readouterr().err
 
 
-def test_a_run_over_before_the_first_look_still_ends_the_bar(monkeypatch):
-    monkeypatch.setattr(progress_module, "POLL", 10.0)
-    shown = []
-
-    def instant(monitor: Monitor):
-        monitor.probe = lambda: 2.5
-        return "done"
-
-    bar = ProgressBar(2.5, enabled=False)
-    monkeypatch.setattr(bar, "update_to", lambda v: shown.append(v))
-    assert run_watched(instant, bar) == "done" and shown[-1] == 2.5
+def test_a_run_over_before_the_first_report_still_ends_the_bar(chain, monkeypatch, watched):
+    monkeypatch.setattr(simulate_module, "PROGRESS_INTERVAL", 100.0)
+    res = chain.simulate(0.01, np.zeros(chain.nq) + 0.1, progress=True)
+    assert res.stats["integrator"] == "compiled" and watched == [0.01]
