@@ -532,7 +532,7 @@ def _fail(system, status: int, t: float, y: np.ndarray, method: str):
 class CollapseWatch:
     """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
     that window's pace the rest of the interval would need more than ``limit`` steps, or more
-    than ``limit / 10`` while the pace has fallen a thousandfold below the run's best (a state
+    than ``limit / 30`` while the pace has fallen a hundredfold below the run's best (a state
     running away, not a model that needs small steps throughout)."""
 
     def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
@@ -548,7 +548,7 @@ class CollapseWatch:
         self.best = max(self.best, pace)
         rest = self.t_end - t
         self.projected = rest / pace if pace > 0 else float("inf")
-        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 10 * pace and pace < 1e-3 * self.best))
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 30 * pace and pace < 1e-2 * self.best))
 
 
 def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
