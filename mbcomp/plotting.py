@@ -310,7 +310,7 @@ class _Scene:
                 a, b = (attach(getattr(comp, f"body_{role}"), _local(system, comp, f"point_{role}")) for role in ends)
                 self.springs.append((a, b))
         for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
-            if hasattr(comp, "body") and hasattr(comp, "point"):
+            if comp.refs.get("body") == "body" and comp.spec("point") is not None:
                 attach(comp.body, _local(system, comp, "point"))
             if comp.kind == "slider":
                 self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
