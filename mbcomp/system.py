@@ -172,6 +172,11 @@ class System:
         return self._compiled.topology
 
     @property
+    def name(self) -> str:
+        """The name of the model this System was compiled from."""
+        return self._compiled.model_name
+
+    @property
     def parameters(self) -> dict[str, Any]:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
