@@ -103,7 +103,7 @@ class CompiledModel:
         from .integrators import c_integrators
         nv = self.topology.nv  # the mass matrix and the accelerations are in speed space
         return (codegen.c_accelerations(nv) + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
-                + c_integrators(self.topology.state_map))
+                + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()
