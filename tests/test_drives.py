@@ -384,3 +384,12 @@ def test_drives_in_model_files(tmp_path):
     path.write_text(SERVO_FILE.replace('type = "step"', 'type = "ramp"'))
     with pytest.raises(mb.ModelError, match=r"forces.pid\] setpoint: signal type must be one of"):
         mb.load(path)
+
+
+def test_cli_info_lists_the_extra_states(capsys):
+    from mbcomp.cli import main
+    from pathlib import Path
+    library = Path(__file__).resolve().parents[1] / "library" / "servo_arm.toml"
+    assert main(["info", str(library)]) == 0
+    out = capsys.readouterr().out
+    assert "extra states  shoulder.pid.integral, shoulder.motor.current, elbow.pid.integral, elbow.motor.current" in out
