@@ -103,7 +103,7 @@ class CompiledModel:
         from .integrators import c_integrators
         nq = self.topology.nq
         return (codegen.c_accelerations(nq) + codegen.c_dae_accelerations(nq, len(self.geometric_rows))
-                + c_integrators(nq))
+                + c_integrators(nq, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()

@@ -23,8 +23,10 @@ def _array(name: str, values) -> str:
     return f"static const double {name}{shape} = {{{flat}}};"
 
 
-def c_integrators(nq: int) -> str:
-    """C source of ``dop853_run`` and ``rk4_run`` for a tree of ``nq`` coordinates."""
+def c_integrators(nq: int, nz: int = 0, drives: bool = False) -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree of ``nq`` coordinates; with
+    ``drives``, the ``nz`` states of drive elements follow the mechanical ones in the state
+    (``drive_equations``: their forces join ``tau``, their rates come from ``drives``)."""
     A = dop.A[:16, :16]
     return "\n".join([
         "#include <stdlib.h>",
@@ -33,7 +35,12 @@ def c_integrators(nq: int) -> str:
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
-        f"#define NY {2 * nq}",
+        f"#define NCOORD {nq}",
+        f"#define NV {nq}",
+        f"#define NMECH {2 * nq}",
+        f"#define NZ {nz}",
+        f"#define HAS_DRIVES {int(bool(drives))}",
+        "#define NY (NMECH + NZ)",
         f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
@@ -48,18 +55,33 @@ static double dummy_input[1];
 
 /* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
-static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
-    for (int i = 0; i < NY / 2; ++i) f[i] = y[NY / 2 + i];
+    for (int i = 0; i < NCOORD; ++i) f[i] = y[NCOORD + i];
 #if NG > 0
     if (dae_nr >= 0) {
-        int status = dae_accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+        int status = dae_accelerations(y, y + NCOORD, p, dummy_input, tau, f + NCOORD, work);
         return status == 2 ? -5 : status;
     }
 #endif
-    return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+    return accelerations(y, y + NCOORD, p, dummy_input, tau, f + NCOORD, work);
 }
 
+#if HAS_DRIVES
+/* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
+   f[NMECH..] gets the states' rates. */
+static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+    double u[1 + NZ], out[NV + NZ], tau_all[NV];
+    u[0] = t;
+    for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
+    drives(y, y + NCOORD, p, u, out);
+    for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
+    for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
+    return mech_rhs(t, y, f, p, tau_all, work);
+}
+#else
+#define rhs mech_rhs
+#endif
 /* The step hook: called with the simulated time about every `hook_interval` s of processor
    time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
    around each run to react to Ctrl-C, to stop requests and to show progress. */
@@ -353,8 +375,6 @@ def why_not_compiled(system, method, tau) -> str | None:
         return "the model has callable forces or torques"
     if system._compiled.drives.callables:
         return "the model's drives or signals use Python callables"
-    if system._compiled.drives.elements:
-        return "drive elements step in Python"
     if callable(tau):
         return "tau is a callable"
     return None
@@ -485,7 +505,7 @@ def compiled_jacobian(system, tau):
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = 2 * system.nq
+    n2 = 2 * system.nq + len(system.extra_states)
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     p = system._p
@@ -575,13 +595,13 @@ class RankLost(Exception):
 
 
 def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None):
+                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None):
     """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
     compiled code; returns ``(t, y, stats, wall)``."""
     lib = system._compiled.functions.lib
     formulation = system._formulation
     if formulation.constraints is None:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     configure = lib.dae_configure
     configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
     rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
@@ -589,27 +609,29 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
     configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale,
               formulation.singular_tolerance)  # this thread only
     try:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     finally:
         configure(-1, None, 0.0, 0.0, 0.0, 0.0)
 
 
-def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     hook = _Hook()
     hook.install(lib)
     try:
-        return _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     finally:
         hook.remove(lib)
 
 
-def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     run, rk4 = _bind(lib)
     n = system.nq
     p = system._p
     tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    y = np.ascontiguousarray(np.concatenate((q0, qd0)), dtype=float)
+    z0 = np.zeros(len(system.extra_states)) if z0 is None else np.asarray(z0, dtype=float)
+    y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
+    ny = y.size
     started = time.perf_counter()
     if method == "RK4":
         if dt is None:
@@ -617,7 +639,7 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         steps = int(round(t_end / dt))
         if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
             raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
-        out = np.empty((steps + 1, 2 * n))
+        out = np.empty((steps + 1, ny))
         counts = np.zeros(3, dtype=np.int64)
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
@@ -631,13 +653,13 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
-    f = np.empty(2 * n)
+    f = np.empty(ny)
     counts = np.zeros(3, dtype=np.int64)
     i_out = np.zeros(1, dtype=np.int64)
     n_steps = np.zeros(1, dtype=np.int64)
     if t_eval is not None:
         t_out = np.ascontiguousarray(t_eval, dtype=float)
-        y_out = np.empty((len(t_out), 2 * n))
+        y_out = np.empty((len(t_out), ny))
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = y
             i_out[0] = 1
@@ -654,7 +676,7 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         cap = 256
         while True:
             t_steps = np.empty(cap)
-            y_steps = np.empty((cap, 2 * n))
+            y_steps = np.empty((cap, ny))
             n_steps[0] = 0
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
@@ -681,7 +703,16 @@ def _hermite(system, t, y, t_eval, tau):
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
-    f = {i: np.concatenate((y[i, n:], system._tree_accelerations(0.0, y[i, :n], y[i, n:], tau))) for i in needed}
+
+    def rate(i):
+        q, qd, z = y[i, :n], y[i, n:2 * n], y[i, 2 * n:]
+        tau_i, rates = tau, z[:0]
+        if system.has_drives:
+            drive, rates = system.drive_outputs(t[i], q, qd, z)
+            tau_i = drive if tau is None else tau + drive
+        return np.concatenate((qd, system._tree_accelerations(t[i], q, qd, tau_i), rates))
+
+    f = {i: rate(i) for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
     h = (t[idx + 1] - t[idx])[:, None]
     s = (t_eval - t[idx])[:, None] / h

@@ -24,7 +24,8 @@ from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression  # noqa: F401 - re-exported
 from .fileform import (BAD, ZERO3, Reader, close_match, component_table, floats, is_valid_name, read_component,
                        read_rotation, short, toml_key, toml_value, type_name)
-from .library import find_library_model, find_library_part, library_dirs, library_models, library_parts, read_description
+from .library import (find_library_model, find_library_part, library_dirs, library_models, library_parts,
+                      read_description, resolve_model_path)
 from .model import Model
 from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame
@@ -84,6 +85,9 @@ def _parse_toml(path: Path, label: str) -> dict:
 def load(path: str | os.PathLike) -> Model:
     """Read a TOML model file into a ``Model`` (schema: docs/files.md and docs/composition.md).
 
+    ``path`` is a file, or the name of a library model (``"double_pendulum"``, also
+    ``"library:double_pendulum"``; see ``mbcomp library``); an existing file wins.
+
     Every problem (unknown or missing key, wrong type, wrong vector length, non-finite
     number, reference to an undeclared body or joint, disallowed expression, TOML syntax)
     is collected and reported in one ``ModelError``, each with the file, table and key:
@@ -98,8 +102,12 @@ def load(path: str | os.PathLike) -> Model:
     "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
     ``path`` (the file read).
     """
-    path = Path(path)
+    path = resolve_model_path(path)
     label = str(path)
+    if not path.exists() and "/" not in label and os.sep not in label and not label.endswith(".toml"):
+        names = ", ".join(library_models()) or "none found"
+        raise ModelError(problems=[f"{label}: cannot read the file (no such file), and no library model "
+                                   f"of that name (library: {names})"])
     data = _parse_toml(path, label)
     reader = Reader(label)
     try:

@@ -170,6 +170,11 @@ class Result:
         """Coordinates, speeds and energy against time (a matplotlib Figure)."""
         return service("plot")(self, *args, **kwargs)
 
+    def view(self, path=None, **kwargs: Any):
+        """The motion in 3D as one self-contained HTML page (see ``mbcomp.viewer.view``): written
+        to ``path`` (returns the Path), or without a path a ``Viewer`` a notebook shows inline."""
+        return service("view")(self, path, **kwargs)
+
     def animate(self, path, **kwargs: Any):
         """Save a 3D stick-and-ball animation (GIF with Pillow, MP4 with ffmpeg)."""
         return service("animate")(self, path, **kwargs)

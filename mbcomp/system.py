@@ -172,6 +172,11 @@ class System:
         return self._compiled.topology
 
     @property
+    def name(self) -> str:
+        """The name of the model this System was compiled from."""
+        return self._compiled.model_name
+
+    @property
     def parameters(self) -> dict[str, Any]:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
@@ -307,7 +312,7 @@ class System:
         if not np.all(np.isfinite(values)):
             springs = []
             for comp in self.topology.forces:
-                if hasattr(comp, "body_a"):
+                if comp.refs.get("a") == "attachment":  # two-point elements (springs, dampers)
                     pa = self._point_position(comp.body_a, self._parameters[f"{comp.name}.point_a"], q)
                     pb = self._point_position(comp.body_b, self._parameters[f"{comp.name}.point_b"], q)
                     if np.linalg.norm(pb - pa) < 1e-12:
