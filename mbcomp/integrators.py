@@ -296,6 +296,12 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
         normalize_state(y_new);
         memcpy(y, y_new, sizeof(double) * NY);
         memcpy(f, K + 12 * NY, sizeof(double) * NY);
+#if NG > 0 && NQUAT == 0  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
+            RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
+            counts[0] += 1;
+        }
+#endif
         if (n_out == 0) {
             t_steps[*n_steps] = t;
             memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
@@ -634,14 +640,15 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
     if formulation.constraints is None:
         return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     configure = lib.dae_configure
-    configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+    configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
     rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
     alpha, beta = formulation.baumgarte
-    configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale)  # this thread only
+    configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale,
+              formulation.singular_tolerance)  # this thread only
     try:
         return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     finally:
-        configure(-1, None, 0.0, 0.0, 0.0)
+        configure(-1, None, 0.0, 0.0, 0.0, 0.0)
 
 
 def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):

@@ -10,6 +10,12 @@ from .base import Formulation, Workspace
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
 DEFAULT_BAUMGARTE = (5.0, 5.0)
 
+#: Relative pivot (square root of the Gram matrix's, against its largest) below which a
+#: constraint direction is dropped from the compiled acceleration solve and projections: a
+#: transient singular position.  1e-4 passes the two-four-bar linkage through its singular
+#: crossings at rtol 1e-8 .. 1e-12 (smaller values stall the step size near the crossings).
+SINGULAR_TOLERANCE = 1e-4
+
 
 class DaeWorkspace(Workspace):
     """State ``[q, qd]`` over all tree coordinates; optional projection after each step."""
@@ -51,6 +57,7 @@ class DaeFormulation(Formulation):
             raise ModelError("formulation 'dae'", f"baumgarte gains must be finite and >= 0, got {gains!r}")
         self.baumgarte = (alpha, beta)
         self.projection = bool(options.get("projection", False))
+        self.singular_tolerance = SINGULAR_TOLERANCE
 
     def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
         if self.constraints is None and not contacts:
