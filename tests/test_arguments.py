@@ -60,7 +60,7 @@ class TestSettings:
         ({"method": "RK4", "dt": 0}, "dt must be positive, got 0"),
         ({"method": "RK4", "dt": "x"}, "dt must be a number"),
         ({"method": "RK4", "dt": True}, "dt must be a number"),
-        ({"tau": "ab"}, "tau: must be 2 finite numbers, got 'ab'"),
+        ({"tau": "ab"}, r"tau: must be 2 finite numbers \(one per speed\), got 'ab'"),
         ({"tau": [1.0]}, "tau: must be 2 finite numbers"),
         ({"tau": [np.nan, 0.0]}, "tau: must be 2 finite numbers"),
         ({"integrator": "fast"}, "integrator must be"),
