@@ -264,6 +264,8 @@ def test_drive_states_run_in_the_compiled_integrators():
     assert stepped.stats["integrator"] == "scipy"
     for name in ("th", "motor.current", "pid.integral"):
         assert np.max(np.abs(compiled[name] - stepped[name])) < 1e-6, name  # rtol 1e-8: steps differ at the kinks
+    radau = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01}, method="Radau")  # compiled Jacobian
+    assert radau.stats["njev"] > 0 and np.max(np.abs(radau["th"] - compiled["th"])) < 1e-5
     rk4 = sys.simulate(2.0, [0.0], method="RK4", dt=1e-3, t_eval=t, x0={"pid.integral": 0.01})
     # fixed steps across the setpoint step and the anti-windup switch: first-order errors
     assert np.max(np.abs(rk4["th"] - compiled["th"])) < 1e-3
@@ -382,3 +384,12 @@ def test_drives_in_model_files(tmp_path):
     path.write_text(SERVO_FILE.replace('type = "step"', 'type = "ramp"'))
     with pytest.raises(mb.ModelError, match=r"forces.pid\] setpoint: signal type must be one of"):
         mb.load(path)
+
+
+def test_cli_info_lists_the_extra_states(capsys):
+    from mbcomp.cli import main
+    from pathlib import Path
+    library = Path(__file__).resolve().parents[1] / "library" / "servo_arm.toml"
+    assert main(["info", str(library)]) == 0
+    out = capsys.readouterr().out
+    assert "extra states  shoulder.pid.integral, shoulder.motor.current, elbow.pid.integral, elbow.motor.current" in out
