@@ -2,8 +2,8 @@
 
 # Composing a model
 from .model import Model
-from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
-                         Slider, Spherical, Spring, TorsionSpring)
+from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
+                         Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 from .components import DCMotor, Drive, JointFriction, JointLimit
 from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
@@ -43,7 +43,7 @@ _services.provide("view", _view)
 __version__ = "0.1.0"
 
 __all__ = [
-    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
+    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Mesh",
     "ModelError", "CompileError", "SimulationError", "load", "load_urdf", "sweep",

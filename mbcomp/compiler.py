@@ -53,18 +53,18 @@ class CompiledModel:
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
-        self.tril = np.tril_indices(self.topology.nq)
+        self.tril = np.tril_indices(self.topology.nv)
         #: Everything about the model that decides the generated code (part of the cache key).
         self.description = structure_description(model, self.topology, self.layout, self.inputs, self.drives)
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
         self.cache_hit = False
-        nq, nb = self.topology.nq, len(self.topology.bodies)
+        nq, nv, nb = self.topology.nq, self.topology.nv, len(self.topology.bodies)
         ng = len(self.geometric_rows)
-        self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
-                      "contacts": len(self.topology.contacts) * (nq + 2), "drives": nq + self.drives.nz}
+        self.sizes = {"nq": nq, "nv": nv, "dynamics": nv * (nv + 1) // 2 + nv, "energy": 2,
+                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nv, "constraints": ng * (nv + 2),
+                      "contacts": len(self.topology.contacts) * (nv + 2), "drives": nv + self.drives.nz}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -101,9 +101,9 @@ class CompiledModel:
     def _c_templates(self) -> str:
         """The hand-written C emitted with every model (accelerations, dae solve, integrators)."""
         from .integrators import c_integrators
-        nq = self.topology.nq
-        return (codegen.c_accelerations(nq) + codegen.c_dae_accelerations(nq, len(self.geometric_rows))
-                + c_integrators(nq, self.drives.nz, bool(self.drives.elements)))
+        nv = self.topology.nv  # the mass matrix and the accelerations are in speed space
+        return (codegen.c_accelerations(nv) + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
+                + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()

@@ -147,20 +147,20 @@ class DriveContext:
 
 
 def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
-    """Outputs ``"drive_forces"`` (nq) and ``"state_rates"`` (nz) of the program."""
-    nq = kin.topology.nq
+    """Outputs ``"drive_forces"`` (nv, speed space) and ``"state_rates"`` (nz) of the program."""
+    nv = kin.topology.nv
     if layout is None:
         prog.du = [sp.Symbol("du0")]
-        prog.outputs["drive_forces"] = [sp.Integer(0)] * nq
+        prog.outputs["drive_forces"] = [sp.Integer(0)] * nv
         prog.outputs["state_rates"] = []
         return
     prog.du = [sp.Symbol(f"du{i}") for i in range(layout.n_u)]
     ctx = DriveContext(prog, kin, layout)
-    forces = [sp.Integer(0)] * nq
+    forces = [sp.Integer(0)] * nv
     rates = []
     for comp in layout.elements:
         for joint, value in comp.drive_loads(ctx):
-            k = kin.topology.q_slice[name_of(joint)].start
+            k = kin.topology.v_slice[name_of(joint)].start  # 1-DOF joints: the speed of the coordinate
             forces[k] = forces[k] + value
         element_rates = comp.state_rates(ctx)
         if len(element_rates) != len(comp.state_names()):

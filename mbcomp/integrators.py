@@ -23,12 +23,15 @@ def _array(name: str, values) -> str:
     return f"static const double {name}{shape} = {{{flat}}};"
 
 
-def c_integrators(nq: int, nz: int = 0, drives: bool = False) -> str:
-    """C source of ``dop853_run`` and ``rk4_run`` for a tree of ``nq`` coordinates; with
-    ``drives``, the ``nz`` states of drive elements follow the mechanical ones in the state
+def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree with the given coordinates and
+    speeds (``statemap.StateMap``): the state is ``y = [q, v, z]``, its rate
+    ``[q'(q, v), v', z']``; quaternions are normalised after every accepted step.  With
+    ``drives``, the ``nz`` states of drive elements follow the mechanical ones
     (``drive_equations``: their forces join ``tau``, their rates come from ``drives``)."""
+    nq, nv = state_map.nq, state_map.nv
     A = dop.A[:16, :16]
-    return "\n".join([
+    lines = [
         "#include <stdlib.h>",
         "#include <string.h>",
         "#include <float.h>",
@@ -36,16 +39,21 @@ def c_integrators(nq: int, nz: int = 0, drives: bool = False) -> str:
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
         f"#define NCOORD {nq}",
-        f"#define NV {nq}",
-        f"#define NMECH {2 * nq}",
+        f"#define NV {nv}",
+        f"#define NMECH {nq + nv}",
         f"#define NZ {nz}",
         f"#define HAS_DRIVES {int(bool(drives))}",
         "#define NY (NMECH + NZ)",
-        f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
+        f"#define NQUAT {state_map.quat_q.size}",
+        f"#define NWORK ({nv * (nv + 1) // 2 + nv} > NDAEWORK ? {nv * (nv + 1) // 2 + nv} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
-        _C_BODY,
-    ])
+    ]
+    if not state_map.identity:
+        ints = lambda name, values: f"static const int {name}[] = {{{', '.join(str(int(v)) for v in values) or '0'}}};"
+        lines += [f"#define NSCREW {state_map.screw_q.size}", ints("SCREW_Q", state_map.screw_q),
+                  ints("SCREW_V", state_map.screw_v), ints("QUAT_Q", state_map.quat_q), ints("QUAT_V", state_map.quat_v)]
+    return "\n".join(lines + [_C_BODY])
 
 
 _C_BODY = r"""
@@ -53,18 +61,44 @@ static double dummy_input[1];
 /* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank). */
 #define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = rs_ == -5 ? -5 : -2; goto done; } } while (0)
 
-/* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status (the dae formulation's
+/* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
 static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
-    for (int i = 0; i < NCOORD; ++i) f[i] = y[NCOORD + i];
+    const double *v = y + NCOORD;
+#if NQUAT > 0
+    for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
+        const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
+        double *r = f + QUAT_Q[k];
+        r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
+        r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
+        r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
+        r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
+    }
+#else
+    for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
+#endif
 #if NG > 0
     if (dae_nr >= 0) {
-        int status = dae_accelerations(y, y + NCOORD, p, dummy_input, tau, f + NCOORD, work);
+        int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
         return status == 2 ? -5 : status;
     }
 #endif
-    return accelerations(y, y + NCOORD, p, dummy_input, tau, f + NCOORD, work);
+    return accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+}
+
+/* Quaternions back to unit length (after each accepted step). */
+static void normalize_state(double *y) {
+#if NQUAT > 0
+    for (int k = 0; k < NQUAT; ++k) {
+        double *a = y + QUAT_Q[k];
+        const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+        if (n > 0) for (int i = 0; i < 4; ++i) a[i] /= n;
+    }
+#else
+    (void)y;
+#endif
 }
 
 #if HAS_DRIVES
@@ -253,14 +287,16 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
                     }
                     out[i] = v + y[i];
                 }
+                normalize_state(out);
                 if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * NY);
                 ++*i_out;
             }
         }
         t = t_new;
+        normalize_state(y_new);
         memcpy(y, y_new, sizeof(double) * NY);
         memcpy(f, K + 12 * NY, sizeof(double) * NY);
-#if NG > 0
+#if NG > 0 && NQUAT == 0  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
         if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
             RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
             counts[0] += 1;
@@ -328,6 +364,7 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
         RHS_OR_FAIL(rhs(t + dt, stage, k + 3 * NY, p, tau, work));
         for (int i = 0; i < NY; ++i)
             next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
+        normalize_state(next);
         counts[0] += 4;
         counts[1] += 1;
         if (!all_finite(next, NY)) { status = -3; goto done; }
@@ -505,7 +542,7 @@ def compiled_jacobian(system, tau):
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = 2 * system.nq + len(system.extra_states)
+    n2 = system.nq + system.nv + len(system.extra_states)
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     p = system._p
@@ -625,7 +662,7 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
 
 def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     run, rk4 = _bind(lib)
-    n = system.nq
+    ny = system.nq + system.nv
     p = system._p
     tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
@@ -700,21 +737,25 @@ def _hermite(system, t, y, t_eval, tau):
     """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
     the steps that bracket a requested time)."""
     n = system.nq
+    state_map, nv = system.topology.state_map, system.nv
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
 
     def rate(i):
-        q, qd, z = y[i, :n], y[i, n:2 * n], y[i, 2 * n:]
+        q, qd, z = y[i, :n], y[i, n:n + nv], y[i, n + nv:]
         tau_i, rates = tau, z[:0]
         if system.has_drives:
             drive, rates = system.drive_outputs(t[i], q, qd, z)
             tau_i = drive if tau is None else tau + drive
-        return np.concatenate((qd, system._tree_accelerations(t[i], q, qd, tau_i), rates))
+        return np.concatenate((state_map.qdot(q, qd), system._tree_accelerations(t[i], q, qd, tau_i), rates))
 
     f = {i: rate(i) for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
     h = (t[idx + 1] - t[idx])[:, None]
     s = (t_eval - t[idx])[:, None] / h
     h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    return h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
+    out = h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
+    if not state_map.identity:
+        out[:, :n] = state_map.normalize(out[:, :n])
+    return out

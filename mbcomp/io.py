@@ -155,7 +155,7 @@ def _read_model(r: Reader, data: dict, path: Path) -> Model:
     model.description = description
     model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
     # With a broken joint the coordinate names are incomplete: check the values only.
-    model.initial = _read_initial(r, sections["initial"], coords_seen)
+    model.initial = _read_initial(r, sections["initial"], coords_seen, getattr(r, "speeds_seen", {}))
     model.simulation = _read_simulation(r, sections["simulation"])
     model.path = path
     return model
@@ -222,6 +222,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
     own = {p: s for p, s in exposed.items() if _port_body(s) in bodies}
     expose(own)
     coords_seen: dict[str, str] = {}
+    speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
     all_joints_read = True
     for comp_name, label, table in named_tables("submodels"):
         instance = _read_submodel(r, comp_name, label, table, bodies, context)
@@ -258,6 +259,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
             if coord in coords_seen:
                 r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
             coords_seen[coord] = f"[{label}]"
+        speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
         _add_component(r, target, joint, label)
 
     for comp_name, label, table in named_tables("forces"):
@@ -268,6 +270,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
         _add_component(r, target, read_component(r, "contacts", comp_name, label, table, bodies, joints), label)
 
     expose({p: s for p, s in exposed.items() if p not in own})
+    r.speeds_seen = speeds_seen  # a ball's speeds, which [initial.qd] may name
     return coords_seen if all_joints_read else None
 
 
@@ -548,10 +551,12 @@ def _read_parameters(r: Reader, table: Any) -> None:
             r.parameters[key] = x
 
 
-def _read_initial(r: Reader, table: dict, coords: dict | None) -> dict:
+def _read_initial(r: Reader, table: dict, coords: dict | None, speeds: dict | None = None) -> dict:
     initial: dict[str, dict[str, float]] = {"q": {}, "qd": {}}
     r.keys("initial", table, ("q", "qd"))
+    known = coords
     for which in ("q", "qd"):
+        coords = known if which == "q" or known is None else {**known, **(speeds or {})}
         values = table.get(which, {})
         label = f"initial.{which}"
         if not isinstance(values, dict):

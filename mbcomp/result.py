@@ -41,8 +41,10 @@ class Event:
 class Result:
     """Simulated time series: plain data that pickles without its System.
 
-    ``t`` (m,) s; ``q``, ``qd`` (m, nq) in ``coords`` order; ``res["name"]`` a coordinate's
-    series; ``stats`` holds the solver counters and wall time.  Everything the derived
+    ``t`` (m,) s; ``q`` (m, nq) in ``coords`` order; ``qd`` (m, nv) in ``speeds`` order (a
+    screw coordinate's speed is its rate; a ball has 4 coordinates, 3 speeds);
+    ``res["name"]`` a coordinate's or a speed's series; ``stats`` holds the solver
+    counters and wall time.  Everything the derived
     series need is recorded here: the parameter values (``parameters``), the speed
     motors' start values (``offsets``) and the contacts held closed at each sample
     (``closed_contacts``), so ``energy()``, ``reactions`` and ``constraint_violation()``
@@ -63,6 +65,7 @@ class Result:
     persistent_contacts: list = field(default_factory=list)
     closed_contacts: list = field(default_factory=list, repr=False)  #: persistent contact indices per sample
     coords: tuple = ()  #: coordinate names (from the System when not given)
+    speeds: tuple = ()  #: speed names, the columns of ``qd`` (from the System when not given)
     parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
     formulation: str = ""
     _reactions: dict | None = field(default=None, repr=False, compare=False)
@@ -78,6 +81,8 @@ class Result:
         if self.system is not None:
             if not self.coords:
                 self.coords = tuple(self.system.coords)
+            if not self.speeds:
+                self.speeds = tuple(getattr(self.system, "speeds", self.system.coords))
             if not self.parameters:
                 self.parameters = self.system.parameters
             if not self.formulation:
@@ -85,6 +90,7 @@ class Result:
             if not self.extra_states:
                 self.extra_states = tuple(getattr(self.system, "extra_states", ()))
         self.coords = tuple(self.coords)
+        self.speeds = tuple(self.speeds) or self.coords
         self.extra_states = tuple(self.extra_states)
 
     def __getstate__(self) -> dict:
@@ -107,19 +113,22 @@ class Result:
         return self.system
 
     def __getitem__(self, name: str) -> np.ndarray:
-        """The series of coordinate ``name`` (or ``name_d`` / ``"d" + name`` for its speed)."""
-        coords = list(self.coords)
+        """The series of coordinate ``name``, of a speed that is not a coordinate's rate (a
+        ball's ``NAME_wx``), or ``name_d`` / ``"d" + name`` for a coordinate's speed."""
+        coords, speeds = list(self.coords), list(self.speeds)
         if not isinstance(name, str):
             raise UnknownNameError("Result", f"a series is named by a coordinate name (str), got {name!r}; "
                                              f"coordinates are {coords}")
         if name in coords:
             return self.q[:, coords.index(name)]
+        if name in speeds:
+            return self.qd[:, speeds.index(name)]
         if name in self.extra_states:
             return self._z()[:, self.extra_states.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
-            if speed in coords:
-                return self.qd[:, coords.index(speed)]
-        raise UnknownNameError("Result", f"no coordinate {name!r}; coordinates are {coords}"
+            if speed in speeds:
+                return self.qd[:, speeds.index(speed)]
+        raise UnknownNameError("Result", f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}"
                        + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
@@ -142,8 +151,8 @@ class Result:
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
-        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + list(self.extra_states) + \
-            ["kinetic", "potential", "total"]
+        header = (["t"] + list(self.coords) + [f"{c}_d" if c in self.coords else c for c in self.speeds]
+                  + list(self.extra_states) + ["kinetic", "potential", "total"])
         z = self._z()
         if not isinstance(path, (str, os.PathLike)):
             raise ModelError("to_csv", f"path must be a file name (str or path), got {path!r}")
@@ -162,7 +171,7 @@ class Result:
         except ImportError as exc:  # pragma: no cover - optional dependency
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
-        data.update({f"{c}_d": self.qd[:, i] for i, c in enumerate(self.coords)})
+        data.update({f"{c}_d" if c in self.coords else c: self.qd[:, i] for i, c in enumerate(self.speeds)})
         data.update({name: self._z()[:, i] for i, name in enumerate(self.extra_states)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 

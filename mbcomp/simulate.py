@@ -165,8 +165,9 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
+        nv = system.nv
         return Result(system=system, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                      qd=values[:, n:2 * n].copy(), z=values[:, 2 * n:].copy(), stats=stats, tau=tau)
+                      qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
     if integrator == "compiled" and reason is not None:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)
@@ -235,6 +236,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             retries = 0
             if solver.status == "failed":
                 raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
+            workspace.normalize(solver.y)  # quaternions to unit length, in place
             counts["steps"] += 1
             t, restart = solver.t, None
             if watch is not None:
@@ -276,7 +278,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     add_counts(solver)
     wall = time.perf_counter() - started
     q = np.array(recorder.q).reshape(-1, system.nq)
-    qd = np.array(recorder.qd).reshape(-1, system.nq)
+    qd = np.array(recorder.qd).reshape(-1, system.nv)
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
     stats = {"method": getattr(cls, "__name__", str(method)), "integrator": "scipy", **counts, "status": 0,

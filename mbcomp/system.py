@@ -52,7 +52,10 @@ class System:
     """A compiled model: the numeric API of API.md.  Never modified by any call.
 
     ``q`` is always every tree coordinate in ``coords`` order (array or ``{name: value}``);
-    ``tau`` adds generalised forces (array of ``len(coords)`` or callable ``(t, q, qd)``).
+    ``qd`` the speeds in ``speeds`` order (a screw coordinate's speed is its rate and
+    shares its name; a ball has 4 coordinates, a quaternion, and 3 speeds, an angular
+    velocity); accelerations, mass matrices, holding forces and ``tau`` are in speed
+    space (``tau``: an array of ``len(speeds)`` or a callable ``(t, q, qd)``).
     """
 
     def __init__(self, compiled, formulation, parameters: dict):
@@ -79,15 +82,41 @@ class System:
         return self._compiled.topology.nq
 
     @property
+    def speeds(self) -> tuple[str, ...]:
+        """Names of the generalised speeds (``qd``), ``nv`` of them."""
+        return self._compiled.topology.speeds
+
+    @property
+    def nv(self) -> int:
+        return self._compiled.topology.nv
+
+    def integrate(self, q: Any, dv: Any) -> np.ndarray:
+        """The coordinates reached from ``q`` by the step ``dv`` in speed space: ``q + dv`` on
+        screw coordinates, a rotation by the vector ``dv`` (rad, child frame) on a ball's
+        quaternion (the result normalised)."""
+        return self.topology.state_map.integrate(self.state_vector(q), self.speed_vector(dv, "dv"))
+
+    def difference(self, q0: Any, q1: Any) -> np.ndarray:
+        """The step ``dv`` (speed space) with ``integrate(q0, dv) = q1`` (the shorter rotation
+        for a ball)."""
+        return self.topology.state_map.difference(self.state_vector(q0, "q0"), self.state_vector(q1, "q1"))
+
+    def coordinate_rates(self, q: Any, qd: Any) -> np.ndarray:
+        """``q' = G(q) qd``: the coordinates' rates for the speeds ``qd`` (``qd`` itself without
+        ball joints; a ball's quaternion rate ``q (0, w) / 2``)."""
+        return self.topology.state_map.qdot(self.state_vector(q), self._velocity(qd))
+
+    @property
     def extra_states(self) -> tuple[str, ...]:
         """States of drive elements (motor currents, PID integrals): ``"component.state"``."""
         return self._compiled.drives.states
 
     @property
     def states(self) -> tuple[str, ...]:
-        """Every state of a simulation: coordinates, their speeds (``NAME_d``), then the
-        states of drive elements (``extra_states``)."""
-        return tuple(self.coords) + tuple(f"{c}_d" for c in self.coords) + self.extra_states
+        """Every state of a simulation: coordinates, the speeds (``NAME_d`` for a coordinate's
+        rate, a ball's by their own names), then the states of drive elements (``extra_states``)."""
+        return (tuple(self.coords) + tuple(f"{c}_d" if c in self.coords else c for c in self.speeds)
+                + self.extra_states)
 
     def extra_state_vector(self, x0: Any = None) -> np.ndarray:
         """Initial values of ``extra_states`` from ``{name: value}`` (missing ones 0)."""
@@ -121,7 +150,7 @@ class System:
         return bool(self._compiled.drives.elements)
 
     def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
-        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nq, speed space)
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nv, speed space)
         and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
         ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
         drives = self._compiled.drives
@@ -130,7 +159,7 @@ class System:
         if total - total != 0.0:
             raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
                                   f"{format_state(q)}, states {format_state(z)}")
-        return out[: self.nq], out[self.nq:]
+        return out[: self.nv], out[self.nv:]
 
     def _applied(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray, states: Any = None):
         """``tau`` plus the drive elements' generalised forces (their states from ``states``:
@@ -226,8 +255,20 @@ class System:
 
     # -- state handling -------------------------------------------------------------------
     def state_vector(self, values: Any, what: str = "q") -> np.ndarray:
-        """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq."""
-        coords = self.coords
+        """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq.
+
+        Quaternions are normalised (any non-zero one is accepted); in a dict, a ball's
+        quaternion may be left out entirely (the identity)."""
+        state_map = self.topology.state_map
+        arr = self._checked_vector(values, what, self.coords, "coordinate",
+                                   None if state_map.identity else state_map.neutral())
+        return arr if state_map.identity else state_map.normalize(arr)
+
+    def speed_vector(self, values: Any, what: str = "qd") -> np.ndarray:
+        """``values`` (array or ``{speed: value}``) as a checked float array of length nv."""
+        return self._checked_vector(values, what, self.speeds, "speed")
+
+    def _checked_vector(self, values: Any, what: str, coords: tuple, noun: str, neutral=None) -> np.ndarray:
         if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (len(coords),):
             total = float(values.sum())  # fast path: a finite sum means finite entries
             if total - total == 0.0:
@@ -235,24 +276,36 @@ class System:
         if isinstance(values, Mapping):
             unknown = [k for k in values if k not in coords]
             if unknown:
-                raise ModelError(f"{what}", f"unknown coordinate(s) {unknown}; coordinates are {list(coords)}")
+                raise ModelError(f"{what}", f"unknown {noun}(s) {unknown}; {noun}s are {list(coords)}")
             missing = [c for c in coords if c not in values]
+            if missing and neutral is not None:
+                values = self._default_quaternions(values, missing, neutral)
+                missing = [c for c in coords if c not in values]
             if missing:
-                raise ModelError(f"{what}", f"missing coordinate(s) {missing}")
+                raise ModelError(f"{what}", f"missing {noun}(s) {missing}")
             values = [values[c] for c in coords]
         try:
             arr = np.asarray(values, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise ModelError(f"{what}", f"must be {len(coords)} numbers, got {values!r}") from None
         if arr.shape != (len(coords),):
-            raise ModelError(f"{what}", f"has length {arr.size}, the model has {len(coords)} coordinates {list(coords)}")
+            raise ModelError(f"{what}", f"has length {arr.size}, the model has {len(coords)} {noun}s {list(coords)}")
         if not np.all(np.isfinite(arr)):
             bad = [coords[i] for i in np.flatnonzero(~np.isfinite(arr))]
             raise ModelError(f"{what}", f"is not finite for {bad}")
         return arr
 
+    def _default_quaternions(self, values: Mapping, missing: list, neutral: np.ndarray) -> dict:
+        """``values`` with every wholly missing quaternion set to the identity."""
+        values = dict(values)
+        for start in self.topology.state_map.quat_q:
+            names = self.coords[start:start + 4]
+            if all(n in missing for n in names):
+                values.update({n: neutral[start + i] for i, n in enumerate(names)})
+        return values
+
     def _velocity(self, qd: Any) -> np.ndarray:
-        return np.zeros(self.nq) if qd is None else self.state_vector(qd, "qd")
+        return np.zeros(self.nv) if qd is None else self.speed_vector(qd, "qd")
 
     def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         if not self._compiled.n_inputs:
@@ -267,13 +320,13 @@ class System:
             return None
         if callable(tau):
             from .components.forces import checked_output
-            return checked_output("tau", tau(t, q, qd), self.nq)
+            return checked_output("tau", tau(t, q, qd), self.nv)
         try:
             arr = np.asarray(tau, dtype=float).reshape(-1)
         except (TypeError, ValueError):
-            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}") from None
-        if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
-            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}")
+            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}") from None
+        if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
+            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
         return arr
 
     # -- tree quantities (raw, unchecked inputs) -------------------------------------------------
@@ -283,8 +336,8 @@ class System:
         return self._compiled.functions(name, q, qd, self._p, u)
 
     def _dynamics(self, t, q, qd, tau=None):
-        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f``."""
-        n = self.nq
+        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f`` (speed space)."""
+        n = self.nv
         out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
         M = np.empty((n, n))
         rows, cols = self._compiled.tril
@@ -355,14 +408,14 @@ class System:
 
     # -- public API -------------------------------------------------------------------------------
     def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
-        """(nq, nq) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by coordinate type)."""
+        """(nv, nv) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by speed type)."""
         q = self.state_vector(q)
-        M, _ = self._dynamics(t, q, np.zeros(self.nq))
+        M, _ = self._dynamics(t, q, np.zeros(self.nv))
         return self._check_finite(M, "mass matrix", q)
 
     def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
-        """(nq,) coordinate accelerations, consistent with every constraint (drive elements
-        act with their ``states``, by name; 0 when not given)."""
+        """(nv,) accelerations (rates of the speeds), consistent with every constraint (drive
+        elements act with their ``states``, by name; 0 when not given)."""
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.accelerations(self, t, q, qd, self._applied(tau, t, q, qd, states))
 
@@ -379,10 +432,10 @@ class System:
         return self._formulation.reactions(self, t, q, qd, self._applied(tau, t, q, qd, states), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
-        """(nq,) generalised forces that, applied, hold the system at rest at ``q``
+        """(nv,) generalised forces that, applied, hold the system at rest at ``q``
         (minus the gravity, spring and applied generalised forces at zero speed)."""
         q = self.state_vector(q)
-        qd = np.zeros(self.nq)
+        qd = np.zeros(self.nv)
         _, f = self._dynamics(t, q, qd)
         return self._check_finite(-f, "holding forces", q)
 
@@ -420,7 +473,7 @@ class System:
         out = self._call("kinematics", q, qd)
         nb = len(self.topology.bodies)
         per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
-        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nq, 6)
+        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nv, 6)
         return per_body, columns
 
     def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
@@ -448,7 +501,7 @@ class System:
 
         def accelerations():
             qdd = self.accelerations(q, qd, t, tau)
-            idx = self.topology.coord_indices_of_body(comp)
+            idx = self.topology.speed_indices_of_body(comp)
             A = A_bias + columns[idx].T @ qdd[idx]
             alpha, a0 = A[:3], A[3:]
             return a0 + cross(alpha, position) + cross(w, velocity), alpha.copy()
@@ -461,12 +514,12 @@ class System:
         local = np.asarray(local, dtype=float)
         if comp is self.topology.ground:
             return local
-        row = self._kinematics(q, np.zeros(self.nq))[0][self.topology.body_index(comp)]
+        row = self._kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)]
         return row[9:12] + row[:9].reshape(3, 3) @ local
 
     def motion_columns(self, q: Any) -> np.ndarray:
-        """(nq, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` (the columns of T)."""
-        return self._kinematics(self.state_vector(q), np.zeros(self.nq))[1]
+        """(nv, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` of the speeds (the columns of T)."""
+        return self._kinematics(self.state_vector(q), np.zeros(self.nv))[1]
 
     def assemble(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(q, qd)`` moved onto the constraints: positions by Newton (minimum-norm steps from
@@ -522,7 +575,7 @@ class System:
         """``{contact: gap}`` (m), negative when penetrated."""
         from .impact import contact_values
         q = self.state_vector(q)
-        values = contact_values(self, q, np.zeros(self.nq))
+        values = contact_values(self, q, np.zeros(self.nv))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
     # -- analysis (mbcomp.analysis) ----------------------------------------------------------
@@ -575,10 +628,11 @@ class System:
 
     # -- display ----------------------------------------------------------------------------------
     def equations(self):
-        """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, qd and parameter symbols."""
+        """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, the speeds and parameter symbols
+        (a screw coordinate's speed is shown as its rate)."""
         import sympy as sp
         prog = self._compiled.program
-        n = self.nq
+        n = self.nv
         tri = prog.outputs["mass_matrix"]
         values = prog.expand(list(tri) + list(prog.outputs["forces"]))
         M = sp.zeros(n, n)
@@ -589,15 +643,15 @@ class System:
                 k += 1
         f = sp.Matrix(values[len(tri):])
         names = {s: sp.Symbol(c) for s, c in zip(prog.q, self.coords)}
-        names.update({s: sp.Symbol(f"\\dot{{{c}}}") for s, c in zip(prog.qd, self.coords)})
+        names.update({s: sp.Symbol(f"\\dot{{{c}}}" if c in self.coords else c) for s, c in zip(prog.qd, self.speeds)})
         return M.xreplace(names), f.xreplace(names)
 
     def _repr_latex_(self) -> str | None:
-        if self.nq > 4:
+        if self.nv > 4:
             return None
         import sympy as sp
         M, f = self.equations()
-        qdd = sp.Matrix([sp.Symbol(f"\\ddot{{{c}}}") for c in self.coords])
+        qdd = sp.Matrix([sp.Symbol(f"\\ddot{{{c}}}" if c in self.coords else f"\\dot{{{c}}}") for c in self.speeds])
         return "$" + sp.latex(M) + sp.latex(qdd) + " = " + sp.latex(f) + "$"
 
     def __repr__(self) -> str:

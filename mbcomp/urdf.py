@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .components import Body, Prismatic, Revolute
+from .components import Body, Free, Prismatic, Revolute
 from .components.frame import Frame
 from .errors import ModelError
 from .model import Model
@@ -238,11 +238,7 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
     if shapes_of.get(ground_body):
         model.ground.shape = tuple(shapes_of[ground_body])   # drawn by the viewer, fixed
     if floating:
-        from . import components
-        free = getattr(components, "Free", None)
-        if free is None:
-            raise ModelError("load_urdf", "floating=True needs the Free joint, which this version lacks")
-        model.add(free(_name(f"{root}_free", taken), model.ground, bodies[root]))
+        model.add(Free(_name(f"{root}_free", taken), model.ground, bodies[root]))
 
     for joint in robot.joints:
         if joint.type == "fixed":

@@ -206,3 +206,31 @@ def test_limits_can_be_enforced(small):
     res = system.simulate(0.5, [1.4, 0.0, 0.0], [3.0, 0.0, 0.0])
     assert res["shoulder"].max() <= 1.5 + 1e-6 and res["shoulder"].max() > 1.5 - 1e-3
     assert any(str(e.contact).startswith("shoulder_limit") for e in res.events)
+
+
+def test_floating_robot_conserves_energy_and_momentum(tmp_path):
+    """``floating=True``: the root joins the ground by a ``Free`` joint.  Without gravity and
+    torques, the total energy and the linear momentum (sum of m v_com) stay constant."""
+    base_inertial = ('<link name="base">\n    <inertial><origin xyz="0.01 0 0.02"/><mass value="3.0"/>'
+                     '<inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.04"/></inertial>')
+    path = tmp_path / "floating.urdf"
+    path.write_text(SMALL.replace('<link name="base">', base_inertial))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = mb.load_urdf(path, floating=True, gravity=(0, 0, 0))
+    system = model.compile()
+    assert len(system.coords) == 10 and len(system.speeds) == 9
+    q0 = [0, 0, 0, 1, 0, 0, 0, 0.3, 0.05, 0.2]
+    qd0 = [0.1, -0.2, 0.05, 0.3, -0.5, 0.8, 1.0, 0.2, -2.0]
+    res = system.simulate(1.0, q0, qd0, rtol=1e-10, atol=1e-12, t_eval=[0.0, 0.5, 1.0])
+
+    def momentum(q, qd):
+        return sum(model[b].mass * system.body_state(b, q, qd).velocity for b in ("base", "arm", "slider", "tip"))
+
+    energy = res.energy().total
+    p0 = momentum(res.q[0], res.qd[0])
+    assert energy[0] > 0.1 and np.linalg.norm(p0) > 0.5
+    assert np.max(np.abs(energy - energy[0])) < 1e-8 * energy[0]
+    for i in (1, 2):
+        assert np.linalg.norm(momentum(res.q[i], res.qd[i]) - p0) < 1e-8 * np.linalg.norm(p0)
+    assert np.allclose(np.linalg.norm(res.q[:, 3:7], axis=1), 1.0, atol=1e-12)

@@ -133,8 +133,10 @@ class LoopClosure(Constraint):
         return {"joint": self.joint}
 
     def _equations(self, ground):
-        from .joints import Fixed, Prismatic, Revolute, Spherical
+        from .joints import Ball, Cylindrical, Fixed, Free, Planar, Prismatic, Revolute, Spherical, Universal
         j = self.joint
+        if isinstance(j, Free):
+            raise ModelError(j, "a Free joint constrains nothing, so it cannot close a loop")
         a, b, pa, pb = j.parent, j.child, f"{j.name}.parent_point", f"{j.name}.child_point"
         # Directions of the joint frames in their body frames (rotated frames: R_pf, R_cf).
         Rp, Rc = j.parent_frame_rotation, j.child_frame_rotation
@@ -143,6 +145,12 @@ class LoopClosure(Constraint):
         if isinstance(j, Prismatic):
             eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
             return eqs + _orientation_lock(a, b, in_a, in_b)
+        if isinstance(j, Cylindrical):  # on the axis line, the axis kept parallel
+            eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
+            return eqs + [DotEquation(a, in_a(j.axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(j.axis))]
+        if isinstance(j, Planar):  # in the plane, the normal kept parallel
+            eqs = [PointEquation(a, in_a(j.normal), a, pa, b, pb, "f")]
+            return eqs + [DotEquation(a, in_a(j.normal), b, in_b(n), f"t{i + 1}") for i, n in enumerate(j.plane_axes)]
         eqs = [PointEquation(ground, n, a, pa, b, pb, "fxyz"[i + 1]) for i, n in enumerate(WORLD_AXES)]
         if isinstance(j, Fixed):
             return eqs + _orientation_lock(a, b, in_a, in_b)
@@ -151,8 +159,12 @@ class LoopClosure(Constraint):
             return eqs + [DotEquation(a, in_a(axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(axis))]
         if isinstance(j, Spherical) and len(j.sequence) == 2:
             return eqs + [DotEquation(a, in_a(AXIS_NAMES[j.sequence[0]]), b, in_b(AXIS_NAMES[j.sequence[1]]), "t")]
-        if isinstance(j, Spherical):
+        if isinstance(j, (Spherical, Ball)):
             return eqs
+        if isinstance(j, Universal):
+            if abs(float(np.dot(j.axes[0], j.axes[1]))) > 1e-12:
+                raise ModelError(j, "a universal joint closes a loop only with perpendicular axes")
+            return eqs + [DotEquation(a, in_a(j.axes[0]), b, in_b(j.axes[1]), "t")]
         raise ModelError(j, "this joint type cannot close a loop")
 
 

@@ -186,7 +186,8 @@ class Force(ForceElement):
 
 
 class JointTorque(SignalOwner, ForceElement):
-    """Generalised force(s) on a joint's coordinates (N m for angles, N for slides).
+    """Generalised force(s) on a joint's speeds (N m for angles, N for slides; for a ball
+    the torque on the child in the child frame).
 
     ``value``: a number / array of the joint's size (a parameter) or a callable
     ``(t, q, qd)`` returning it.
@@ -266,18 +267,19 @@ class JointTorque(SignalOwner, ForceElement):
         return []
 
     def input_size(self, joint: Any = None) -> int:
-        """Run-time input values: the resolved ``joint``'s coordinate count for a callable
+        """Run-time input values: the resolved ``joint``'s speed count for a callable
         (0 for a constant value)."""
         if not self.is_callable:
             return 0
-        return joint.n_coords if joint is not None else 1
+        return joint.nv if joint is not None else 1
 
     def check(self, resolved: dict) -> list[str]:
         """Problems against the resolved references (``{"joint": Joint}``); sets nothing."""
         joint = resolved["joint"]
-        if self.size is not None and self.size != joint.n_coords:
+        if self.size is not None and self.size != joint.nv:
+            noun = "coordinate(s)" if joint.nv == joint.nq else "speed(s)"
             return [f"{describe(self)}: value has {self.size} entries, joint {joint.name!r} has "
-                    f"{joint.n_coords} coordinate(s)"]
+                    f"{joint.nv} {noun}"]
         return []
 
     def evaluate_input(self, t, q, qd, size: int | None = None):
