@@ -55,7 +55,11 @@ __all__ = [
 def load(path):
     """Read a model: a declarative TOML model file (docs/files.md), a library model's name
     (``mbcomp library``), or a URDF robot description (``.urdf``, see ``load_urdf``)."""
+    import os
     from .library import resolve_model_path
+    if not isinstance(path, (str, os.PathLike)):
+        raise ModelError("load", f"path must be a file path or a library model's name, got {type(path).__name__} "
+                                 f"{path!r:.60}")
     resolved = resolve_model_path(path)
     if resolved.suffix.lower() == ".urdf":
         return load_urdf(resolved)
