@@ -130,8 +130,10 @@ class TestCompiledDae:
         compiled = loop.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12)
         stepped = loop.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12, integrator="scipy")
         assert compiled.stats["integrator"] == "compiled" and stepped.stats["integrator"] == "scipy"
-        assert compiled.stats["nfev"] == stepped.stats["nfev"]
-        np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-9)
+        # The compiled loop also projects onto the constraints after each step (one more
+        # evaluation per step), so its step count differs a little from Python stepping.
+        assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) < 0.2 * stepped.stats["nfev"]
+        np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-8)
         assert compiled.constraint_violation().max() < 1e-10
 
     def test_compiled_kkt_solve_matches_the_python_one_off_the_constraints(self, loop):
@@ -140,9 +142,9 @@ class TestCompiledDae:
         lib = loop._compiled.functions.lib
         formulation = loop._formulation
         rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
-        lib.dae_configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
-                                      ctypes.c_double]
-        lib.dae_configure(len(rows), rows.ctypes.data, *formulation.baumgarte, formulation.schur_scale)
+        lib.dae_configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
+        lib.dae_configure(len(rows), rows.ctypes.data, *formulation.baumgarte, formulation.schur_scale,
+                          formulation.singular_tolerance)
         try:
             q, qd = loop.assemble([1.0, -0.5, 1.5], [1.0, 0.0, 0.0])
             q = q + 0.01
@@ -152,7 +154,7 @@ class TestCompiledDae:
             status = lib.dae_accelerations(pointer(q), pointer(qd), pointer(loop._p), pointer(u), None,
                                            pointer(out), pointer(work))
         finally:
-            lib.dae_configure(-1, None, 0.0, 0.0, 0.0)
+            lib.dae_configure(-1, None, 0.0, 0.0, 0.0, 0.0)
         assert status == 0
         np.testing.assert_allclose(out, loop.accelerations(q, qd), rtol=1e-10, atol=1e-10)
 
