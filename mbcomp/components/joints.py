@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..params import ParameterSpec, axis_name, unit_vector
-from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
+from ..rotations import (normals, AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
 from .base import Component
 from .frame import Frame, split_frame
@@ -562,7 +562,6 @@ class Planar(Joint):
             self.plane_axes = (AXIS_NAMES[pair[0]], AXIS_NAMES[pair[1]])
             self._suffixes = (*pair, "angle")
         else:
-            from .constraints import normals
             self.plane_axes = normals(self.normal)
             self._suffixes = ("u", "v", "angle")
         super().__init__(name, parent, child, **options)
