@@ -2,8 +2,8 @@
 
 # Composing a model
 from .model import Model
-from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
-                         Slider, Spherical, Spring, TorsionSpring)
+from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
+                         Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 from .components.frame import Frame, rpy
 
 # The compiled system and its results
@@ -34,7 +34,7 @@ _services.provide("animate", _animate_result)
 __version__ = "0.1.0"
 
 __all__ = [
-    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Fixed", "Spring", "Damper", "Force",
+    "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
 ]

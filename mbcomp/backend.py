@@ -74,6 +74,7 @@ class CFunctions:
         self.path = library_path
         self.sizes = sizes
         self.nq = sizes["nq"]
+        self.nv = sizes.get("nv", self.nq)
         void = ctypes.c_void_p
         self._fns = {}
         for name in FUNCTIONS:
@@ -101,8 +102,8 @@ class CFunctions:
         """This thread's input/output buffers and their bound pointers."""
         buffers = getattr(self._local, "buffers", None)
         if buffers is None or len(buffers[0]["u"]) < n_inputs:
-            n = self.nq
-            arrays = {"q": np.empty(n), "qd": np.empty(n), "u": np.zeros(max(n_inputs, 1)), "tau": np.empty(n),
+            n = self.nv  # speeds: the mass matrix, forces and accelerations are nv-sized
+            arrays = {"q": np.empty(self.nq), "qd": np.empty(n), "u": np.zeros(max(n_inputs, 1)), "tau": np.empty(n),
                       "out": np.empty(n), "work": np.empty(n * (n + 1) // 2 + n)}
             pointers = {k: ctypes.c_void_p(v.ctypes.data) for k, v in arrays.items()}
             buffers = self._local.buffers = (arrays, pointers)

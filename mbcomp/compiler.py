@@ -43,17 +43,17 @@ class CompiledModel:
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
-        self.tril = np.tril_indices(self.topology.nq)
+        self.tril = np.tril_indices(self.topology.nv)
         description = structure_description(model, self.topology, self.layout, self.inputs)
         self.key = codegen.structure_key(description)
         self._program = None
         started = time.perf_counter()
         self.cache_hit = False
-        nq, nb = self.topology.nq, len(self.topology.bodies)
+        nq, nv, nb = self.topology.nq, self.topology.nv, len(self.topology.bodies)
         ng = len(self.geometric_rows)
-        self.sizes = {"nq": nq, "dynamics": nq * (nq + 1) // 2 + nq, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nq, "constraints": ng * (nq + 2),
-                      "contacts": len(self.topology.contacts) * (nq + 2)}
+        self.sizes = {"nq": nq, "nv": nv, "dynamics": nv * (nv + 1) // 2 + nv, "energy": 2,
+                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nv, "constraints": ng * (nv + 2),
+                      "contacts": len(self.topology.contacts) * (nv + 2)}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -81,9 +81,9 @@ class CompiledModel:
                     cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
             from .integrators import c_integrators
             source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
-                      + codegen.c_accelerations(self.topology.nq)
-                      + codegen.c_dae_accelerations(self.topology.nq, len(self.geometric_rows))
-                      + c_integrators(self.topology.nq))
+                      + codegen.c_accelerations(self.topology.nv)
+                      + codegen.c_dae_accelerations(self.topology.nv, len(self.geometric_rows))
+                      + c_integrators(self.topology.state_map))
             path = build_c_library(source, self.key, cache=cache)
             if path is not None:
                 functions = CFunctions(path, self.sizes)

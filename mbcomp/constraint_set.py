@@ -87,24 +87,24 @@ class ConstraintSet:
     # -- evaluation -------------------------------------------------------------------------------
     def evaluate(self, system, q: np.ndarray, qd: np.ndarray, t: float,
                  motor_offsets: dict | None = None) -> ConstraintValues:
-        """Residuals, Jacobian (nc, nq), explicit time rates and acceleration bias.
+        """Residuals, Jacobian (nc, nv: over the speeds), explicit time rates and acceleration bias.
 
         Point and dot equations come from the generated ``constraints`` function;
         motor rows are ``q_k - s(t)`` with s's derivatives by finite differences.
         """
-        nq, nc = self.topology.nq, self.nc
-        g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nq)), np.zeros(nc), np.zeros(nc)
+        nv, nc = self.topology.nv, self.nc
+        g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nv)), np.zeros(nc), np.zeros(nc)
         rows = self.geometric_rows
         if rows:
             ng = len(rows)
             out = system._call("constraints", q, qd)
             g[rows] = out[:ng]
-            J[rows] = out[ng: ng + ng * nq].reshape(ng, nq)
-            bias[rows] = out[ng + ng * nq:]
+            J[rows] = out[ng: ng + ng * nv].reshape(ng, nv)
+            bias[rows] = out[ng + ng * nv:]
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
-            J[r, k] = 1.0
+            J[r, self.topology.v_slice[name_of(eq.joint)].start] = 1.0  # a 1-DOF screw joint
             if eq.speed is not None and motor_offsets is not None and r in motor_offsets:
                 g[r] = q[k] - motor_offsets[r] - eq.speed * t
                 g_t[r] = -eq.speed

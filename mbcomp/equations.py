@@ -214,7 +214,7 @@ class Kinematics:
     def __init__(self, topology, layout: ParameterLayout, inputs: dict, prog: Program):
         self.topology, self.layout, self.inputs, self.prog = topology, layout, inputs, prog
         self.R, self.origin, self.V, self.A = {}, {}, {}, {}
-        self.S: list = [None] * topology.nq
+        self.S: list = [None] * topology.nv  # motion column of each speed
         self.let = prog.let
 
     def param(self, comp, attr: str):
@@ -229,7 +229,8 @@ class Kinematics:
         return self.prog.q[sl]
 
     def qd(self, joint) -> list:
-        sl = self.topology.q_slice[name_of(joint)]
+        """The joint's speeds (its coordinates' rates for a screw joint)."""
+        sl = self.topology.v_slice[name_of(joint)]
         return self.prog.qd[sl]
 
     def rotation(self, body):
@@ -263,7 +264,7 @@ def _vector(kin, spec) -> list:
 
 def _point_terms(kin, body, spec):
     """World position, velocity, bias acceleration and Jacobian columns ``{k: 3-vector}``
-    of a body point: ``v = sum_k (w_k x p + v0_k) qd_k``, ``a = J qdd + bias``."""
+    of a body point: ``v = sum_k (w_k x p + v0_k) qd_k`` over the speeds, ``a = J qdd + bias``."""
     prog = kin.prog
     p = kin.position(body, _vector(kin, spec))
     name = name_of(body)
@@ -274,7 +275,7 @@ def _point_terms(kin, body, spec):
     v = prog.lets([a + b for a, b in zip(V[3:], cross(V[:3], p))])
     acc = prog.lets([a0 + x + y for a0, x, y in zip(A[3:], cross(A[:3], p), cross(V[:3], v))])
     columns = {k: prog.lets([a + b for a, b in zip(cross(kin.S[k][:3], p), kin.S[k][3:])])
-               for k in kin.topology.coord_indices_of_body(body)}
+               for k in kin.topology.speed_indices_of_body(body)}
     return p, v, acc, columns
 
 
@@ -284,12 +285,12 @@ def _rotation_terms(kin, body):
     if name == kin.topology.ground.name:
         zero = [sp.Integer(0)] * 3
         return kin.R[name], zero, zero, {}
-    return kin.R[name], kin.V[name][:3], kin.A[name][:3], {k: kin.S[k][:3] for k in kin.topology.coord_indices_of_body(body)}
+    return kin.R[name], kin.V[name][:3], kin.A[name][:3], {k: kin.S[k][:3] for k in kin.topology.speed_indices_of_body(body)}
 
 
-def _combine(nq, *terms):
-    """Row of length nq from ``(vector, {k: column})`` pairs: sum of ``vector . column``."""
-    row = [sp.Integer(0)] * nq
+def _combine(nv, *terms):
+    """Row of length nv from ``(vector, {k: column})`` pairs: sum of ``vector . column``."""
+    row = [sp.Integer(0)] * nv
     for vector, columns in terms:
         for k, column in columns.items():
             row[k] += dot(vector, column)
@@ -300,7 +301,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
     """Output ``output``: residual g, Jacobian rows (row-major) and acceleration bias of the
     geometric constraint equations (point and dot), as ``constraint_set`` documents."""
     from .components.primitives import DotEquation, PointEquation
-    nq = kin.topology.nq
+    nv = kin.topology.nv
     g_out, J_out, bias_out = [], [], []
     for eq in equations:
         if isinstance(eq, PointEquation):
@@ -311,7 +312,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             d = prog.lets([x - y for x, y in zip(pb, pa)])
             wn = prog.lets(cross(wf, n))
             g = dot(n, d)
-            row = _combine(nq, (n, Jb), ([-c for c in n], Ja), (cross(n, d), Jwf))
+            row = _combine(nv, (n, Jb), ([-c for c in n], Ja), (cross(n, d), Jwf))
             bias = (dot(n, [x - y for x, y in zip(ab, aa)]) + 2 * dot(wn, [x - y for x, y in zip(vb, va)])
                     + dot([x + y for x, y in zip(cross(alf, n), cross(wf, wn))], d))
         elif isinstance(eq, DotEquation):
@@ -321,7 +322,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             ub = prog.lets(matvec(Rb, [exact(c) for c in eq.u_b]))
             axis = prog.lets(cross(ub, ua))
             g = dot(ua, ub)
-            row = _combine(nq, (axis, Jwb), ([-c for c in axis], Jwa))
+            row = _combine(nv, (axis, Jwb), ([-c for c in axis], Jwa))
             rate = [x + y for x, y in zip(cross(cross(wb, ub), ua), cross(ub, cross(wa, ua)))]
             bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
         else:
@@ -333,16 +334,17 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=()) -> Program:
-    """The whole model as one straight-line program.
+    """The whole model as one straight-line program over coordinates ``q`` (nq) and
+    speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
-    Outputs: ``"mass_matrix"`` (lower triangle, row-major), ``"forces"`` (f_bar: gravity,
-    force elements, convective and gyroscopic terms; ``M_bar qdd = f_bar + tau``),
-    ``"energy"`` (kinetic, potential), and ``"kinematics"`` (per body R, origin, V, A-bias;
-    per coordinate S).
+    Outputs: ``"mass_matrix"`` (nv x nv, lower triangle, row-major), ``"forces"`` (f_bar:
+    gravity, force elements, convective and gyroscopic terms; ``M_bar qdd = f_bar + tau``
+    with ``qdd`` the speeds' rates), ``"energy"`` (kinetic, potential), and
+    ``"kinematics"`` (per body R, origin, V, A-bias; per speed S).
     """
-    nq = topology.nq
+    nq, nv = topology.nq, topology.nv
     n_inputs = sum(size for _, size in inputs.values())
-    prog = Program(q=[sp.Symbol(f"q{i}") for i in range(nq)], qd=[sp.Symbol(f"qd{i}") for i in range(nq)],
+    prog = Program(q=[sp.Symbol(f"q{i}") for i in range(nq)], qd=[sp.Symbol(f"qd{i}") for i in range(nv)],
                    p=[], u=[sp.Symbol(f"u{i}") for i in range(n_inputs)])
     kin = Kinematics(topology, layout, inputs, prog)
     zero = [sp.Integer(0)] * 6
@@ -359,10 +361,13 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         R = kin.R[parent]
         pos = prog.lets([o + r for o, r in zip(kin.origin[parent], matvec(R, kin.param(joint, "parent_point")))])
         V, A = kin.V[parent], kin.A[parent]
-        sl = topology.q_slice[joint.name]
+        q0, v0 = topology.q_slice[joint.name].start, topology.v_slice[joint.name].start
         R = _rotate_frame(prog, R, getattr(joint, "parent_rotation", None))
-        for k, (kind, axis) in enumerate(joint._screws()):
-            i = sl.start + k
+        for kind, axis, sq, sv in joint._walk():
+            if kind == "B":
+                R, V, A = _ball_segment(prog, kin, prog.q[q0 + sq.start:q0 + sq.stop], v0 + sv.start, R, pos, V, A)
+                continue
+            i, k = q0 + sq.start, v0 + sv.start
             axis_world = prog.lets(matvec(R, [exact(a) for a in axis]))
             if kind == "R":
                 S = axis_world + prog.lets(cross(pos, axis_world))
@@ -372,9 +377,9 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
             else:
                 S = [sp.Integer(0)] * 3 + axis_world
                 pos = prog.lets([x + a * prog.q[i] for x, a in zip(pos, axis_world)])
-            kin.S[i] = S
-            A = prog.lets([a + b * prog.qd[i] for a, b in zip(A, motion_cross(V, S))])
-            V = prog.lets([a + b * prog.qd[i] for a, b in zip(V, S)])
+            kin.S[k] = S
+            A = prog.lets([a + b * prog.qd[k] for a, b in zip(A, motion_cross(V, S))])
+            V = prog.lets([a + b * prog.qd[k] for a, b in zip(V, S)])
         R = _rotate_frame(prog, R, getattr(joint, "child_rotation", None), transpose=True)
         kin.R[body.name] = R
         kin.origin[body.name] = prog.lets([x - r for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
@@ -394,14 +399,14 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         weight = [mass * g for g in gravity]
         external[body.name] = prog.lets(cross(com, weight) + weight)
 
-    generalized = [sp.Integer(0)] * nq
+    generalized = [sp.Integer(0)] * nv
     potential = sp.Integer(0)
     for body in topology.bodies:
         potential -= inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)
     for element in topology.forces:
         for load in element._loads(kin):
             if load[0] == "generalized":
-                sl = topology.q_slice[name_of(load[1])]
+                sl = topology.v_slice[name_of(load[1])]
                 for k, value in zip(range(sl.start, sl.stop), load[2]):
                     generalized[k] += value
                 continue
@@ -429,23 +434,23 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
             composite[parent] = (composite[parent] + composite[body.name]).materialise(prog)
             wrench[parent] = prog.lets([a + b for a, b in zip(wrench[parent], wrench[body.name])])
 
-    owner = [None] * nq
+    owner = [None] * nv
     for body, joint in zip(topology.bodies, topology.tree_joints):
-        for i in range(*topology.q_slice[joint.name].indices(nq)):
+        for i in range(*topology.v_slice[joint.name].indices(nv)):
             owner[i] = body
     columns_of_chain = {}
     for body in topology.bodies:
-        columns_of_chain[body.name] = topology.coord_indices_of_body(body)
+        columns_of_chain[body.name] = topology.speed_indices_of_body(body)
     M = {}
     forces = []
-    for i in range(nq):
+    for i in range(nv):
         body = owner[i]
         F = prog.lets(composite[body.name].apply(kin.S[i]))
         for j in columns_of_chain[body.name]:
             if j <= i:
                 M[i, j] = prog.let(dot(kin.S[j], F))
         forces.append(prog.let(generalized[i] - dot(kin.S[i], wrench[body.name])))
-    prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nq) for j in range(i + 1)]
+    prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
     prog.outputs["forces"] = forces
     prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
     kinematics = []
@@ -461,6 +466,32 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
 
 
 KINEMATICS_PER_BODY = 9 + 3 + 6 + 6
+
+
+def _ball_segment(prog: Program, kin: Kinematics, quat: list, k0: int, R, pos, V, A):
+    """A free rotation about the point ``pos`` (world): the quaternion ``quat`` rotates the
+    frame ``R``; speeds ``k0 .. k0 + 2`` are the angular velocity in the rotated frame.
+
+    The motion columns ``S_k = (R' e_k, pos x R' e_k)`` are fixed in the child, so their
+    rate is ``V_child x_m S_k`` and the acceleration bias of the segment is
+    ``sum_k (V x_m S_k) w_k`` with the velocity ``V`` before it (``S w x_m S w = 0``).
+    Returns the new ``R``, ``V`` and ``A``.
+    """
+    w, x, y, z = quat
+    s = prog.let(2 / (w * w + x * x + y * y + z * z))  # any non-zero quaternion rotates rigidly
+    local = [[1 - s * (y * y + z * z), s * (x * y - w * z), s * (x * z + w * y)],
+             [s * (x * y + w * z), 1 - s * (x * x + z * z), s * (y * z - w * x)],
+             [s * (x * z - w * y), s * (y * z + w * x), 1 - s * (x * x + y * y)]]
+    local = [prog.lets(row) for row in local]
+    R = [[prog.let(dot(R[r], [local[m][col] for m in range(3)])) for col in range(3)] for r in range(3)]
+    omega = prog.qd[k0:k0 + 3]
+    for j in range(3):
+        axis_world = [R[r][j] for r in range(3)]
+        kin.S[k0 + j] = axis_world + prog.lets(cross(pos, axis_world))
+    Sw = prog.lets([sum((kin.S[k0 + j][r] * omega[j] for j in range(3)), sp.Integer(0)) for r in range(6)])
+    A = prog.lets([a + b for a, b in zip(A, motion_cross(V, Sw))])
+    V = prog.lets([a + b for a, b in zip(V, Sw)])
+    return R, V, A
 
 
 def _rotate_frame(prog: Program, R, rotation, transpose: bool = False):

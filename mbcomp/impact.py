@@ -24,11 +24,11 @@ class Impact:
 
 
 def contact_values(system, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
-    """Gaps (m), gap Jacobian (nk, nq), and gap acceleration bias of every contact."""
-    nk, nq = len(system.topology.contacts), system.nq
+    """Gaps (m), gap Jacobian (nk, nv), and gap acceleration bias of every contact."""
+    nk, nv = len(system.topology.contacts), system.nv
     out = system._call("contacts", q, qd)
-    return ConstraintValues(out[:nk].copy(), out[nk: nk + nk * nq].reshape(nk, nq), np.zeros(nk),
-                            out[nk + nk * nq:].copy())
+    return ConstraintValues(out[:nk].copy(), out[nk: nk + nk * nv].reshape(nk, nv), np.zeros(nk),
+                            out[nk + nk * nv:].copy())
 
 
 def contact_indices(system, contacts) -> list[int]:
@@ -77,9 +77,9 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
             return float(restitution.get(i, restitution_of(system, i)))
         return restitution_of(system, i) if restitution is None else float(restitution)
 
-    M, _ = system._dynamics(t, q, np.zeros_like(q))
+    M, _ = system._dynamics(t, q, np.zeros_like(qd))
     Minv = formulation._inverse(formulation._factor(system, M, q))
-    bilateral = formulation.constraint_values(system, t, q, np.zeros_like(q), offsets)
+    bilateral = formulation.constraint_values(system, t, q, np.zeros_like(qd), offsets)
     gaps = contact_values(system, q, qd)
     approach = gaps.J @ qd
     involved = sorted(set(active) | persistent)

@@ -20,19 +20,28 @@ def _array(name: str, values) -> str:
     return f"static const double {name}{shape} = {{{flat}}};"
 
 
-def c_integrators(nq: int) -> str:
-    """C source of ``dop853_run`` and ``rk4_run`` for a tree of ``nq`` coordinates."""
+def c_integrators(state_map) -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree with the given coordinates and
+    speeds (``statemap.StateMap``): the state is ``y = [q, v]``, its rate
+    ``[q'(q, v), v']``; quaternions are normalised after every accepted step."""
+    nq, nv = state_map.nq, state_map.nv
     A = dop.A[:16, :16]
-    return "\n".join([
+    lines = [
         "#include <stdlib.h>",
         "#include <string.h>",
         "#include <float.h>",
-        f"#define NY {2 * nq}",
-        f"#define NWORK ({nq * (nq + 1) // 2 + nq} > NDAEWORK ? {nq * (nq + 1) // 2 + nq} : NDAEWORK)",
+        f"#define NY {nq + nv}",
+        f"#define NCOORD {nq}",
+        f"#define NQUAT {state_map.quat_q.size}",
+        f"#define NWORK ({nv * (nv + 1) // 2 + nv} > NDAEWORK ? {nv * (nv + 1) // 2 + nv} : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
-        _C_BODY,
-    ])
+    ]
+    if not state_map.identity:
+        ints = lambda name, values: f"static const int {name}[] = {{{', '.join(str(int(v)) for v in values) or '0'}}};"
+        lines += [f"#define NSCREW {state_map.screw_q.size}", ints("SCREW_Q", state_map.screw_q),
+                  ints("SCREW_V", state_map.screw_v), ints("QUAT_Q", state_map.quat_q), ints("QUAT_V", state_map.quat_v)]
+    return "\n".join(lines + [_C_BODY])
 
 
 _C_BODY = r"""
@@ -40,18 +49,44 @@ static double dummy_input[1];
 /* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank). */
 #define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = rs_ == -5 ? -5 : -2; goto done; } } while (0)
 
-/* y = [q, qd]: f = [qd, qdd]; returns the accelerations() status (the dae formulation's
+/* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
 static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
-    for (int i = 0; i < NY / 2; ++i) f[i] = y[NY / 2 + i];
+    const double *v = y + NCOORD;
+#if NQUAT > 0
+    for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
+        const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
+        double *r = f + QUAT_Q[k];
+        r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
+        r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
+        r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
+        r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
+    }
+#else
+    for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
+#endif
 #if NG > 0
     if (dae_nr >= 0) {
-        int status = dae_accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+        int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
         return status == 2 ? -5 : status;
     }
 #endif
-    return accelerations(y, y + NY / 2, p, dummy_input, tau, f + NY / 2, work);
+    return accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+}
+
+/* Quaternions back to unit length (after each accepted step). */
+static void normalize_state(double *y) {
+#if NQUAT > 0
+    for (int k = 0; k < NQUAT; ++k) {
+        double *a = y + QUAT_Q[k];
+        const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+        if (n > 0) for (int i = 0; i < 4; ++i) a[i] /= n;
+    }
+#else
+    (void)y;
+#endif
 }
 
 static int all_finite(const double *v, int n) {
@@ -199,11 +234,13 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
                     }
                     out[i] = v + y[i];
                 }
+                normalize_state(out);
                 if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * NY);
                 ++*i_out;
             }
         }
         t = t_new;
+        normalize_state(y_new);
         memcpy(y, y_new, sizeof(double) * NY);
         memcpy(f, K + 12 * NY, sizeof(double) * NY);
         if (n_out == 0) {
@@ -259,6 +296,7 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
         RHS_OR_FAIL(rhs(t + dt, stage, k + 3 * NY, p, tau, work));
         for (int i = 0; i < NY; ++i)
             next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
+        normalize_state(next);
         counts[0] += 4;
         counts[1] += 1;
         if (!all_finite(next, NY)) { status = -3; goto done; }
@@ -324,7 +362,7 @@ def compiled_jacobian(system, tau):
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = 2 * system.nq
+    n2 = system.nq + system.nv
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     p = system._p
@@ -381,7 +419,7 @@ def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, metho
 
 def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
-    n = system.nq
+    ny = system.nq + system.nv
     p = system._p
     tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
@@ -393,7 +431,7 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         steps = int(round(t_end / dt))
         if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
             raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
-        out = np.empty((steps + 1, 2 * n))
+        out = np.empty((steps + 1, ny))
         counts = np.zeros(3, dtype=np.int64)
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
@@ -405,13 +443,13 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
-    f = np.empty(2 * n)
+    f = np.empty(ny)
     counts = np.zeros(3, dtype=np.int64)
     i_out = np.zeros(1, dtype=np.int64)
     n_steps = np.zeros(1, dtype=np.int64)
     if t_eval is not None:
         t_out = np.ascontiguousarray(t_eval, dtype=float)
-        y_out = np.empty((len(t_out), 2 * n))
+        y_out = np.empty((len(t_out), ny))
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = y
             i_out[0] = 1
@@ -426,7 +464,7 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         cap = 256
         while True:
             t_steps = np.empty(cap)
-            y_steps = np.empty((cap, 2 * n))
+            y_steps = np.empty((cap, ny))
             n_steps[0] = 0
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
@@ -448,12 +486,17 @@ def _hermite(system, t, y, t_eval, tau):
     """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
     the steps that bracket a requested time)."""
     n = system.nq
+    state_map = system.topology.state_map
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
-    f = {i: np.concatenate((y[i, n:], system._tree_accelerations(0.0, y[i, :n], y[i, n:], tau))) for i in needed}
+    f = {i: np.concatenate((state_map.qdot(y[i, :n], y[i, n:]), system._tree_accelerations(0.0, y[i, :n], y[i, n:], tau)))
+         for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
     h = (t[idx + 1] - t[idx])[:, None]
     s = (t_eval - t[idx])[:, None] / h
     h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    return h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
+    out = h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
+    if not state_map.identity:
+        out[:, :n] = state_map.normalize(out[:, :n])
+    return out

@@ -39,12 +39,14 @@ class Event:
 class Result:
     """Simulated time series: plain data that pickles without its System.
 
-    ``t`` (m,) s; ``q``, ``qd`` (m, nq) in ``coords`` order; ``res["name"]`` a coordinate's
-    series; ``stats`` holds the solver counters and wall time.  Everything the derived
-    series need is recorded here: the parameter values (``parameters``), the speed
-    motors' start values (``offsets``) and the contacts held closed at each sample
-    (``closed_contacts``), so ``energy()``, ``reactions`` and ``constraint_violation()``
-    give the same numbers whichever System of the same model computes them.
+    ``t`` (m,) s; ``q`` (m, nq) in ``coords`` order; ``qd`` (m, nv) in ``speeds`` order (a
+    screw coordinate's speed is its rate; a ball has 4 coordinates, 3 speeds);
+    ``res["name"]`` a coordinate's or a speed's series; ``stats`` holds the solver
+    counters and wall time.  Everything the derived series need is recorded here: the
+    parameter values (``parameters``), the speed motors' start values (``offsets``) and
+    the contacts held closed at each sample (``closed_contacts``), so ``energy()``,
+    ``reactions`` and ``constraint_violation()`` give the same numbers whichever System
+    of the same model computes them.
 
     ``system`` is the System that produced the result; it is left out when the result is
     pickled (``with_system`` binds one again).
@@ -61,6 +63,7 @@ class Result:
     persistent_contacts: list = field(default_factory=list)
     closed_contacts: list = field(default_factory=list, repr=False)  #: persistent contact indices per sample
     coords: tuple = ()  #: coordinate names (from the System when not given)
+    speeds: tuple = ()  #: speed names, the columns of ``qd`` (from the System when not given)
     parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
     formulation: str = ""
     _reactions: dict | None = field(default=None, repr=False, compare=False)
@@ -69,11 +72,14 @@ class Result:
         if self.system is not None:
             if not self.coords:
                 self.coords = tuple(self.system.coords)
+            if not self.speeds:
+                self.speeds = tuple(getattr(self.system, "speeds", self.coords))
             if not self.parameters:
                 self.parameters = self.system.parameters
             if not self.formulation:
                 self.formulation = self.system.formulation
         self.coords = tuple(self.coords)
+        self.speeds = tuple(self.speeds or self.coords)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -95,14 +101,17 @@ class Result:
         return self.system
 
     def __getitem__(self, name: str) -> np.ndarray:
-        """The series of coordinate ``name`` (or ``name_d`` / ``"d" + name`` for its speed)."""
-        coords = list(self.coords)
+        """The series of coordinate ``name``, of a speed that is not a coordinate's rate (a
+        ball's ``NAME_wx``), or ``name_d`` / ``"d" + name`` for a coordinate's speed."""
+        coords, speeds = list(self.coords), list(self.speeds)
         if name in coords:
             return self.q[:, coords.index(name)]
+        if name in speeds:
+            return self.qd[:, speeds.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
-            if speed in coords:
-                return self.qd[:, coords.index(speed)]
-        raise KeyError(f"no coordinate {name!r}; coordinates are {coords}")
+            if speed in speeds:
+                return self.qd[:, speeds.index(speed)]
+        raise KeyError(f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}")
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
@@ -124,7 +133,8 @@ class Result:
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
-        header = ["t"] + list(self.coords) + [f"{c}_d" for c in self.coords] + ["kinetic", "potential", "total"]
+        header = (["t"] + list(self.coords) + [f"{c}_d" if c in self.coords else c for c in self.speeds]
+                  + ["kinetic", "potential", "total"])
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
@@ -139,7 +149,7 @@ class Result:
         except ImportError as exc:  # pragma: no cover - optional dependency
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
-        data.update({f"{c}_d": self.qd[:, i] for i, c in enumerate(self.coords)})
+        data.update({f"{c}_d" if c in self.coords else c: self.qd[:, i] for i, c in enumerate(self.speeds)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 
     def plot(self, *args: Any, **kwargs: Any):

@@ -112,3 +112,63 @@ def euler_rotation(sequence: str, angles: Sequence[Any]) -> Any:
         r = axis_angle(AXIS_NAMES[axis_name], angle)
         result = r if result is None else result @ r
     return result
+
+
+# -- unit quaternions (w, x, y, z); plain arithmetic, so sympy symbols work as well ---------
+def quat_matrix(q: Sequence[Any]) -> list:
+    """Rotation matrix (nested lists) of the quaternion ``q = (w, x, y, z)``.
+
+    Scaled by ``2 / |q|^2``, so any non-zero quaternion gives an orthogonal matrix:
+    an integrator's stage values that drift off unit length still rotate rigidly.
+    """
+    w, x, y, z = q
+    s = 2 / (w * w + x * x + y * y + z * z)
+    return [[1 - s * (y * y + z * z), s * (x * y - w * z), s * (x * z + w * y)],
+            [s * (x * y + w * z), 1 - s * (x * x + z * z), s * (y * z - w * x)],
+            [s * (x * z - w * y), s * (y * z + w * x), 1 - s * (x * x + y * y)]]
+
+
+def quat_multiply(a: Sequence[Any], b: Sequence[Any]) -> list:
+    """Hamilton product ``a b``: its rotation matrix is ``R(a) R(b)``."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return [aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw]
+
+
+def quat_rate(q: Sequence[Any], w: Sequence[Any]) -> list:
+    """``q' = q (0, w) / 2``: the quaternion rate for angular velocity ``w`` (rad/s) given
+    in the rotated (child) frame."""
+    return [c / 2 for c in quat_multiply(q, [0, *w])]
+
+
+def quat_exp(phi: Sequence[float]) -> np.ndarray:
+    """Unit quaternion of the rotation vector ``phi`` (rad; axis times angle)."""
+    phi = np.asarray(phi, dtype=float)
+    angle = float(np.linalg.norm(phi))
+    half = angle / 2
+    # sin(half) / angle without cancellation for small angles
+    k = 0.5 - angle * angle / 48 if angle < 1e-4 else np.sin(half) / angle
+    return np.concatenate(([np.cos(half)], k * phi))
+
+
+def quat_log(q: Sequence[float]) -> np.ndarray:
+    """Rotation vector (rad) of the unit quaternion ``q`` (the shorter of ``q``, ``-q``)."""
+    q = np.asarray(q, dtype=float)
+    if q[0] < 0:
+        q = -q
+    n = float(np.linalg.norm(q[1:]))
+    if n < 1e-12:
+        return 2 * q[1:] / max(q[0], 1e-300)
+    return 2 * np.arctan2(n, q[0]) * q[1:] / n
+
+
+def quat_normalize(q: Sequence[float], owner: Any = None) -> np.ndarray:
+    """``q / |q|``; ``ModelError`` naming ``owner`` for a zero (or non-finite) quaternion."""
+    q = np.asarray(q, dtype=float)
+    n = float(np.linalg.norm(q))
+    if not (n > 1e-300 and np.isfinite(n)):
+        raise ModelError(owner, f"quaternion {tuple(q.tolist())} must be non-zero and finite")
+    return q / n

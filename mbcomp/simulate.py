@@ -221,6 +221,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             retries = 0
             if solver.status == "failed":
                 raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
+            workspace.normalize(solver.y)  # quaternions to unit length, in place
             counts["steps"] += 1
             t, restart = solver.t, None
             if watch is not None:
@@ -255,7 +256,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
     add_counts(solver)
     wall = time.perf_counter() - started
     q = np.array(recorder.q).reshape(-1, system.nq)
-    qd = np.array(recorder.qd).reshape(-1, system.nq)
+    qd = np.array(recorder.qd).reshape(-1, system.nv)
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
     stats = {"method": getattr(cls, "__name__", str(method)), "integrator": "scipy", **counts, "status": 0,

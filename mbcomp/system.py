@@ -50,7 +50,10 @@ class System:
     """A compiled model: the numeric API of API.md.  Never modified by any call.
 
     ``q`` is always every tree coordinate in ``coords`` order (array or ``{name: value}``);
-    ``tau`` adds generalised forces (array of ``len(coords)`` or callable ``(t, q, qd)``).
+    ``qd`` the speeds in ``speeds`` order (a screw coordinate's speed is its rate and
+    shares its name; a ball has 4 coordinates, a quaternion, and 3 speeds, an angular
+    velocity); accelerations, mass matrices, holding forces and ``tau`` are in speed
+    space (``tau``: an array of ``len(speeds)`` or a callable ``(t, q, qd)``).
     """
 
     def __init__(self, compiled, formulation, parameters: dict):
@@ -75,6 +78,15 @@ class System:
     @property
     def nq(self) -> int:
         return self._compiled.topology.nq
+
+    @property
+    def speeds(self) -> tuple[str, ...]:
+        """Names of the generalised speeds (``qd``), ``nv`` of them."""
+        return self._compiled.topology.speeds
+
+    @property
+    def nv(self) -> int:
+        return self._compiled.topology.nv
 
     @property
     def ndof(self) -> int:
@@ -139,8 +151,20 @@ class System:
 
     # -- state handling -------------------------------------------------------------------
     def state_vector(self, values: Any, what: str = "q") -> np.ndarray:
-        """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq."""
-        coords = self.coords
+        """``values`` (array or ``{coordinate: value}``) as a checked float array of length nq.
+
+        Quaternions are normalised (any non-zero one is accepted); in a dict, a ball's
+        quaternion may be left out entirely (the identity)."""
+        state_map = self.topology.state_map
+        arr = self._checked_vector(values, what, self.coords, "coordinate",
+                                   None if state_map.identity else state_map.neutral())
+        return arr if state_map.identity else state_map.normalize(arr)
+
+    def speed_vector(self, values: Any, what: str = "qd") -> np.ndarray:
+        """``values`` (array or ``{speed: value}``) as a checked float array of length nv."""
+        return self._checked_vector(values, what, self.speeds, "speed")
+
+    def _checked_vector(self, values: Any, what: str, coords: tuple, noun: str, neutral=None) -> np.ndarray:
         if type(values) is np.ndarray and values.dtype == np.float64 and values.shape == (len(coords),):
             total = float(values.sum())  # fast path: a finite sum means finite entries
             if total - total == 0.0:
@@ -148,24 +172,36 @@ class System:
         if isinstance(values, Mapping):
             unknown = [k for k in values if k not in coords]
             if unknown:
-                raise ModelError(f"{what}", f"unknown coordinate(s) {unknown}; coordinates are {list(coords)}")
+                raise ModelError(f"{what}", f"unknown {noun}(s) {unknown}; {noun}s are {list(coords)}")
             missing = [c for c in coords if c not in values]
+            if missing and neutral is not None:
+                values = self._default_quaternions(values, missing, neutral)
+                missing = [c for c in coords if c not in values]
             if missing:
-                raise ModelError(f"{what}", f"missing coordinate(s) {missing}")
+                raise ModelError(f"{what}", f"missing {noun}(s) {missing}")
             values = [values[c] for c in coords]
         try:
             arr = np.asarray(values, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise ModelError(f"{what}", f"must be {len(coords)} numbers, got {values!r}") from None
         if arr.shape != (len(coords),):
-            raise ModelError(f"{what}", f"has length {arr.size}, the model has {len(coords)} coordinates {list(coords)}")
+            raise ModelError(f"{what}", f"has length {arr.size}, the model has {len(coords)} {noun}s {list(coords)}")
         if not np.all(np.isfinite(arr)):
             bad = [coords[i] for i in np.flatnonzero(~np.isfinite(arr))]
             raise ModelError(f"{what}", f"is not finite for {bad}")
         return arr
 
+    def _default_quaternions(self, values: Mapping, missing: list, neutral: np.ndarray) -> dict:
+        """``values`` with every wholly missing quaternion set to the identity."""
+        values = dict(values)
+        for start in self.topology.state_map.quat_q:
+            names = self.coords[start:start + 4]
+            if all(n in missing for n in names):
+                values.update({n: neutral[start + i] for i, n in enumerate(names)})
+        return values
+
     def _velocity(self, qd: Any) -> np.ndarray:
-        return np.zeros(self.nq) if qd is None else self.state_vector(qd, "qd")
+        return np.zeros(self.nv) if qd is None else self.speed_vector(qd, "qd")
 
     def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         if not self._compiled.n_inputs:
@@ -180,10 +216,10 @@ class System:
             return None
         if callable(tau):
             from .components.forces import checked_output
-            return checked_output("tau", tau(t, q, qd), self.nq)
+            return checked_output("tau", tau(t, q, qd), self.nv)
         arr = np.asarray(tau, dtype=float).reshape(-1)
-        if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
-            raise ModelError("tau", f"must be {self.nq} finite numbers, got {tau!r}")
+        if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
+            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
         return arr
 
     # -- tree quantities (raw, unchecked inputs) -------------------------------------------------
@@ -193,8 +229,8 @@ class System:
         return self._compiled.functions(name, q, qd, self._p, u)
 
     def _dynamics(self, t, q, qd, tau=None):
-        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f``."""
-        n = self.nq
+        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f`` (speed space)."""
+        n = self.nv
         out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
         M = np.empty((n, n))
         rows, cols = self._compiled.tril
@@ -265,13 +301,13 @@ class System:
 
     # -- public API -------------------------------------------------------------------------------
     def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
-        """(nq, nq) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by coordinate type)."""
+        """(nv, nv) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by speed type)."""
         q = self.state_vector(q)
-        M, _ = self._dynamics(t, q, np.zeros(self.nq))
+        M, _ = self._dynamics(t, q, np.zeros(self.nv))
         return self._check_finite(M, "mass matrix", q)
 
     def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
-        """(nq,) coordinate accelerations, consistent with every constraint."""
+        """(nv,) accelerations (rates of the speeds), consistent with every constraint."""
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
 
@@ -288,10 +324,10 @@ class System:
         return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
-        """(nq,) generalised forces that, applied, hold the system at rest at ``q``
+        """(nv,) generalised forces that, applied, hold the system at rest at ``q``
         (minus the gravity, spring and applied generalised forces at zero speed)."""
         q = self.state_vector(q)
-        qd = np.zeros(self.nq)
+        qd = np.zeros(self.nv)
         _, f = self._dynamics(t, q, qd)
         return self._check_finite(-f, "holding forces", q)
 
@@ -305,7 +341,7 @@ class System:
         out = self._call("kinematics", q, qd)
         nb = len(self.topology.bodies)
         per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
-        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nq, 6)
+        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nv, 6)
         return per_body, columns
 
     def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
@@ -332,7 +368,7 @@ class System:
 
         def accelerations():
             qdd = self.accelerations(q, qd, t, tau)
-            idx = self.topology.coord_indices_of_body(comp)
+            idx = self.topology.speed_indices_of_body(comp)
             A = A_bias + columns[idx].T @ qdd[idx]
             alpha, a0 = A[:3], A[3:]
             return a0 + cross(alpha, position) + cross(w, velocity), alpha.copy()
@@ -345,12 +381,12 @@ class System:
         local = np.asarray(local, dtype=float)
         if comp is self.topology.ground:
             return local
-        row = self._kinematics(q, np.zeros(self.nq))[0][self.topology.body_index(comp)]
+        row = self._kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)]
         return row[9:12] + row[:9].reshape(3, 3) @ local
 
     def motion_columns(self, q: Any) -> np.ndarray:
-        """(nq, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` (the columns of T)."""
-        return self._kinematics(self.state_vector(q), np.zeros(self.nq))[1]
+        """(nv, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` of the speeds (the columns of T)."""
+        return self._kinematics(self.state_vector(q), np.zeros(self.nv))[1]
 
     def assemble(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(q, qd)`` moved onto the constraints: positions by Newton (minimum-norm steps from
@@ -405,15 +441,16 @@ class System:
         """``{contact: gap}`` (m), negative when penetrated."""
         from .impact import contact_values
         q = self.state_vector(q)
-        values = contact_values(self, q, np.zeros(self.nq))
+        values = contact_values(self, q, np.zeros(self.nv))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
     # -- display ----------------------------------------------------------------------------------
     def equations(self):
-        """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, qd and parameter symbols."""
+        """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, the speeds and parameter symbols
+        (a screw coordinate's speed is shown as its rate)."""
         import sympy as sp
         prog = self._compiled.program
-        n = self.nq
+        n = self.nv
         tri = prog.outputs["mass_matrix"]
         values = prog.expand(list(tri) + list(prog.outputs["forces"]))
         M = sp.zeros(n, n)
@@ -424,15 +461,15 @@ class System:
                 k += 1
         f = sp.Matrix(values[len(tri):])
         names = {s: sp.Symbol(c) for s, c in zip(prog.q, self.coords)}
-        names.update({s: sp.Symbol(f"\\dot{{{c}}}") for s, c in zip(prog.qd, self.coords)})
+        names.update({s: sp.Symbol(f"\\dot{{{c}}}" if c in self.coords else c) for s, c in zip(prog.qd, self.speeds)})
         return M.xreplace(names), f.xreplace(names)
 
     def _repr_latex_(self) -> str | None:
-        if self.nq > 4:
+        if self.nv > 4:
             return None
         import sympy as sp
         M, f = self.equations()
-        qdd = sp.Matrix([sp.Symbol(f"\\ddot{{{c}}}") for c in self.coords])
+        qdd = sp.Matrix([sp.Symbol(f"\\ddot{{{c}}}" if c in self.coords else f"\\dot{{{c}}}") for c in self.speeds])
         return "$" + sp.latex(M) + sp.latex(qdd) + " = " + sp.latex(f) + "$"
 
     def __repr__(self) -> str:

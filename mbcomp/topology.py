@@ -21,7 +21,8 @@ class Topology:
 
     ``bodies`` are the moving bodies in depth-first order from the ground (parents
     before children); ``tree_joints[i]`` is the joint into ``bodies[i]``; ``coords``
-    are the tree coordinates in that order and ``q_slice[joint name]`` their slice.
+    are the tree coordinates in that order and ``q_slice[joint name]`` their slice;
+    ``speeds`` the tree speeds (``nv <= nq``) and ``v_slice[joint name]`` theirs.
     """
 
     ground: Body
@@ -36,10 +37,26 @@ class Topology:
     contacts: tuple
     components: dict
     graph: Any = field(repr=False, compare=False)
+    speeds: tuple = ()
+    v_slice: dict = field(default_factory=dict)
 
     @property
     def nq(self) -> int:
         return len(self.coords)
+
+    @property
+    def nv(self) -> int:
+        return len(self.speeds)
+
+    @property
+    def state_map(self):
+        """The numeric ``q' = G(q) v``, ``integrate``, ``normalize`` of the whole tree."""
+        from .statemap import StateMap
+        found = self.__dict__.get("_state_map")
+        if found is None:
+            found = StateMap.of(self)
+            object.__setattr__(self, "_state_map", found)
+        return found
 
     @property
     def has_loops(self) -> bool:
@@ -68,6 +85,14 @@ class Topology:
         for body in self.ancestors(ref):
             joint = self.tree_joints[self.bodies.index(body)]
             indices.extend(range(*self.q_slice[joint.name].indices(self.nq)))
+        return sorted(indices)
+
+    def speed_indices_of_body(self, ref: Any) -> list[int]:
+        """Indices of every speed that moves ``ref`` (its joint and its ancestors')."""
+        indices = []
+        for body in self.ancestors(ref):
+            joint = self.tree_joints[self.bodies.index(body)]
+            indices.extend(range(*self.v_slice[joint.name].indices(self.nv)))
         return sorted(indices)
 
 
@@ -130,12 +155,14 @@ def build_topology(model) -> Topology:
     tree_joints = tuple(tree_joint_of[n] for n in order)
     parent_of = {n: components[name_of(tree_joint_of[n].parent)] for n in order}
 
-    coords, q_slice = [], {}
+    coords, q_slice, speeds, v_slice = [], {}, [], {}
     for joint in tree_joints:
-        q_slice[joint.name] = slice(len(coords), len(coords) + joint.n_coords)
+        q_slice[joint.name] = slice(len(coords), len(coords) + joint.nq)
         coords.extend(joint.coords)
+        v_slice[joint.name] = slice(len(speeds), len(speeds) + joint.nv)
+        speeds.extend(joint.speeds)
     seen: dict[str, int] = {}
-    for name in coords:
+    for name in coords + [v for j in tree_joints for v in j.speeds if v not in j.coords]:
         seen[name] = seen.get(name, 0) + 1
     for name, count in seen.items():
         if count > 1:
@@ -171,7 +198,8 @@ def build_topology(model) -> Topology:
         raise CompileError(problems=problems)
     return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),
                     parent_of=parent_of, coords=tuple(coords), q_slice=q_slice, forces=forces,
-                    constraints=constraints, contacts=contacts, components=components, graph=graph)
+                    constraints=constraints, contacts=contacts, components=components, graph=graph,
+                    speeds=tuple(speeds), v_slice=v_slice)
 
 
 def _connected(tree: nx.DiGraph, a: str, b: str) -> bool:

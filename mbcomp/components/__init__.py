@@ -4,10 +4,10 @@ from .body import Body, Ground
 from .constraints import Motor, Slider
 from .contacts import Contact
 from .forces import Damper, Force, JointTorque, Spring, TorsionSpring
-from .joints import Fixed, Joint, Prismatic, Revolute, Spherical
+from .joints import Ball, Cylindrical, Fixed, Free, Joint, Planar, Prismatic, Revolute, Spherical, Universal
 
 __all__ = [
     "Component", "Constraint", "ForceElement", "Body", "Ground", "Joint", "Revolute", "Prismatic",
-    "Spherical", "Fixed", "Spring", "Damper", "Force", "JointTorque", "TorsionSpring", "Slider",
+    "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force", "JointTorque", "TorsionSpring", "Slider",
     "Motor", "Contact",
 ]

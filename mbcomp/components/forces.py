@@ -157,7 +157,8 @@ class Force(ForceElement):
 
 
 class JointTorque(ForceElement):
-    """Generalised force(s) on a joint's coordinates (N m for angles, N for slides).
+    """Generalised force(s) on a joint's speeds (N m for angles, N for slides; for a ball
+    the torque on the child in the child frame).
 
     ``value``: a number / array of the joint's size (a parameter) or a callable
     ``(t, q, qd)`` returning it.
@@ -192,11 +193,11 @@ class JointTorque(ForceElement):
 
     def bind_joint(self, joint) -> None:
         """Check the value's size against the resolved joint (called by the compiler)."""
-        self._size = joint.n_coords
+        self._size = joint.nv
         if not self.is_callable:
             size = 1 if isinstance(self.value, float) else len(self.value)
-            if size != joint.n_coords:
-                raise ModelError(self, f"value has {size} entries, joint {joint.name!r} has {joint.n_coords} coordinate(s)")
+            if size != joint.nv:
+                raise ModelError(self, f"value has {size} entries, joint {joint.name!r} has {joint.nv} speed(s)")
 
     def evaluate_input(self, t, q, qd):
         return checked_output(self, self.value(t, q, qd), self._size)

@@ -1,8 +1,21 @@
-"""Joints: Revolute, Prismatic, Spherical (Euler angles) and Fixed.
+"""Joints: Revolute, Prismatic, Spherical (Euler angles), Ball, Free, Universal,
+Cylindrical, Planar and Fixed.
 
-A joint is a sequence of elementary motions ("screws"), each a rotation about
-or a translation along a unit axis resolved in the frame left by the previous
-ones; the compiler derives poses, velocities and Jacobians from that sequence.
+The joint contract: a joint has ``nq`` coordinates (``coords``) and ``nv`` speeds
+(``speeds``), with ``q' = G(q) v``.  It is a sequence of elementary motions
+(``_segments()``), each resolved in the frame left by the previous ones:
+
+- ``("R", axis)``: a rotation about a unit axis; 1 coordinate (the angle), 1 speed (its rate);
+- ``("P", axis)``: a translation along a unit axis; 1 coordinate, 1 speed (its rate);
+- ``("B", None)``: a free rotation; 4 coordinates, the unit quaternion ``(w, x, y, z)``
+  of the child frame relative to the frame before it, and 3 speeds, the angular
+  velocity (rad/s) relative to that frame, resolved in the child frame
+  (``q' = q (0, w) / 2``).
+
+Screw joints (only R and P) have ``G = I``: each speed is its coordinate's rate and
+shares its name.  The compiler derives poses, motion columns and accelerations from
+the segments (``equations.build_program``); ``qdot``, ``integrate``, ``difference``,
+``normalize`` and ``neutral`` are the numeric side of the same contract.
 """
 from __future__ import annotations
 
@@ -11,15 +24,19 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from ..errors import ModelError
-from ..rotations import AXIS_NAMES, axis_angle, parse_sequence, unit_axis
+from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
+                         quat_normalize, quat_rate, unit_axis)
 from .base import Component
 from ._values import vector3
 from .frame import split_frame
 
+#: (coordinates, speeds) of each segment kind.
+SEGMENT_SIZES = {"R": (1, 1), "P": (1, 1), "B": (4, 3)}
+
 
 class Joint(Component):
-    """Connects ``parent`` to ``child``; at zero coordinates the child frame is parallel
-    to the parent frame.
+    """Connects ``parent`` to ``child``; at zero coordinates (the identity quaternion for
+    a ball) the child frame is parallel to the parent frame.
 
     Parameters
     ----------
@@ -31,21 +48,26 @@ class Joint(Component):
     child_point : (3,) m, joint location in the child body frame (with a body)
     coords : str or sequence of str, names of the joint coordinates (default from the
         joint name)
+    speeds : sequence of str, names of the joint speeds (only joints with a rotation
+        segment have speeds that are not coordinate rates; a screw coordinate's speed
+        always shares its name)
 
-    Subclasses provide ``n_coords``, ``coord_suffixes`` and ``_screws()``.
+    Subclasses provide ``n_coords``, ``coord_suffixes`` and ``_screws()`` (or, for
+    joints with a ball segment, ``_segments()`` and ``speed_suffixes``).
     """
 
     n_coords: ClassVar[int] = 0
     parameters = ("parent_point", "child_point")
 
     def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
-                 child_point: Any = None, coords: Any = None):
+                 child_point: Any = None, coords: Any = None, speeds: Any = None):
         super().__init__(name)
         self.parent, parent_point, self.parent_rotation = split_frame(parent, parent_point, self, "parent")
         self.child, child_point, self.child_rotation = split_frame(child, child_point, self, "child")
         self.parent_point = vector3(parent_point, self, "parent_point")
         self.child_point = vector3(child_point, self, "child_point")
         self.coords = self._coord_names(coords)
+        self.speeds = self._speed_names(speeds)
 
     # -- contract -----------------------------------------------------------
     @property
@@ -53,17 +75,47 @@ class Joint(Component):
         """Suffixes for the default coordinate names ``f"{name}_{suffix}"`` (``""`` = the name)."""
         return ("",) * self.n_coords
 
+    #: Suffixes of the default names of the speeds of ball segments.
+    speed_suffixes: ClassVar[tuple[str, ...]] = ("wx", "wy", "wz")
+
     def _screws(self) -> list[tuple[str, tuple[float, float, float]]]:
         """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
+
+    def _segments(self) -> list[tuple[str, Any]]:
+        """The joint's motion as segments (see the module docstring); screws by default."""
+        return self._screws()
+
+    @property
+    def nq(self) -> int:
+        """Number of coordinates."""
+        return self.n_coords
+
+    @property
+    def nv(self) -> int:
+        """Number of speeds (degrees of freedom of the joint)."""
+        return sum(SEGMENT_SIZES[kind][1] for kind, _ in self._segments())
+
+    @property
+    def is_screw(self) -> bool:
+        """True when every speed is its coordinate's rate (``G = I``)."""
+        return all(kind in ("R", "P") for kind, _ in self._segments())
+
+    @property
+    def neutral(self) -> tuple[float, ...]:
+        """Coordinates of the zero position (zeros; the identity quaternion for a ball)."""
+        out: list[float] = []
+        for kind, _ in self._segments():
+            out.extend((1.0, 0.0, 0.0, 0.0) if kind == "B" else (0.0,))
+        return tuple(out)
 
     # -- derived ------------------------------------------------------------
     def references(self) -> dict[str, Any]:
         return {"parent": self.parent, "child": self.child}
 
     def structure(self) -> tuple:
-        screws = tuple(self._screws())
+        screws = tuple(self._segments())
         if self.parent_rotation is None and self.child_rotation is None:
             return screws
         return screws + (("frames", self.parent_rotation, self.child_rotation),)
@@ -78,25 +130,102 @@ class Joint(Component):
         """(3, 3) rotation of the joint's child frame in the child body frame."""
         return np.eye(3) if self.child_rotation is None else np.array(self.child_rotation)
 
+    def _walk(self):
+        """``(kind, axis, q slice, v slice)`` of each segment, local to the joint."""
+        iq = iv = 0
+        for kind, axis in self._segments():
+            nq, nv = SEGMENT_SIZES[kind]
+            yield kind, axis, slice(iq, iq + nq), slice(iv, iv + nv)
+            iq, iv = iq + nq, iv + nv
+
+    def _checked(self, values: Any, size: int, what: str) -> np.ndarray:
+        values = np.asarray(values, dtype=float).reshape(-1)
+        if values.shape != (size,):
+            raise ModelError(self, f"needs {size} {what}, got {values.size}")
+        return values
+
+    def qdot(self, q: Sequence[float], v: Sequence[float]) -> np.ndarray:
+        """Coordinate rates ``q' = G(q) v`` (quaternion rates ``q (0, w) / 2``)."""
+        q, v = self._checked(q, self.nq, "coordinate(s)"), self._checked(v, self.nv, "speed(s)")
+        out = np.empty(self.nq)
+        for kind, _, sq, sv in self._walk():
+            out[sq] = quat_rate(q[sq], v[sv]) if kind == "B" else v[sv]
+        return out
+
+    def integrate(self, q: Sequence[float], dv: Sequence[float]) -> np.ndarray:
+        """The coordinates reached from ``q`` by the step ``dv`` in speed space (a rotation
+        vector, child frame, for a ball segment); ``q + dv`` for a screw joint."""
+        q, dv = self._checked(q, self.nq, "coordinate(s)"), self._checked(dv, self.nv, "speed(s)")
+        out = q.copy()
+        for kind, _, sq, sv in self._walk():
+            if kind == "B":
+                out[sq] = quat_normalize(quat_multiply(q[sq], quat_exp(dv[sv])), self)
+            else:
+                out[sq] = q[sq] + dv[sv]
+        return out
+
+    def difference(self, q0: Sequence[float], q1: Sequence[float]) -> np.ndarray:
+        """The step ``dv`` with ``integrate(q0, dv) = q1`` (the shorter rotation for a ball)."""
+        q0, q1 = self._checked(q0, self.nq, "coordinate(s)"), self._checked(q1, self.nq, "coordinate(s)")
+        out = np.empty(self.nv)
+        for kind, _, sq, sv in self._walk():
+            if kind == "B":
+                a = quat_normalize(q0[sq], self)
+                out[sv] = quat_log(quat_multiply([a[0], -a[1], -a[2], -a[3]], quat_normalize(q1[sq], self)))
+            else:
+                out[sv] = q1[sq] - q0[sq]
+        return out
+
+    def normalize(self, q: Sequence[float]) -> np.ndarray:
+        """``q`` with each quaternion scaled to unit length (``ModelError`` for a zero one)."""
+        q = self._checked(q, self.nq, "coordinate(s)").copy()
+        for kind, _, sq, _ in self._walk():
+            if kind == "B":
+                q[sq] = quat_normalize(q[sq], self)
+        return q
+
     def relative_pose(self, q: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """``(R_PC, p_PC)``: child body frame rotation and origin in the parent body frame.
 
         ``R_PC = R_pf R_joint(q) R_cf^T`` and ``p_PC = parent_point + R_pf translation(q)
         - R_PC child_point`` (m, parent body frame).
         """
-        q = np.asarray(q, dtype=float).reshape(-1)
-        if q.shape != (self.n_coords,):
-            raise ModelError(self, f"needs {self.n_coords} coordinate(s), got {q.size}")
+        q = self._checked(q, self.nq, "coordinate(s)")
         rotation = self.parent_frame_rotation
         translation = np.zeros(3)
-        for (kind, axis), value in zip(self._screws(), q):
+        for kind, axis, sq, _ in self._walk():
             if kind == "R":
-                rotation = rotation @ axis_angle(axis, value)
+                rotation = rotation @ axis_angle(axis, q[sq][0])
+            elif kind == "P":
+                translation = translation + rotation @ (np.asarray(axis) * q[sq][0])
             else:
-                translation = translation + rotation @ (np.asarray(axis) * value)
+                rotation = rotation @ np.array(quat_matrix(q[sq]), dtype=float)
         rotation = rotation @ self.child_frame_rotation.T
         origin = np.asarray(self.parent_point) + translation - rotation @ np.asarray(self.child_point)
         return rotation, origin
+
+    def relative_velocity(self, q: Sequence[float], v: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """``(w, u)``: the child's angular velocity (rad/s) and the velocity (m/s) of its frame
+        origin relative to the parent, both in the parent frame (the parent at rest)."""
+        q, v = self._checked(q, self.nq, "coordinate(s)"), self._checked(v, self.nv, "speed(s)")
+        rotation = self.parent_frame_rotation
+        translation = np.zeros(3)
+        w = np.zeros(3)
+        u = np.zeros(3)  # velocity of the moving joint point
+        for kind, axis, sq, sv in self._walk():
+            if kind == "R":
+                w = w + rotation @ np.asarray(axis) * v[sv][0]
+                rotation = rotation @ axis_angle(axis, q[sq][0])
+            elif kind == "P":
+                step = rotation @ np.asarray(axis)
+                u = u + step * v[sv][0] + np.cross(w, step * q[sq][0])
+                translation = translation + step * q[sq][0]
+            else:
+                rotation = rotation @ np.array(quat_matrix(q[sq]), dtype=float)
+                w = w + rotation @ v[sv]
+        rotation = rotation @ self.child_frame_rotation.T
+        point = np.asarray(self.child_point)
+        return w, u + np.cross(w, -rotation @ point)
 
     def _coord_names(self, coords: Any) -> tuple[str, ...]:
         if coords is None:
@@ -106,6 +235,30 @@ class Joint(Component):
             raise ModelError(self, f"coords must be {self.n_coords} non-empty name(s), got {coords!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"coords {names} repeat a name")
+        return names
+
+    def _speed_names(self, speeds: Any) -> tuple[str, ...]:
+        default: list[str] = []
+        for kind, _, sq, _ in self._walk():
+            if kind == "B":
+                default.extend(f"{self.name}_{s}" for s in self.speed_suffixes)
+            else:
+                default.append(self.coords[sq.start])
+        if speeds is None:
+            return tuple(default)
+        names = (speeds,) if isinstance(speeds, str) else tuple(speeds)
+        if len(names) != len(default) or not all(isinstance(n, str) and n.strip() for n in names):
+            raise ModelError(self, f"speeds must be {len(default)} non-empty name(s), got {speeds!r}")
+        if len(set(names)) != len(names):
+            raise ModelError(self, f"speeds {names} repeat a name")
+        for kind, _, sq, sv in self._walk():
+            if kind != "B" and names[sv.start] != self.coords[sq.start]:
+                raise ModelError(self, f"speed {names[sv.start]!r} must be named like its coordinate "
+                                       f"{self.coords[sq.start]!r} (a screw coordinate's speed is its rate)")
+        clash = {names[i] for kind, _, _, sv in self._walk() if kind == "B"
+                 for i in range(sv.start, sv.stop) if names[i] in self.coords}
+        if clash:
+            raise ModelError(self, f"speed name(s) {sorted(clash)} are also coordinate names")
         return names
 
 
@@ -172,3 +325,112 @@ class Fixed(Joint):
 
     def _screws(self):
         return []
+
+
+class Ball(Joint):
+    """Spherical joint without singularity: the coordinates are the unit quaternion
+    ``(w, x, y, z)`` of the child frame relative to the parent (default names
+    ``NAME_qw``, ``NAME_qx``, ``NAME_qy``, ``NAME_qz``), the speeds the child's angular
+    velocity relative to the parent in the child frame, rad/s (``NAME_wx``, ``NAME_wy``,
+    ``NAME_wz``).  The integrators keep the quaternion at unit length.
+    """
+
+    n_coords = 4
+    coord_suffixes = ("qw", "qx", "qy", "qz")
+
+    def _segments(self):
+        return [("B", None)]
+
+
+class Free(Joint):
+    """A floating child: three translations along the parent's axes (m, coordinates
+    ``NAME_x``, ``NAME_y``, ``NAME_z``, their rates the first three speeds) then a
+    ``Ball`` rotation about the translated joint point (``NAME_qw`` .. ``NAME_qz``;
+    speeds ``NAME_wx`` .. ``NAME_wz``, rad/s in the child frame).  7 coordinates, 6 speeds.
+    """
+
+    n_coords = 7
+    coord_suffixes = ("x", "y", "z", "qw", "qx", "qy", "qz")
+
+    def _segments(self):
+        return [("P", AXIS_NAMES["x"]), ("P", AXIS_NAMES["y"]), ("P", AXIS_NAMES["z"]), ("B", None)]
+
+
+def _axis_letter(spec: Any) -> str | None:
+    """``"x"`` for an axis given as ``"x"`` (or ``"+x"``), else None."""
+    if isinstance(spec, str) and spec.strip().lower().lstrip("+") in AXIS_NAMES:
+        return spec.strip().lower().lstrip("+")
+    return None
+
+
+class Universal(Joint):
+    """Two rotations (rad): about ``axes[0]`` (parent frame), then about ``axes[1]`` as
+    carried by the first rotation (a Cardan joint).  The axes must not be parallel.
+    Coordinates ``NAME_<axis>`` for named axes (``NAME_1``, ``NAME_2`` otherwise).
+    """
+
+    n_coords = 2
+
+    def __init__(self, name: str, parent: Any, child: Any, axes: Any = ("x", "y"), **options: Any):
+        owner = f"Universal {name!r}"
+        if isinstance(axes, str) or len(axes) != 2:
+            raise ModelError(owner, f"axes must be two axes such as ('x', 'y'), got {axes!r}")
+        self.axes = tuple(unit_axis(a, owner=owner) for a in axes)
+        if abs(float(np.dot(self.axes[0], self.axes[1]))) > 1.0 - 1e-9:
+            raise ModelError(owner, f"axes {axes!r} are parallel: a universal joint needs two different axes")
+        letters = tuple(_axis_letter(a) for a in axes)
+        self._suffixes = letters if None not in letters and letters[0] != letters[1] else ("1", "2")
+        super().__init__(name, parent, child, **options)
+
+    @property
+    def coord_suffixes(self) -> tuple[str, ...]:
+        return self._suffixes
+
+    def _screws(self):
+        return [("R", self.axes[0]), ("R", self.axes[1])]
+
+
+class Cylindrical(Joint):
+    """Rotation about (rad, ``NAME_angle``) and translation along (m, ``NAME_slide``) one
+    ``axis`` of the parent frame through ``parent_point``."""
+
+    n_coords = 2
+    coord_suffixes = ("angle", "slide")
+
+    def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
+        self.axis = unit_axis(axis, owner=f"Cylindrical {name!r}")
+        super().__init__(name, parent, child, **options)
+
+    def _screws(self):
+        return [("R", self.axis), ("P", self.axis)]
+
+
+class Planar(Joint):
+    """Motion in the plane with the given ``normal`` (parent frame): two translations (m)
+    along in-plane axes ``t1``, ``t2`` with ``t1 x t2 = normal`` (for ``"z"``: x then y),
+    then a rotation (rad) about the normal.  Coordinates ``NAME_<t1>``, ``NAME_<t2>``,
+    ``NAME_angle`` for a named normal (``NAME_u``, ``NAME_v``, ``NAME_angle`` otherwise).
+    """
+
+    n_coords = 3
+    _IN_PLANE = {"x": ("y", "z"), "y": ("z", "x"), "z": ("x", "y")}
+
+    def __init__(self, name: str, parent: Any, child: Any, normal: Any = "z", **options: Any):
+        self.normal = unit_axis(normal, owner=f"Planar {name!r}")
+        letter = _axis_letter(normal)
+        if letter is not None:
+            pair = self._IN_PLANE[letter]
+            self.plane_axes = (AXIS_NAMES[pair[0]], AXIS_NAMES[pair[1]])
+            self._suffixes = (*pair, "angle")
+        else:
+            from .constraints import normals
+            self.plane_axes = normals(self.normal)
+            self._suffixes = ("u", "v", "angle")
+        super().__init__(name, parent, child, **options)
+
+    @property
+    def coord_suffixes(self) -> tuple[str, ...]:
+        return self._suffixes
+
+    def _screws(self):
+        return [("P", self.plane_axes[0]), ("P", self.plane_axes[1]), ("R", self.normal)]

@@ -41,13 +41,17 @@ class Workspace:
     """Per-simulation state of a formulation (buffers, partitions, warm starts).
 
     ``y0``: the integrator's initial state; ``rhs(t, y)``; ``full_state(t, y) -> (q, qd)``;
-    ``after_step(t, y) -> y or None`` (a corrected state, e.g. a projection, or None).
+    ``after_step(t, y) -> y or None`` (a corrected state, e.g. a projection, or None);
+    ``normalize(y)``: quaternions back to unit length in place after an accepted step
+    (no restart: the change is of the order of the step's error).
+    The plain workspace's state is ``[q, qd]`` (nq + nv), its rate ``[q'(q, qd), qdd]``.
     """
 
     def __init__(self, formulation, system, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts=()):
         self.formulation, self.system, self.tau = formulation, system, tau
         self.contacts = tuple(contacts)
         self.n = system.nq
+        self.state_map = system.topology.state_map
         self.offsets = formulation.motor_offsets(q0, t0)
         self.y0 = np.concatenate((q0, qd0))
 
@@ -55,13 +59,18 @@ class Workspace:
         q, qd = y[: self.n], y[self.n:]
         qdd = self.formulation.accelerations(self.system, t, q, qd, self.system._tau(self.tau, t, q, qd),
                                              offsets=self.offsets, contacts=self.contacts)
-        return np.concatenate((qd, qdd))
+        return np.concatenate((self.state_map.qdot(q, qd), qdd))
 
     def full_state(self, t, y):
-        return y[: self.n], y[self.n:]
+        q = y[: self.n]
+        return (q if self.state_map.identity else self.state_map.normalize(q)), y[self.n:]
 
     def after_step(self, t, y):
         return None
+
+    def normalize(self, y) -> None:
+        if not self.state_map.identity:
+            y[: self.n] = self.state_map.normalize(y[: self.n])
 
 
 class Formulation:
@@ -97,11 +106,11 @@ class Formulation:
     def constraint_values(self, system, t, q, qd, offsets=None, contacts=()):
         """Constraint equations at a state, with the gap rows of closed (persistent)
         ``contacts`` appended after the model's own."""
-        nq = len(q)
+        nv = len(qd)
         if self.constraints is not None:
             cv = self.constraints.evaluate(system, q, qd, t, offsets)
         else:
-            cv = ConstraintValues(np.zeros(0), np.zeros((0, nq)), np.zeros(0), np.zeros(0))
+            cv = ConstraintValues(np.zeros(0), np.zeros((0, nv)), np.zeros(0), np.zeros(0))
         if contacts:
             from ..impact import contact_values
             ck = contact_values(system, q, qd)
@@ -234,29 +243,36 @@ class Formulation:
         if self.constraints is None:
             return q.copy(), qd.copy()
         zero = np.zeros_like(qd)
+        state_map = system.topology.state_map
+        base = q.copy()
+
+        def position(x):  # x: a step in speed space from the guess (the coordinates themselves for screws)
+            return x if state_map.identity else state_map.integrate(base, x)
 
         def residual(x):
-            g = self.constraint_values(system, t, x, zero, offsets).g
+            g = self.constraint_values(system, t, position(x), zero, offsets).g
             return np.where(np.isfinite(g), g, 0.0)
 
         def jacobian(x):
-            cv = self.constraint_values(system, t, x, zero, offsets)
+            cv = self.constraint_values(system, t, position(x), zero, offsets)
             return np.where(np.isfinite(cv.g)[:, None], cv.J, 0.0)
 
         q = q.copy()
-        if float(np.max(np.abs(residual(q)), initial=0.0)) > 1e-6:
+        if float(np.max(np.abs(residual(q if state_map.identity else zero)), initial=0.0)) > 1e-6:
             # Far from the constraints: a trust-region least-squares solve, robust where
             # plain Newton steps explode (near-singular Jacobians off the solution set).
-            solution = scipy.optimize.least_squares(residual, q, jac=jacobian, method="trf", xtol=1e-14,
-                                                    ftol=1e-14, gtol=1e-14, max_nfev=400)
-            q = solution.x
+            # (With quaternions the Jacobian in speed space is exact at the guess only,
+            # enough for trf; the Newton polish below is exact.)
+            solution = scipy.optimize.least_squares(residual, q if state_map.identity else zero, jac=jacobian,
+                                                    method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=400)
+            q = position(solution.x)
         for _ in range(20):  # Newton polish with minimum-norm steps
             cv = self.constraint_values(system, t, q, zero, offsets)
             rows = np.isfinite(cv.g)
             if float(np.max(np.abs(cv.g[rows]), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
             step, *_ = np.linalg.lstsq(cv.J[rows], -cv.g[rows], rcond=1e-10)
-            q = q + step
+            q = state_map.integrate(q, step)
         cv = self.constraint_values(system, t, q, zero, offsets)
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
         if float(np.max(np.abs(g), initial=0.0)) > 1e-9:
@@ -285,7 +301,7 @@ class Formulation:
         """max |g(q, t)| over the position-level constraint equations."""
         if self.constraints is None:
             return 0.0
-        g = self.constraint_values(system, t, q, np.zeros_like(q), offsets).g
+        g = self.constraint_values(system, t, q, np.zeros(system.nv), offsets).g
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
     def start(self, system, t0, q0, qd0, tau, contacts=()) -> Workspace:
@@ -301,25 +317,27 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
     Raises ``ModelError`` when no configuration satisfies the constraints (they
     conflict, or leave fewer than zero degrees of freedom).
     """
-    nq = system.nq
-    formulation.ndof, formulation.redundant = nq, []
+    nq, nv = system.nq, system.nv
+    formulation.ndof, formulation.redundant = nv, []
     if formulation.constraints is None:
         return
     rng = np.random.default_rng(seed)
-    guesses = [np.zeros(nq)] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
+    state_map = system.topology.state_map
+    guesses = [state_map.neutral()] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
+    guesses = [state_map.normalize(g) for g in guesses]
     last_error, best = None, None
     closest = np.inf
     consistent = 0
     for guess in guesses:
         try:
-            q, _ = formulation.assemble(system, guess, np.zeros(nq))
+            q, _ = formulation.assemble(system, guess, np.zeros(nv))
         except SimulationError as exc:
             residual = getattr(exc, "residual", np.inf)
             if residual < closest:
                 closest, last_error = residual, exc
             continue
         consistent += 1
-        J = formulation.constraint_values(system, 0.0, q, np.zeros(nq)).J
+        J = formulation.constraint_values(system, 0.0, q, np.zeros(nv)).J
         rows = independent_rows(J)
         # The generic rank is the largest found: a configuration may be singular (a
         # parallelogram built collinear), never more regular than the mechanism.
@@ -330,18 +348,18 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
             break
     if best is None:
         raise ModelError(None, f"the constraints cannot all be met: no configuration satisfies them (they "
-                               f"conflict, or remove more freedom than the {nq} coordinates have); from "
+                               f"conflict, or remove more freedom than the {nv} speeds have); from "
                                f"{len(guesses)} starting guesses, the closest: {last_error}")
     rows, nc, scale, q_best = best
     if rows.size:
         # Size of the Schur complement's Cholesky pivots where the mechanism is regular: the
         # fast path in solve_constrained must not accept rows whose pivots all collapsed.
-        J = formulation.constraint_values(system, 0.0, q_best, np.zeros(nq)).J[rows]
-        M, _ = system._dynamics(0.0, q_best, np.zeros(nq))
+        J = formulation.constraint_values(system, 0.0, q_best, np.zeros(nv)).J[rows]
+        M, _ = system._dynamics(0.0, q_best, np.zeros(nv))
         A = J @ np.linalg.solve(M, J.T)
         formulation.schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
     formulation.nominal_rank = int(rows.size)
     formulation.nominal_rows = rows
     formulation.jacobian_scale = scale
-    formulation.ndof = nq - int(rows.size)
+    formulation.ndof = nv - int(rows.size)
     formulation.redundant = [formulation.constraints.labels[r] for r in range(nc) if r not in set(rows.tolist())]

@@ -5,7 +5,11 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import SimulationError, format_state
+from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
+
+#: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
+CHART_LIMIT = 1.0
 
 #: Re-choose the independent coordinates when the dependent block's condition number
 #: exceeds this (and a fresh choice is clearly better).
@@ -13,7 +17,7 @@ REPARTITION_CONDITION = 30.0
 
 
 def partition(J: np.ndarray):
-    """``(dependent, independent)`` coordinate indices: the dependent ones are the pivot
+    """``(dependent, independent)`` speed indices: the dependent ones are the pivot
     columns of a column-pivoted QR of the (independent-row) Jacobian."""
     nq = J.shape[1]
     if J.shape[0] == 0:
@@ -30,73 +34,95 @@ class TrialStateError(SimulationError):
 
 
 class LagrangeWorkspace(Workspace):
-    """State ``[q_ind, qd_ind]``; dependent coordinates by warm-started Newton."""
+    """State ``[x_ind, qd_ind]``: the independent chart coordinates (``statemap.Chart``: the
+    coordinates themselves for screw joints, a rotation vector from a base orientation for
+    a ball) and their speeds; the dependent ones by warm-started Newton."""
 
     def __init__(self, formulation, system, t0, q0, qd0, tau, contacts=()):
         super().__init__(formulation, system, t0, q0, qd0, tau, contacts)
         # Newton starts from the last accepted state, advanced by its speeds: stage values of
         # rejected steps must not carry the iteration onto another assembly branch.
         self.t_accepted, self.q_accepted, self.qd_accepted = t0, q0.copy(), qd0.copy()
+        self.chart = Chart(self.state_map, q0)
         self.choose(t0, q0)
-        self.y0 = np.concatenate((q0[self.ind], qd0[self.ind]))
+        self.y0 = np.concatenate((self.chart.to_x(q0)[self.ind], qd0[self.ind]))
 
     def choose(self, t, q):
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
+        """Partition the speeds at ``q`` (and centre the chart there)."""
+        self.chart = Chart(self.state_map, q)
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros(self.system.nv), self.offsets,
+                                                self.contacts)
         self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts)
         self.rows = self.formulation.rows_of(cv.J)
         self.dep, self.ind = partition(cv.J[self.rows])
 
-    def dependent(self, t, qi):
-        """Full q from the independent coordinates (Newton from the last accepted state,
-        advanced along its velocity)."""
-        q = self.q_accepted + self.qd_accepted * (t - self.t_accepted)
-        q[self.ind] = qi
-        zero = np.zeros_like(q)
+    def dependent(self, t, xi):
+        """Full q (and its chart coordinates) from the independent chart coordinates (Newton
+        from the last accepted state, advanced along its velocity)."""
+        chart = self.chart
+        x = chart.to_x(self.state_map.integrate(self.q_accepted, self.qd_accepted * (t - self.t_accepted)))
+        x[self.ind] = xi
+        q = chart.to_q(x)
+        zero = np.zeros(self.system.nv)
         for _ in range(25):
             cv = self.formulation.constraint_values(self.system, t, q, zero, self.offsets, self.contacts)
             g = cv.g[self.rows]
             if float(np.max(np.abs(g), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
+            D = chart.tangent(x)
+            Jx = cv.J[self.rows] if D is None else cv.J[self.rows] @ D
             try:
-                q[self.dep] -= np.linalg.solve(cv.J[np.ix_(self.rows, self.dep)], g)
+                x[self.dep] -= np.linalg.solve(Jx[:, self.dep], g)
             except np.linalg.LinAlgError:
                 raise TrialStateError(f"dependent coordinates are singular at t = {t:g}: constraints "
                                       f"{self.formulation.row_names(self.rows, self.contacts)}") from None
+            q = chart.to_q(x)
         else:
             raise TrialStateError(f"dependent coordinates did not converge at t = {t:g} (residual "
                                   f"{np.max(np.abs(g)):.3g}): constraints "
                                   f"{self.formulation.row_names(self.rows, self.contacts)}")
-        return q, cv
+        return q, cv, x
 
     def retreat(self):
         """``(t, y)`` of the last accepted state, with the coordinates chosen afresh there."""
         self.choose(self.t_accepted, self.q_accepted)
-        return self.t_accepted, np.concatenate((self.q_accepted[self.ind], self.qd_accepted[self.ind]))
+        return self.t_accepted, np.concatenate((self.chart.to_x(self.q_accepted)[self.ind],
+                                                self.qd_accepted[self.ind]))
 
-    def full_state(self, t, y):
+    def _full_state(self, t, y):
         k = len(self.ind)
-        qi, qdi = y[:k], y[k:]
-        q, cv = self.dependent(t, qi)
-        qd = np.zeros_like(q)
+        xi, qdi = y[:k], y[k:]
+        q, cv, x = self.dependent(t, xi)
+        qd = np.zeros(self.system.nv)
         qd[self.ind] = qdi
         if len(self.dep):
             J = cv.J[self.rows]
             qd[self.dep] = np.linalg.solve(J[:, self.dep], -(J[:, self.ind] @ qdi + cv.g_t[self.rows]))
-        return q, qd
+        return q, qd, x
+
+    def full_state(self, t, y):
+        return self._full_state(t, y)[:2]
+
+    def normalize(self, y) -> None:
+        return None  # the chart keeps quaternions at unit length
 
     def rhs(self, t, y):
-        q, qd = self.full_state(t, y)
+        q, qd, x = self._full_state(t, y)
         tau = self.system._tau(self.tau, t, q, qd)
         qdd, _ = self.formulation.solve(self.system, t, q, qd, tau, self.offsets, self.contacts,
                                         (self.rows, self.dep, self.ind))
-        return np.concatenate((qd[self.ind], qdd[self.ind]))
+        return np.concatenate((self.chart.rate(x, qd)[self.ind], qdd[self.ind]))
 
     def after_step(self, t, y):
-        q, qd = self.full_state(t, y)
+        q, qd, x = self._full_state(t, y)
         self.t_accepted, self.q_accepted, self.qd_accepted = t, q, qd
+        if self.chart.largest_rotation(x) > CHART_LIMIT:
+            self.chart = Chart(self.state_map, q)  # re-centre the rotations' chart here
+            return np.concatenate((self.chart.to_x(q)[self.ind], qd[self.ind]))
         if not len(self.dep):
             return None
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros_like(q), self.offsets, self.contacts)
+        cv = self.formulation.constraint_values(self.system, t, q, np.zeros(self.system.nv), self.offsets,
+                                                self.contacts)
         condition = self.condition(cv.J, self.rows, self.dep)
         if condition < REPARTITION_CONDITION:
             return None
@@ -114,7 +140,8 @@ class LagrangeWorkspace(Workspace):
         if self.condition(cv.J, rows, dep) > 0.5 * condition:
             return None  # no clearly better choice
         self.rows, self.dep, self.ind = rows, dep, ind
-        return np.concatenate((q[ind], qd[ind]))
+        self.chart = Chart(self.state_map, q)
+        return np.concatenate((self.chart.to_x(q)[ind], qd[ind]))
 
     def condition(self, J, rows, dep) -> float:
         """How close the dependent block is to singular, against the Jacobian's regular size:
@@ -160,10 +187,10 @@ class LagrangeFormulation(Formulation):
         except np.linalg.LinAlgError:
             raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
                                   f"{self.row_names(rows, contacts)}") from None
-        B = np.zeros((len(q), len(ind)))
+        B = np.zeros((len(qd), len(ind)))
         B[ind, np.arange(len(ind))] = 1.0
         B[dep] = -X[:, :-1]
-        c = np.zeros(len(q))
+        c = np.zeros(len(qd))
         c[dep] = -X[:, -1]
         if len(ind):
             Mr = B.T @ M @ B

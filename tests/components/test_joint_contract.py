@@ -41,6 +41,24 @@ FACTORIES = {
     mb.Fixed: {
         "fixed": lambda n, p, c: mb.Fixed(n, p, c, **_POINTS),
     },
+    mb.Ball: {
+        "ball": lambda n, p, c: mb.Ball(n, p, c, **_POINTS),
+    },
+    mb.Free: {
+        "free": lambda n, p, c: mb.Free(n, p, c, **_POINTS),
+    },
+    mb.Universal: {
+        "universal-xy": lambda n, p, c: mb.Universal(n, p, c, axes=("x", "y"), **_POINTS),
+        "universal-oblique": lambda n, p, c: mb.Universal(n, p, c, axes=((0.3, -0.5, 0.8), "z"), **_POINTS),
+    },
+    mb.Cylindrical: {
+        "cylindrical-y": lambda n, p, c: mb.Cylindrical(n, p, c, axis="y", **_POINTS),
+        "cylindrical-oblique": lambda n, p, c: mb.Cylindrical(n, p, c, axis=(0.6, 0.0, -0.8), **_POINTS),
+    },
+    mb.Planar: {
+        "planar-z": lambda n, p, c: mb.Planar(n, p, c, normal="z", **_POINTS),
+        "planar-oblique": lambda n, p, c: mb.Planar(n, p, c, normal=(0.2, 0.9, -0.4), **_POINTS),
+    },
 }
 
 JOINT_TYPES = [cls for cls in all_subclasses(Joint) if not cls.__name__.startswith("_")]
@@ -80,10 +98,12 @@ class TestJointContract:
         assert len(joint.coord_suffixes) == joint.n_coords
         assert len(joint.coords) == joint.n_coords
         assert len(set(joint.coords)) == joint.n_coords
+        assert len(joint.speeds) == joint.nv <= joint.nq
+        assert len(set(joint.speeds)) == joint.nv
 
-    def test_pose_at_zero_is_identity_rotation_with_joint_points_coincident(self, cls, factory):
+    def test_pose_at_neutral_is_identity_rotation_with_joint_points_coincident(self, cls, factory):
         joint = factory("j", "a", "b")
-        R, p = joint.relative_pose(np.zeros(joint.n_coords))
+        R, p = joint.relative_pose(np.array(joint.neutral))
         assert_close(R, np.eye(3), atol=1e-15, name="rotation at q = 0")
         expected = np.asarray(joint.parent_point) - np.asarray(joint.child_point)
         assert_close(p, expected, atol=1e-15, name="child origin at q = 0")
@@ -117,13 +137,13 @@ class TestJointContract:
 
     def test_finite_difference_of_pose_matches_motion_columns(self, cls, factory):
         """Column k of the compiled motion subspace is ``(w_k, v0_k)`` (world frame, velocity
-        of the body point at the world origin); the pose differentiated along coordinate k
-        must give ``dR/dq_k R^T = [w_k]x`` and ``dp/dq_k = v0_k + w_k x p``."""
+        of the body point at the world origin); the pose moved by a step along speed k
+        (``joint.integrate``) must give ``dR/dv_k R^T = [w_k]x`` and ``dp/dv_k = v0_k + w_k x p``."""
         rng = np.random.default_rng(3)
         m, joint = _model(factory)
         sys = m.compile(backend="python")
         mount = m["mount"]
-        sl = sys.topology.q_slice["tested"]
+        sl, vs = sys.topology.q_slice["tested"], sys.topology.v_slice["tested"]
         h = 1e-6
 
         def world_pose(q):
@@ -131,14 +151,19 @@ class TestJointContract:
             R2, p2 = joint.relative_pose(q[sl])
             return R1 @ R2, p1 + R1 @ p2
 
+        def moved(q, k, step):
+            dv = np.zeros(joint.nv)
+            dv[k - vs.start] = step
+            out = q.copy()
+            out[sl] = joint.integrate(q[sl], dv)
+            return out
+
         for _ in range(3):
-            q = rng.uniform(-1.2, 1.2, sys.nq)
+            q = sys.state_vector(rng.uniform(-1.2, 1.2, sys.nq))
             columns = sys.motion_columns(q)
             R, p = world_pose(q)
-            for k in range(sl.start, sl.stop):
-                dq = np.zeros(sys.nq)
-                dq[k] = h
-                (Rp, pp), (Rm, pm) = world_pose(q + dq), world_pose(q - dq)
+            for k in range(vs.start, vs.stop):
+                (Rp, pp), (Rm, pm) = world_pose(moved(q, k, h)), world_pose(moved(q, k, -h))
                 w = _skew_vector((Rp - Rm) / (2 * h) @ R.T)
                 v = (pp - pm) / (2 * h)
                 w_k, v0_k = columns[k, :3], columns[k, 3:]
@@ -151,10 +176,35 @@ class TestJointContract:
         m, joint = _model(factory)
         sys = m.compile(backend="python")
         q = rng.uniform(-1.2, 1.2, sys.nq)
-        qd = np.zeros(sys.nq)
-        sl = sys.topology.q_slice["tested"]
+        qd = np.zeros(sys.nv)
+        sl = sys.topology.v_slice["tested"]
         qd[sl] = rng.normal(size=sl.stop - sl.start)
         state = sys.body_state("child", q, qd, point=(0, 0, 0))
         V = sys.motion_columns(q).T @ qd
         assert_close(state.angular_velocity, V[:3], atol=1e-13, name="angular velocity")
         assert_close(state.velocity, V[3:] + np.cross(V[:3], state.position), atol=1e-13, name="velocity")
+
+    def test_relative_velocity_is_the_rate_of_the_pose(self, cls, factory):
+        """``relative_velocity(q, v)`` equals the finite-difference rate of ``relative_pose``
+        along ``q' = qdot(q, v)``."""
+        joint = factory("j", "a", "b")
+        rng = np.random.default_rng(21)
+        h = 1e-6
+        for _ in range(3):
+            q = joint.normalize(rng.uniform(-1.2, 1.2, joint.nq))
+            v = rng.normal(size=joint.nv)
+            rate = joint.qdot(q, v)
+            (Rp, pp), (Rm, pm) = joint.relative_pose(q + h * rate), joint.relative_pose(q - h * rate)
+            R, _ = joint.relative_pose(q)
+            w, u = joint.relative_velocity(q, v)
+            assert_close(w, _skew_vector((Rp - Rm) / (2 * h) @ R.T), atol=1e-8, name="angular velocity")
+            assert_close(u, (pp - pm) / (2 * h), atol=1e-8, name="origin velocity")
+
+    def test_integrate_and_difference_are_inverse(self, cls, factory):
+        joint = factory("j", "a", "b")
+        rng = np.random.default_rng(4)
+        q = joint.normalize(rng.uniform(-1.0, 1.0, joint.nq))
+        dv = rng.uniform(-0.5, 0.5, joint.nv)
+        q1 = joint.integrate(q, dv)
+        assert_close(joint.difference(q, q1), dv, atol=1e-12, name="difference(q, integrate(q, dv))")
+        assert_close(joint.normalize(q1), q1, atol=1e-15, name="integrate keeps unit quaternions")
