@@ -32,8 +32,11 @@ class CompiledModel:
     """What compilation produces and every ``System`` of the same structure shares:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
-    def __init__(self, model, *, cache: bool, backend: str):
+    def __init__(self, model, *, cache: bool, backend: str, c_snippets: tuple = ()):
+        """``c_snippets``: callables ``(nv, ng) -> str`` giving the C code the formulations
+        add to the library (every registered formulation's, so that one library serves all)."""
         self.model_name = model.name
+        self.c_snippets = tuple(c_snippets)
         self.topology = build_topology(model)
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
@@ -82,7 +85,8 @@ class CompiledModel:
             from .integrators import c_integrators
             source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
                       + codegen.c_accelerations(self.topology.nv)
-                      + codegen.c_dae_accelerations(self.topology.nv, len(self.geometric_rows))
+                      + "".join(snippet(self.topology.nv, len(self.geometric_rows)) for snippet in self.c_snippets)
+                      + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
                       + c_integrators(self.topology.state_map))
             path = build_c_library(source, self.key, cache=cache)
             if path is not None:

@@ -85,7 +85,7 @@ class ConstraintSet:
         self.geometric_rows = [r for r in range(self.nc) if r not in set(self.coordinate_rows)]
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, system, q: np.ndarray, qd: np.ndarray, t: float,
+    def evaluate(self, kernel, q: np.ndarray, qd: np.ndarray, t: float,
                  motor_offsets: dict | None = None) -> ConstraintValues:
         """Residuals, Jacobian (nc, nv: over the speeds), explicit time rates and acceleration bias.
 
@@ -97,7 +97,7 @@ class ConstraintSet:
         rows = self.geometric_rows
         if rows:
             ng = len(rows)
-            out = system._call("constraints", q, qd)
+            out = kernel.call("constraints", q, qd)
             g[rows] = out[:ng]
             J[rows] = out[ng: ng + ng * nv].reshape(ng, nv)
             bias[rows] = out[ng + ng * nv:]

@@ -317,26 +317,20 @@ from .errors import ModelError, SimulationError  # noqa: E402
 COMPILED_METHODS = ("DOP853", "RK4")
 
 
-def why_not_compiled(system, method, tau) -> str | None:
-    """Why the compiled loop cannot run this simulation (None when it can)."""
-    topology = system.topology
+def why_not_compiled(kernel, formulation, method, tau) -> str | None:
+    """Why the compiled loop cannot run this simulation (None when it can); the formulation
+    says whether its way of handling constraints runs in compiled code."""
+    topology = kernel.topology
     if method not in COMPILED_METHODS:
         return f"method {method!r} has no compiled loop (compiled: {', '.join(COMPILED_METHODS)})"
-    if system.backend != "c":
+    if kernel.backend != "c":
         return "the model was compiled without a C compiler (backend 'python')"
-    if topology.cut_joints or topology.constraints:
-        formulation = system._formulation
-        if formulation.name != "dae":
-            return "the lagrange formulation of a constrained model steps in Python (use formulation='dae')"
-        if formulation.projection:
-            return "projection=True steps in Python"
-        if formulation.constraints.coordinate_rows:
-            return "motors step in Python"
-        if formulation.nominal_rows is None:
-            return "no consistent configuration was found at compile time"
+    reason = formulation.compiled_loop()
+    if reason is not None:
+        return reason
     if topology.contacts:
         return "the model has contacts"
-    if system._compiled.n_inputs:
+    if kernel.n_inputs:
         return "the model has callable forces or torques"
     if callable(tau):
         return "tau is a callable"
@@ -355,39 +349,39 @@ def _bind(lib):
     return run, rk4
 
 
-def compiled_jacobian(system, tau):
+def compiled_jacobian(kernel, tau):
     """``jac(t, y)`` for scipy's implicit methods, computed in compiled code (forward
     differences of the compiled right-hand side: one call instead of 2 nq Python calls)."""
-    lib = system._compiled.functions.lib
+    lib = kernel.compiled.functions.lib
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = system.nq + system.nv
+    n2 = kernel.nq + kernel.nv
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    p = system._p
+    p = kernel.p
 
     def jac(t, y):
         y = np.ascontiguousarray(y, dtype=float)
         out = np.empty((n2, n2))
         status = fn(p.ctypes.data, tau_ptr, float(t), y.ctypes.data, out.ctypes.data)
         if status:
-            _fail(system, status, t, y, "Jacobian")
+            _fail(kernel, status, t, y, "Jacobian")
         return out
 
     jac.tau = tau_arr  # keep the buffer alive with the closure
     return jac
 
 
-def _fail(system, status: int, t: float, y: np.ndarray, method: str):
-    n = system.nq
+def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
+    n = kernel.nq
     if status == RANK_LOST:
         raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
     if status == SINGULAR:
-        system._solve_tree(*system._dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
+        kernel.tree_solve(*kernel.dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
@@ -398,30 +392,20 @@ class RankLost(Exception):
     """The compiled dae path met a singular position: the caller falls back to Python stepping."""
 
 
-def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
+def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
                  atol: float, t_eval, tau, max_step: float, dt: float | None):
-    """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
-    compiled code; returns ``(t, y, stats, wall)``."""
-    lib = system._compiled.functions.lib
-    formulation = system._formulation
-    if formulation.constraints is None:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
-    configure = lib.dae_configure
-    configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
-    rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
-    alpha, beta = formulation.baumgarte
-    configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale)  # this thread only
-    try:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
-    finally:
-        configure(-1, None, 0.0, 0.0, 0.0)
+    """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
+    entirely in compiled code; returns ``(t, y, stats, wall)``."""
+    lib = kernel.compiled.functions.lib
+    with formulation.compiled_setup(lib):  # e.g. the dae rows and gains, for this thread only
+        return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
 
 
-def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
-    ny = system.nq + system.nv
-    p = system._p
-    tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
+    ny = kernel.nq + kernel.nv
+    p = kernel.p
+    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     y = np.ascontiguousarray(np.concatenate((q0, qd0)), dtype=float)
     started = time.perf_counter()
@@ -436,10 +420,10 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
         if status:
-            _fail(system, status, float("nan"), y, method)
+            _fail(kernel, status, float("nan"), y, method)
         t = np.arange(steps + 1) * dt
         if t_eval is not None:
-            out, t = _hermite(system, t, out, t_eval, tau_arr), np.asarray(t_eval)
+            out, t = _hermite(kernel, t, out, t_eval, tau_arr), np.asarray(t_eval)
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
@@ -457,7 +441,7 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
         if status:
-            _fail(system, status, state[0], y, method)
+            _fail(kernel, status, state[0], y, method)
         times, values = t_out, y_out
     else:
         chunks_t, chunks_y = [np.zeros(1)], [y[None, :].copy()]
@@ -475,22 +459,22 @@ def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
                 cap = min(cap * 4, 1 << 20)
                 continue
             if status:
-                _fail(system, status, state[0], y, method)
+                _fail(kernel, status, state[0], y, method)
             break
         times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     return times, values, stats, time.perf_counter() - started
 
 
-def _hermite(system, t, y, t_eval, tau):
+def _hermite(kernel, t, y, t_eval, tau):
     """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
     the steps that bracket a requested time)."""
-    n = system.nq
-    state_map = system.topology.state_map
+    n = kernel.nq
+    state_map = kernel.topology.state_map
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
-    f = {i: np.concatenate((state_map.qdot(y[i, :n], y[i, n:]), system._tree_accelerations(0.0, y[i, :n], y[i, n:], tau)))
+    f = {i: np.concatenate((state_map.qdot(y[i, :n], y[i, n:]), kernel.tree_accelerations(0.0, y[i, :n], y[i, n:], tau)))
          for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
     h = (t[idx + 1] - t[idx])[:, None]

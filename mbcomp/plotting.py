@@ -351,7 +351,7 @@ class _Scene:
 
     def _poses_fast(self, q: np.ndarray):
         """The same from one evaluation of the generated kinematics (no accelerations)."""
-        per_body = self.system._kinematics(q, np.zeros_like(q))[0]
+        per_body = self.system.kernel.kinematics(q, np.zeros(self.system.kernel.nv))[0]
         rotations = np.concatenate([np.eye(3)[None], per_body[:, :9].reshape(-1, 3, 3)])
         origins = np.concatenate([np.zeros((1, 3)), per_body[:, 9:12]])
         return rotations, origins

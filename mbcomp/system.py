@@ -6,11 +6,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .components import Spherical
-from .constraint_set import cross
 from .components._values import name_of
-from .equations import KINEMATICS_PER_BODY
-from .errors import format_state, ModelError, SimulationError, describe
+from .constraint_set import cross
+from .errors import ModelError
+from .kernel import Kernel
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 
 
@@ -60,8 +59,8 @@ class System:
         object.__setattr__(self, "_compiled", compiled)
         object.__setattr__(self, "_formulation", formulation)
         object.__setattr__(self, "_parameters", dict(parameters))
-        object.__setattr__(self, "_p", compiled.layout.pack(parameters))
-        object.__setattr__(self, "_p_pointer", None)  # bound on first compiled call
+        object.__setattr__(self, "_kernel", Kernel(compiled, parameters))
+        object.__setattr__(self, "_p", self._kernel.p)
 
     def __setattr__(self, name, value):
         raise AttributeError("System is immutable: use with_parameters() for new parameter values")
@@ -111,6 +110,12 @@ class System:
     @property
     def topology(self):
         return self._compiled.topology
+
+    @property
+    def kernel(self) -> Kernel:
+        """The numeric core under this System (raw arrays in, no checks): generated-function
+        calls, tree solve, diagnosis; for analyses and extensions built on the System."""
+        return self._kernel
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -203,113 +208,17 @@ class System:
     def _velocity(self, qd: Any) -> np.ndarray:
         return np.zeros(self.nv) if qd is None else self.speed_vector(qd, "qd")
 
-    def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if not self._compiled.n_inputs:
-            return self._compiled.no_inputs
-        u = np.zeros(self._compiled.n_inputs)
-        for name, (start, size) in self._compiled.inputs.items():
-            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd)
-        return u
-
-    def _tau(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
-        if tau is None:
-            return None
-        if callable(tau):
-            from .components.forces import checked_output
-            return checked_output("tau", tau(t, q, qd), self.nv)
-        arr = np.asarray(tau, dtype=float).reshape(-1)
-        if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
-            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
-        return arr
-
-    # -- tree quantities (raw, unchecked inputs) -------------------------------------------------
-    def _call(self, name: str, q, qd, u=None) -> np.ndarray:
-        if u is None:
-            u = np.zeros(self._compiled.n_inputs)
-        return self._compiled.functions(name, q, qd, self._p, u)
-
-    def _dynamics(self, t, q, qd, tau=None):
-        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f`` (speed space)."""
-        n = self.nv
-        out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
-        M = np.empty((n, n))
-        rows, cols = self._compiled.tril
-        M[rows, cols] = out[: n * (n + 1) // 2]
-        M[cols, rows] = M[rows, cols]
-        f = out[n * (n + 1) // 2:]
-        if tau is not None:
-            f = f + tau
-        return M, f
-
-    def _diagnose(self, q: np.ndarray) -> str:
-        """Name the components that can make the tree mass matrix singular at ``q``."""
-        hints = []
-        for joint in self.topology.tree_joints:
-            if isinstance(joint, Spherical) and len(joint.sequence) == 3:
-                middle = q[self.topology.q_slice[joint.name]][1]
-                a1, a3 = joint.sequence[0], joint.sequence[2]
-                value = np.sin(middle) if a1 == a3 else np.cos(middle)
-                if abs(value) < 1e-6:
-                    hints.append(f"{describe(joint)} is at its Euler-angle singularity "
-                                 f"({joint.coords[1]} = {middle:.6g} rad: first and last axes align)")
-        return "; ".join(hints) if hints else "check for massless bodies or bodies without inertia on rotating joints"
-
-    def _check_finite(self, values: np.ndarray, what: str, q: np.ndarray) -> np.ndarray:
-        if not np.all(np.isfinite(values)):
-            springs = []
-            for comp in self.topology.forces:
-                if hasattr(comp, "body_a"):
-                    pa = self._point_position(comp.body_a, self._parameters[f"{comp.name}.point_a"], q)
-                    pb = self._point_position(comp.body_b, self._parameters[f"{comp.name}.point_b"], q)
-                    if np.linalg.norm(pb - pa) < 1e-12:
-                        springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
-            reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
-            raise SimulationError(f"{what} is not finite at q = {format_state(q)}: {reason}")
-        return values
-
-    def _tree_accelerations(self, t, q, qd, tau) -> np.ndarray:
-        """Unconstrained tree accelerations (in compiled code when the backend has it)."""
-        functions = self._compiled.functions
-        if functions.accelerations is None:
-            M, f = self._dynamics(t, q, qd, tau)
-            self._check_finite(M, "mass matrix", q)
-            self._check_finite(f, "generalised forces", q)
-            return self._solve_tree(M, f, q)
-        u = self._inputs(t, q, qd) if self._compiled.n_inputs else self._compiled.no_inputs
-        if self._p_pointer is None:
-            object.__setattr__(self, "_p_pointer", functions.bind_parameters(self._p))
-        status, out = functions.accelerations(q, qd, self._p_pointer, u, tau)
-        total = float(out.sum())
-        if status or total - total != 0.0:  # NaN or inf somewhere
-            M, f = self._dynamics(t, q, qd, tau)
-            self._check_finite(M, "mass matrix", q)
-            self._check_finite(f, "generalised forces", q)
-            return self._solve_tree(M, f, q)  # raises with a diagnosis
-        return out
-
-    def _solve_tree(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """``M^-1 f`` by Cholesky, or a ``SimulationError`` naming why M is singular."""
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            L = None
-        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
-        if L is None or np.min(np.diag(L)) ** 2 < 1e-13 * scale:
-            raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {self._diagnose(q)}")
-        y = np.linalg.solve(L, f)
-        return np.linalg.solve(L.T, y)
-
     # -- public API -------------------------------------------------------------------------------
     def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv, nv) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by speed type)."""
         q = self.state_vector(q)
-        M, _ = self._dynamics(t, q, np.zeros(self.nv))
-        return self._check_finite(M, "mass matrix", q)
+        M, _ = self._kernel.dynamics(t, q, np.zeros(self.nv))
+        return self._kernel.check_finite(M, "mass matrix", q)
 
     def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
         """(nv,) accelerations (rates of the speeds), consistent with every constraint."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self, t, q, qd, self._tau(tau, t, q, qd))
+        return self._formulation.accelerations(self._kernel, t, q, qd, self._kernel.tau(tau, t, q, qd))
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                   contacts: Any = ()) -> dict[str, np.ndarray]:
@@ -320,29 +229,22 @@ class System:
         from .impact import contact_indices
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
-            else tuple(contact_indices(self, contacts)) if contacts else ()
-        return self._formulation.reactions(self, t, q, qd, self._tau(tau, t, q, qd), offsets, closed)
+            else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
+        return self._formulation.reactions(self._kernel, t, q, qd, self._kernel.tau(tau, t, q, qd), offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv,) generalised forces that, applied, hold the system at rest at ``q``
         (minus the gravity, spring and applied generalised forces at zero speed)."""
         q = self.state_vector(q)
         qd = np.zeros(self.nv)
-        _, f = self._dynamics(t, q, qd)
-        return self._check_finite(-f, "holding forces", q)
+        _, f = self._kernel.dynamics(t, q, qd)
+        return self._kernel.check_finite(-f, "holding forces", q)
 
     def energy(self, q: Any, qd: Any, t: float = 0.0) -> Energy:
         """Kinetic and potential energy (J); the potential counts gravity and springs."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        kinetic, potential = self._call("energy", q, qd)
+        kinetic, potential = self._kernel.call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
-
-    def _kinematics(self, q, qd):
-        out = self._call("kinematics", q, qd)
-        nb = len(self.topology.bodies)
-        per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
-        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nv, 6)
-        return per_body, columns
 
     def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
                    tau: Any = None) -> BodyState:
@@ -359,7 +261,7 @@ class System:
         if comp is self.topology.ground:
             zero = np.zeros(3)
             return BodyState(local.copy(), zero, np.eye(3), zero.copy(), lambda: (np.zeros(3), np.zeros(3)))
-        per_body, columns = self._kinematics(q, qd)
+        per_body, columns = self._kernel.kinematics(q, qd)
         row = per_body[self.topology.body_index(comp)]
         R, origin, V, A_bias = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
         w, v0 = V[:3].copy(), V[3:]
@@ -375,30 +277,21 @@ class System:
 
         return BodyState(position, velocity, R, w, accelerations)
 
-    def _point_position(self, body: Any, local: Any, q: np.ndarray) -> np.ndarray:
-        """World position of a body point from the kinematics alone (no dynamics)."""
-        comp = self.topology.resolve(body)
-        local = np.asarray(local, dtype=float)
-        if comp is self.topology.ground:
-            return local
-        row = self._kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)]
-        return row[9:12] + row[:9].reshape(3, 3) @ local
-
     def motion_columns(self, q: Any) -> np.ndarray:
         """(nv, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` of the speeds (the columns of T)."""
-        return self._kinematics(self.state_vector(q), np.zeros(self.nv))[1]
+        return self._kernel.kinematics(self.state_vector(q), np.zeros(self.nv))[1]
 
     def assemble(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(q, qd)`` moved onto the constraints: positions by Newton (minimum-norm steps from
         the guess), speeds by mass-orthogonal projection.  ``SimulationError`` naming the
         constraints that cannot be met."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.assemble(self, q, qd, t)
+        return self._formulation.assemble(self._kernel, q, qd, t)
 
     def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
         """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
         values of speed motors, as a ``Result`` records them)."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
+        return self._formulation.constraint_violation(self._kernel, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
@@ -418,9 +311,11 @@ class System:
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
-        return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
-                        tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed,
-                        integrator=integrator, dt=dt)
+        q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
+        result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
+                          atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
+                          rest_speed=rest_speed, integrator=integrator, dt=dt)
+        return result.with_system(system)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every
@@ -429,19 +324,18 @@ class System:
         Returns ``.qd`` after the impact, ``.impulses`` ``{contact: N s}`` (positive pushes
         apart) and ``.energy_loss`` (J).  ``restitution`` overrides the contacts' own.
         """
-        from .impact import GAP_TOLERANCE, contact_indices, contact_values, solve_impact
+        from .impact import GAP_TOLERANCE, contact_indices, solve_impact
         q, qd = self.state_vector(q), self._velocity(qd)
-        indices = contact_indices(self, contacts)
+        indices = contact_indices(self._kernel, contacts)
         if contacts is None:
-            values = contact_values(self, q, qd)
+            values = self._kernel.contacts(q, qd)
             indices = [i for i in indices if values.g[i] < GAP_TOLERANCE and values.J[i] @ qd < 0]
-        return solve_impact(self, t, q, qd, indices, restitution)
+        return solve_impact(self._kernel, self._formulation, t, q, qd, indices, restitution)
 
     def gaps(self, q: Any) -> dict[str, float]:
         """``{contact: gap}`` (m), negative when penetrated."""
-        from .impact import contact_values
         q = self.state_vector(q)
-        values = contact_values(self, q, np.zeros(self.nv))
+        values = self._kernel.contacts(q, np.zeros(self.nv))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
     # -- display ----------------------------------------------------------------------------------
@@ -481,15 +375,17 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
                   **options: Any) -> System:
     """Model -> System (see ``Model.compile``)."""
     from .compiler import CompiledModel
-    from .formulations import get_formulation
+    from .formulations import FORMULATIONS, get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
-    compiled = CompiledModel(model, cache=cache, backend=backend)
+    # The library carries every registered formulation's C code: one library serves them all.
+    snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
+    compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
     system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
-    analyse(system._formulation, system)
+    analyse(system._formulation, system._kernel)
     return system
 
 
