@@ -129,3 +129,13 @@ class TestProjection:
         q, qd = s.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
         res = s.simulate(5.0, q, qd, rtol=1e-6, atol=1e-8)
         assert np.max(res.constraint_violation()) < 1e-9
+
+
+def test_compiled_loop_hook_says_why_not():
+    """Each formulation says whether it can step in the compiled integrators, and why not."""
+    from conftest import fourbar
+    dae = fourbar().compile("dae")
+    assert dae._formulation.compiled_loop() is None
+    assert "projection" in fourbar().compile("dae", projection=True)._formulation.compiled_loop()
+    assert "lagrange" in fourbar().compile("lagrange")._formulation.compiled_loop()
+    assert "motors" in fourbar(motor=mb.Motor("drive", "A", speed=2.0)).compile("dae")._formulation.compiled_loop()
