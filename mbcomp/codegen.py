@@ -155,7 +155,8 @@ def c_accelerations(nq: int) -> str:
     ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed
     lower triangle that ``dynamics`` writes.  Returns 0, or k + 1 when pivot k shows
     the mass matrix is not positive definite (same threshold as the Python path).
-    ``work`` holds nq (nq + 1) / 2 + nq doubles; ``tau`` may be NULL.
+    ``work`` holds ``DYNAMICS_SIZE`` doubles (the offsets come from ``OutputLayout.c_defines``);
+    ``tau`` may be NULL.
     """
     return f"""
 #define NQ {nq}
@@ -199,7 +200,7 @@ static void upper_solve(const double *L, double *b) {{
 
 int accelerations(const double *q, const double *qd, const double *p, const double *u,
                   const double *tau, double *qdd, double *work) {{
-    double *L = work, *f = work + NQ * (NQ + 1) / 2;
+    double *L = work + DYNAMICS_MASS_MATRIX_OFF, *f = work + DYNAMICS_FORCES_OFF;
     dynamics(q, qd, p, u, work);
     for (int i = 0; i < NQ; ++i) qdd[i] = f[i] + (tau ? tau[i] : 0.0);
     const int status = mass_cholesky(L);

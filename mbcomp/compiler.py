@@ -10,8 +10,9 @@ import numpy as np
 from . import codegen
 from .backend import COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, build_c_library
 from .components._values import name_of
-from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
+from .equations import build_program, input_layout, parameter_layout, parameter_values
 from .errors import ModelError
+from .layout import OutputLayout
 from .topology import build_topology
 
 
@@ -47,16 +48,17 @@ class CompiledModel:
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
+        #: Where each output quantity sits in the generated functions' packed outputs.
+        self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
+                                             len(self.topology.contacts))
         description = structure_description(model, self.topology, self.layout, self.inputs)
-        self.key = codegen.structure_key(description)
+        #: Everything about the model that decides the generated code (part of the cache key).
+        self.description = description + "\nlayout|" + self.output_layout.description()
+        self.key = codegen.structure_key(self.description)
         self._program = None
         started = time.perf_counter()
         self.cache_hit = False
-        nq, nv, nb = self.topology.nq, self.topology.nv, len(self.topology.bodies)
-        ng = len(self.geometric_rows)
-        self.sizes = {"nq": nq, "nv": nv, "dynamics": nv * (nv + 1) // 2 + nv, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nv, "constraints": ng * (nv + 2),
-                      "contacts": len(self.topology.contacts) * (nv + 2)}
+        self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -66,8 +68,17 @@ class CompiledModel:
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
             self._program = build_program(self.topology, self.layout, self.inputs, equations)
+            self._check_layout(self._program)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
+
+    def _check_layout(self, program) -> None:
+        """The program's outputs must fill the output layout exactly (C and Python read them by it)."""
+        for function, names in FUNCTIONS.items():
+            written = sum(len(program.outputs[name]) for name in names)
+            if written != self.output_layout.size(function):
+                raise ModelError(f"Model {self.model_name!r}", f"internal error: {function} writes {written} values, "
+                                 f"its layout has {self.output_layout.size(function)}")
 
     def _load(self, cache: bool, backend: str):
         if backend not in ("auto", "c", "python"):
@@ -84,6 +95,7 @@ class CompiledModel:
                     cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
             from .integrators import c_integrators
             source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                      + self.output_layout.c_defines()
                       + codegen.c_accelerations(self.topology.nv)
                       + "".join(snippet(self.topology.nv, len(self.geometric_rows)) for snippet in self.c_snippets)
                       + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"

@@ -96,11 +96,7 @@ class ConstraintSet:
         g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nv)), np.zeros(nc), np.zeros(nc)
         rows = self.geometric_rows
         if rows:
-            ng = len(rows)
-            out = kernel.call("constraints", q, qd)
-            g[rows] = out[:ng]
-            J[rows] = out[ng: ng + ng * nv].reshape(ng, nv)
-            bias[rows] = out[ng + ng * nv:]
+            g[rows], J[rows], bias[rows] = kernel.constraints(q, qd)
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start

@@ -465,9 +465,6 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
     return prog
 
 
-KINEMATICS_PER_BODY = 9 + 3 + 6 + 6
-
-
 def _ball_segment(prog: Program, kin: Kinematics, quat: list, k0: int, R, pos, V, A):
     """A free rotation about the point ``pos`` (world): the quaternion ``quat`` rotates the
     frame ``R``; speeds ``k0 .. k0 + 2`` are the angular velocity in the rotated frame.

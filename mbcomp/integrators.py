@@ -33,7 +33,7 @@ def c_integrators(state_map) -> str:
         f"#define NY {nq + nv}",
         f"#define NCOORD {nq}",
         f"#define NQUAT {state_map.quat_q.size}",
-        f"#define NWORK ({nv * (nv + 1) // 2 + nv} > NDAEWORK ? {nv * (nv + 1) // 2 + nv} : NDAEWORK)",
+        "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
     ]

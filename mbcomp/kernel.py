@@ -14,8 +14,8 @@ import numpy as np
 
 from .components import Spherical
 from .constraint_set import ConstraintValues
-from .equations import KINEMATICS_PER_BODY
 from .errors import ModelError, SimulationError, describe, format_state
+from .layout import body_fields
 
 #: A pivot of the mass matrix's Cholesky factor below this fraction of its largest diagonal
 #: entry counts as singular (the same threshold as the compiled ``accelerations``).
@@ -39,6 +39,7 @@ class Kernel:
         self.nq = compiled.topology.nq
         self.nv = getattr(compiled.topology, "nv", self.nq)
         self.n_inputs = compiled.n_inputs
+        self.layout = compiled.output_layout
         self._pointer = None  # the parameter vector's ctypes pointer, bound on first compiled call
 
     def with_parameters(self, parameters: Mapping[str, Any]) -> "Kernel":
@@ -82,16 +83,9 @@ class Kernel:
 
     def dynamics(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray | None = None):
         """Tree mass matrix ``M`` (nv, nv) and generalised forces ``f`` (+ tau): ``M qdd = f``."""
-        n = self.nv
-        out = self.call("dynamics", q, qd, self.inputs(t, q, qd))
-        M = np.empty((n, n))
-        rows, cols = self.compiled.tril
-        M[rows, cols] = out[: n * (n + 1) // 2]
-        M[cols, rows] = M[rows, cols]
-        f = out[n * (n + 1) // 2:]
-        if tau is not None:
-            f = f + tau
-        return M, f
+        out = self.layout.unpack("dynamics", self.call("dynamics", q, qd, self.inputs(t, q, qd)))
+        f = out["forces"]
+        return out["mass_matrix"], (f if tau is None else f + tau)
 
     def checked_dynamics(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray | None = None):
         """``dynamics`` with a ``SimulationError`` explaining any non-finite entry."""
@@ -102,17 +96,15 @@ class Kernel:
 
     def energy(self, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
         """``(kinetic, potential)`` energy, J (potential: gravity and springs)."""
-        kinetic, potential = self.call("energy", q, qd)
-        return float(kinetic), float(potential)
+        out = self.layout.unpack("energy", self.call("energy", q, qd))
+        return float(out["kinetic"]), float(out["potential"])
 
     def kinematics(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per body ``(R (9), origin (3), V (6), A_bias (6))`` rows, and the world-frame motion
+        """Per body rows (``layout.BODY_FIELDS``: rotation, origin, velocity ``(w, v0)``,
+        acceleration bias; split them with ``layout.body_fields``), and the world-frame motion
         columns ``S_k = (w_k, v0_k)`` of every speed (nv, 6)."""
-        out = self.call("kinematics", q, qd)
-        nb = len(self.topology.bodies)
-        per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
-        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nv, 6)
-        return per_body, columns
+        out = self.layout.unpack("kinematics", self.call("kinematics", q, qd))
+        return out["bodies"], out["columns"]
 
     def point_position(self, body: Any, local: Any, q: np.ndarray) -> np.ndarray:
         """World position (m) of a body point given in the body frame, from the kinematics."""
@@ -120,15 +112,20 @@ class Kernel:
         local = np.asarray(local, dtype=float)
         if comp is self.topology.ground:
             return local
-        row = self.kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)]
-        return row[9:12] + row[:9].reshape(3, 3) @ local
+        row = body_fields(self.kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)])
+        return row["origin"] + row["rotation"] @ local
 
     def contacts(self, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
         """Gaps (m), gap Jacobian (nk, nv) and gap acceleration bias of every contact."""
-        nk, nv = len(self.topology.contacts), self.nv
-        out = self.call("contacts", q, qd)
-        return ConstraintValues(out[:nk].copy(), out[nk: nk + nk * nv].reshape(nk, nv), np.zeros(nk),
-                                out[nk + nk * nv:].copy())
+        out = self.layout.unpack("contacts", self.call("contacts", q, qd))
+        nk = len(out["gap"])
+        return ConstraintValues(out["gap"].copy(), out["jacobian"], np.zeros(nk), out["bias"].copy())
+
+    def constraints(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Residuals (ng,), Jacobian (ng, nv) and acceleration bias (ng,) of the geometric
+        constraint equations (loops and sliders)."""
+        out = self.layout.unpack("constraints", self.call("constraints", q, qd))
+        return out["residual"], out["jacobian"], out["bias"]
 
     # -- the tree solve ----------------------------------------------------------------------------
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from .components._values import name_of
 from .constraint_set import cross
 from .errors import ModelError
 from .kernel import Kernel
+from .layout import body_fields
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 
 
@@ -262,8 +263,8 @@ class System:
             zero = np.zeros(3)
             return BodyState(local.copy(), zero, np.eye(3), zero.copy(), lambda: (np.zeros(3), np.zeros(3)))
         per_body, columns = self._kernel.kinematics(q, qd)
-        row = per_body[self.topology.body_index(comp)]
-        R, origin, V, A_bias = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
+        row = body_fields(per_body[self.topology.body_index(comp)])
+        R, origin, V, A_bias = row["rotation"], row["origin"], row["velocity"], row["bias"]
         w, v0 = V[:3].copy(), V[3:]
         position = origin + R @ local
         velocity = v0 + cross(w, position)

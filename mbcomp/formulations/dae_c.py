@@ -9,14 +9,14 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     ``qdd = L^-T (L^-1 f + Y lam)``, on the rows configured per thread by ``dae_configure``
     (the independent rows found at compile time) with Baumgarte gains.  Returns 0, 1 when
     M is not positive definite, 2 when the rows lost rank (a singular position: the caller
-    falls back to the Python path, which diagnoses it).
+    falls back to the Python path, which diagnoses it).  Offsets into the packed outputs come
+    from the ``OutputLayout`` defines.
     """
     if ng == 0:
         return "\n#define NG 0\n#define NDAEWORK 0\n"
-    ntri = nq * (nq + 1) // 2
     return f"""
 #define NG {ng}
-#define NDAEWORK ({ntri} + 2 * {nq} + {ng} * ({nq} + 2) + {nq} * {ng} + {ng} * {ng} + 3 * {ng})
+#define NDAEWORK (DYNAMICS_SIZE + CONSTRAINTS_SIZE + {nq} * {ng} + {ng} * {ng} + 3 * {ng} + {nq})
 static __thread int dae_nr = -1;
 static __thread long dae_rows[NG];
 static __thread double dae_alpha, dae_beta, dae_scale;
@@ -30,11 +30,12 @@ void dae_configure(int nr, const long *rows, double alpha, double beta, double s
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
                       const double *tau, double *qdd, double *work) {{
     const int n = NQ, nr = dae_nr;
-    double *L = work, *f = work + {ntri}, *c = f + n, *Y = c + NG * (NQ + 2), *A = Y + n * NG;
+    double *L = work + DYNAMICS_MASS_MATRIX_OFF, *f = work + DYNAMICS_FORCES_OFF, *c = work + DYNAMICS_SIZE;
+    double *Y = c + CONSTRAINTS_SIZE, *A = Y + n * NG;
     double *r = A + NG * NG, *lam = r + NG, *uvec = lam + NG;
     dynamics(q, qd, p, u, work);
     constraints(q, qd, p, u, c);
-    const double *g = c, *J = c + NG, *bias = c + NG + NG * NQ;
+    const double *g = c + CONSTRAINTS_RESIDUAL_OFF, *J = c + CONSTRAINTS_JACOBIAN_OFF, *bias = c + CONSTRAINTS_BIAS_OFF;
     for (int i = 0; i < n; ++i) uvec[i] = f[i] + (tau ? tau[i] : 0.0);
     if (mass_cholesky(L)) return 1;
     lower_solve(L, uvec);  /* uvec <- L^-1 (f + tau) */
