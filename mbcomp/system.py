@@ -385,9 +385,9 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
-    system = System(compiled, formulation_class(compiled, **options), dict(compiled.default_parameters))
-    analyse(system._formulation, system._kernel)
-    return system
+    formulation = formulation_class(compiled, **options)
+    info = analyse(formulation, Kernel(compiled, compiled.default_parameters))
+    return System(compiled, formulation.with_info(info), dict(compiled.default_parameters))
 
 
 def rebuild_system(model, formulation, options, backend, parameters) -> System:

@@ -1,7 +1,9 @@
 """The Formulation interface shared by ``lagrange`` and ``dae``, and the machinery both use."""
 from __future__ import annotations
 
+import copy
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,6 +38,20 @@ def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 
         return np.arange(0)
     rank = int(np.sum(diag > tol * max(diag[0], scale)))
     return np.sort(piv[:rank])
+
+
+@dataclass(frozen=True)
+class FormulationInfo:
+    """What ``analyse`` finds about a model's constraints at a consistent configuration:
+    degrees of freedom, the rank and independent rows of the constraint Jacobian, its size
+    and the Schur complement's where the mechanism is regular, the redundant equations."""
+
+    ndof: int
+    nominal_rank: int | None = None
+    nominal_rows: np.ndarray | None = None  #: read-only
+    jacobian_scale: float = 0.0
+    schur_scale: float = 0.0
+    redundant: tuple[str, ...] = ()
 
 
 class Workspace:
@@ -107,6 +123,7 @@ class Formulation:
         self.compiled = compiled
         self.options = options
         self.constraints = compiled.constraint_set
+        self.info = FormulationInfo(ndof=compiled.topology.nv)  # until analyse() has run
 
     # -- numeric pieces -----------------------------------------------------------------------
     def constraint_values(self, kernel, t, q, qd, offsets=None, contacts=()):
@@ -191,10 +208,36 @@ class Formulation:
                 f"mechanism at rest: a dead point/bifurcation where the motion is not determined; constraints "
                 f"involved: {self.row_names(lost, contacts)}")
 
-    nominal_rank: int | None = None
-    nominal_rows: np.ndarray | None = None
-    jacobian_scale: float = 0.0
-    schur_scale: float = 0.0
+    # -- what analyse() found (FormulationInfo) --------------------------------------------------------
+    @property
+    def ndof(self) -> int:
+        return self.info.ndof
+
+    @property
+    def redundant(self) -> tuple[str, ...]:
+        return self.info.redundant
+
+    @property
+    def nominal_rank(self) -> int | None:
+        return self.info.nominal_rank
+
+    @property
+    def nominal_rows(self) -> np.ndarray | None:
+        return self.info.nominal_rows
+
+    @property
+    def jacobian_scale(self) -> float:
+        return self.info.jacobian_scale
+
+    @property
+    def schur_scale(self) -> float:
+        return self.info.schur_scale
+
+    def with_info(self, info: "FormulationInfo") -> "Formulation":
+        """A copy of this formulation using what ``analyse`` found (this one is unchanged)."""
+        new = copy.copy(self)
+        new.info = info
+        return new
 
     def rows_of(self, J: np.ndarray) -> np.ndarray:
         """Independent rows of a constraint Jacobian of this model (see ``independent_rows``)."""
@@ -310,17 +353,17 @@ class Formulation:
         return cls(self, kernel, t0, q0, qd0, tau, contacts)
 
 
-def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> None:
-    """Find a consistent configuration and from it the rank of the constraints:
-    sets ``ndof``, ``nominal_rank`` and ``redundant`` (labels of dependent equations).
+def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationInfo:
+    """Find a consistent configuration and from it the rank of the constraints: the
+    degrees of freedom, the independent rows and the redundant equations (by label).
+    Changes nothing (``formulation.with_info`` makes the formulation that uses the result).
 
     Raises ``ModelError`` when no configuration satisfies the constraints (they
     conflict, or leave fewer than zero degrees of freedom).
     """
     nq, nv = kernel.nq, kernel.nv
-    formulation.ndof, formulation.redundant = nv, []
     if formulation.constraints is None:
-        return
+        return FormulationInfo(ndof=nv)
     rng = np.random.default_rng(seed)
     state_map = kernel.topology.state_map
     guesses = [state_map.neutral()] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
@@ -351,15 +394,17 @@ def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> None:
                                f"conflict, or remove more freedom than the {nv} speeds have); from "
                                f"{len(guesses)} starting guesses, the closest: {last_error}")
     rows, nc, scale, q_best = best
+    schur_scale = 0.0
     if rows.size:
         # Size of the Schur complement's Cholesky pivots where the mechanism is regular: the
         # fast path in solve_constrained must not accept rows whose pivots all collapsed.
         J = formulation.constraint_values(kernel, 0.0, q_best, np.zeros(nv)).J[rows]
         M, _ = kernel.dynamics(0.0, q_best, np.zeros(nv))
         A = J @ np.linalg.solve(M, J.T)
-        formulation.schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
-    formulation.nominal_rank = int(rows.size)
-    formulation.nominal_rows = rows
-    formulation.jacobian_scale = scale
-    formulation.ndof = nv - int(rows.size)
-    formulation.redundant = [formulation.constraints.labels[r] for r in range(nc) if r not in set(rows.tolist())]
+        schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
+    rows = np.array(rows, dtype=int)
+    rows.flags.writeable = False
+    return FormulationInfo(ndof=nv - int(rows.size), nominal_rank=int(rows.size), nominal_rows=rows,
+                           jacobian_scale=scale, schur_scale=schur_scale,
+                           redundant=tuple(formulation.constraints.labels[r] for r in range(nc)
+                                           if r not in set(rows.tolist())))
