@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import codegen
+from . import cache, codegen
 
 FUNCTIONS = {
     "dynamics": ["mass_matrix", "forces"],
@@ -123,33 +123,55 @@ class CFunctions:
         return status, arrays["out"].copy()
 
 
-def build_c_library(source: str, key: str, cache: bool = True) -> Path | None:
-    """Compile C source into the cache (atomically), or into a private temporary
-    directory with ``cache=False``; None when no compiler works."""
-    target = codegen.cache_dir() / f"{key}.so" if cache else Path(tempfile.mkdtemp(prefix="mbcomp-")) / "model.so"
-    if cache and target.exists():
-        return target
-    compiler = c_compiler()
-    if compiler is None:
-        return None
-    with tempfile.TemporaryDirectory() as tmp:
+#: Flags of every compiled model (part of the cache key).
+C_FLAGS = ("-O1", "-shared", "-fPIC", "-fno-math-errno")
+
+
+def compile_c(source: str, compiler: str) -> bytes | None:
+    """The shared library built from C ``source`` (its bytes), or None when the compiler
+    fails (with a warning).  The build directory is removed on every path."""
+    with tempfile.TemporaryDirectory(prefix="mbcomp-build-") as tmp:
         src = Path(tmp) / "model.c"
         src.write_text(source)
         out = Path(tmp) / "model.so"
-        cmd = [compiler, "-O1", "-shared", "-fPIC", "-fno-math-errno", str(src), "-o", str(out), "-lm"]
+        cmd = [compiler, *C_FLAGS, str(src), "-o", str(out), "-lm"]
         try:
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+            return out.read_bytes()
         except subprocess.CalledProcessError as exc:
             warnings.warn(f"mbcomp: the C compiler failed, using the Python backend: {exc.stderr.decode()[-2000:]}",
                           RuntimeWarning, stacklevel=2)
             return None
         except (OSError, subprocess.SubprocessError):
             return None
-        try:
-            codegen.write_atomic(target, out.read_bytes())
-        except OSError:
-            # Unwritable cache: load from a private copy instead.
-            private = Path(tempfile.mkdtemp(prefix="mbcomp-")) / "model.so"
-            shutil.copy(out, private)
-            return private
-    return target
+
+
+def load_private(data: bytes, sizes: dict) -> "CFunctions":
+    """Load library bytes from a private temporary directory, removed once loaded (a
+    loaded library stays mapped after its file is gone)."""
+    tmp = tempfile.mkdtemp(prefix="mbcomp-")
+    try:
+        path = Path(tmp) / "model.so"
+        path.write_bytes(data)
+        return CFunctions(path, sizes)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def c_functions(source: str, sizes: dict, *, key: str | None = None, inputs: dict | None = None) -> "CFunctions | None":
+    """Compile ``source`` and load it; with ``key``, also store it in the cache (signed
+    manifest with ``inputs``).  None when no compiler works."""
+    compiler = c_compiler()
+    if compiler is None:
+        return None
+    data = compile_c(source, compiler)
+    if data is None:
+        return None
+    if key is not None:
+        path = cache.store(key, ".so", data, inputs or {})
+        if path is not None:
+            try:
+                return CFunctions(path, sizes)
+            except OSError:
+                cache.discard(key, ".so")
+    return load_private(data, sizes)

@@ -124,9 +124,11 @@ def initial_state(model, system) -> tuple[list[float], list[float], list[str]]:
     """q0, qd0 in ``system.coords`` order from the file's [initial] (0 where not given),
     and warnings for values of coordinates the compiled system does not have."""
     q_values, qd_values = model.initial.get("q", {}), model.initial.get("qd", {})
-    q0 = [float(q_values.get(c, 0.0)) for c in system.coords]
-    qd0 = [float(qd_values.get(c, 0.0)) for c in system.coords]
-    extra = [c for c in list(q_values) + list(qd_values) if c not in system.coords]
+    speeds = getattr(system, "speeds", system.coords)
+    neutral = system.topology.state_map.neutral()  # a ball's quaternion defaults to the identity
+    q0 = [float(q_values.get(c, neutral[i])) for i, c in enumerate(system.coords)]
+    qd0 = [float(qd_values.get(c, 0.0)) for c in speeds]
+    extra = [c for c in q_values if c not in system.coords] + [c for c in qd_values if c not in speeds]
     warnings = [f"[initial] value for {c!r} ignored: not a coordinate of the compiled system "
                 "(a loop-closing joint's coordinate?)" for c in dict.fromkeys(extra)]
     return q0, qd0, warnings
@@ -226,8 +228,11 @@ def run_summary(model, path: Path, system, result) -> str:
                 f"{stats['wall_time']:.3g} s wall" if stats.get("wall_time") is not None else None]
     lines.append(f"simulated    t = 0 .. {_fmt(result.t[-1])} s, {stats.get('method', '?')}, rtol {stats.get('rtol')}, "
                  f"atol {stats.get('atol')}: " + ", ".join(c for c in counters if c))
-    rows = [["coordinate", "q", "qd"]] + [[c, _fmt(result.q[-1, i]), _fmt(result.qd[-1, i])]
+    speeds = list(getattr(system, "speeds", system.coords))
+    rows = [["coordinate", "q", "qd"]] + [[c, _fmt(result.q[-1, i]),
+                                           _fmt(result.qd[-1, speeds.index(c)]) if c in speeds else ""]
                                           for i, c in enumerate(system.coords)]
+    rows += [[c, "", _fmt(result.qd[-1, i])] for i, c in enumerate(speeds) if c not in system.coords]
     lines.append(f"final state (t = {_fmt(result.t[-1])} s)")
     lines.append(_table(rows))
     try:
@@ -290,7 +295,11 @@ def describe_components(model, cut_joints: Sequence[str] = ()) -> list[str]:
         for j in joints:
             kind = type(j).__name__.lower()
             detail = {"revolute": lambda: f" about {_axis_text(j.axis)}", "prismatic": lambda: f" along {_axis_text(j.axis)}",
-                      "spherical": lambda: f" {j.sequence!r}"}.get(kind, lambda: "")()
+                      "spherical": lambda: f" {j.sequence!r}",
+                      "universal": lambda: f" about {_axis_text(j.axes[0])} then {_axis_text(j.axes[1])}",
+                      "cylindrical": lambda: f" about and along {_axis_text(j.axis)}",
+                      "planar": lambda: f" normal {_axis_text(j.normal)}",
+                      "ball": lambda: " (quaternion)", "free": lambda: " (translation + quaternion)"}.get(kind, lambda: "")()
             coords = f" [{', '.join(j.coords)}]" if j.coords else ""
             if j.name in cut_joints:
                 coords = ", closes a loop"
@@ -360,6 +369,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     for line in describe_components(model, cut):
         print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
+    if tuple(system.speeds) != tuple(system.coords):
+        print(f"speeds       {', '.join(system.speeds)} ({system.nv}; a ball's: its angular velocity in the child frame)")
     print(f"degrees of freedom  {system.ndof}")
     if system.constraint_names:
         print(f"constraint equations  {', '.join(system.constraint_names)}"
@@ -370,23 +381,24 @@ def cmd_info(args: argparse.Namespace) -> int:
     if not args.equations:
         return EXIT_OK
     print()
-    if system.nq > MAX_PRINTED_COORDS:
-        print(f"equations of motion: {system.nq} coordinates are too many to print legibly; in Python:\n"
+    if system.nv > MAX_PRINTED_COORDS:
+        print(f"equations of motion: {system.nv} speeds are too many to print legibly; in Python:\n"
               f"  M, f = mbcomp.load({str(path)!r}).compile().equations()   # M qdd = f (sympy)")
         return EXIT_OK
     M, f = numeric_equations(system, simplify=args.simplify)
     width = shutil.get_terminal_size((100, 24)).columns
-    qdd = ", ".join(f"{c}''" for c in system.coords)
-    print(f"equations of motion  M(q) q'' = f(q, q', t),  q'' = [{qdd}]")
+    qdd = ", ".join(f"{c}''" if c in system.coords else f"{c}'" for c in system.speeds)
+    print(f"equations of motion  M(q) v' = f(q, v, t),  v' = [{qdd}]" if system.speeds != system.coords else
+          f"equations of motion  M(q) q'' = f(q, q', t),  q'' = [{qdd}]")
     if constraints or cut:
         print("(tree equations; the constraints add their reactions C_q^T lambda to f)")
-    for i in range(system.nq):
-        for j in range(i, system.nq):
+    for i in range(system.nv):
+        for j in range(i, system.nv):
             if M[i, j] != 0:
                 _print_entry(f"M[{i},{j}]", M[i, j], width)
-    if system.nq > 1:
+    if system.nv > 1:
         print("(M is symmetric; entries not shown are zero or mirror the ones shown)")
-    for i in range(system.nq):
+    for i in range(system.nv):
         _print_entry(f"f[{i}]", f[i], width)
     return EXIT_OK
 

@@ -1,11 +1,8 @@
-"""sympy straight-line programs -> numeric functions (Python or C), cached by model structure."""
+"""sympy straight-line programs -> numeric functions (Python or C source)."""
 from __future__ import annotations
 
-import hashlib
-import os
-import sys
-import tempfile
-from pathlib import Path
+import functools
+import inspect
 from typing import Callable
 
 import sympy as sp
@@ -212,53 +209,16 @@ int accelerations(const double *q, const double *qd, const double *p, const doub
 """
 
 
-# -- cache --------------------------------------------------------------------------------
-def cache_dir() -> Path:
-    """``$MBCOMP_CACHE_DIR``, else the user cache directory (``~/.cache/mbcomp``)."""
-    env = os.environ.get("MBCOMP_CACHE_DIR")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")
-    if sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    return Path(base) / "mbcomp"
-
-
-def structure_key(description: str) -> str:
-    """Cache key: hash of the model structure, the code generator version and Python's."""
-    text = f"{CODEGEN_VERSION}|{sys.version_info[:2]}|{description}"
-    return hashlib.sha256(text.encode()).hexdigest()[:32]
-
-
-def read_cached(key: str, suffix: str) -> str | None:
-    path = cache_dir() / f"{key}{suffix}"
+# -- what the cache key needs ------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def generator_text() -> str:
+    """The code generator's own text (version, printer, source templates): part of the cache
+    key, so that a changed generator never reuses code it did not write."""
     try:
-        return path.read_text()
-    except OSError:
-        return None
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write via a temporary file and rename, so concurrent runs never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def write_cached(key: str, suffix: str, text: str) -> None:
-    try:
-        write_atomic(cache_dir() / f"{key}{suffix}", text.encode())
-    except OSError:
-        pass  # an unwritable cache only costs a recompile next time
+        parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source)]
+    except (OSError, TypeError):
+        parts = []
+    return "\n".join([CODEGEN_VERSION, *parts])
 
 
 def load_python(source: str, key: str) -> dict[str, Callable]:

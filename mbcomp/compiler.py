@@ -1,18 +1,22 @@
 """Compilation: model -> topology, parameter layout and generated numeric functions (cached)."""
 from __future__ import annotations
 
-import shutil
+import hashlib
 import time
 from typing import Any
 
 import numpy as np
 
-from . import codegen
-from .backend import COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, build_c_library
+from . import cache, codegen
+from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
 from .components._values import name_of
 from .equations import build_program, input_layout, parameter_layout, parameter_values
 from .errors import ModelError
 from .layout import OutputLayout
+from .flatten import flatten
+from .params import ParameterSpec
+
+GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world frame")
 from .topology import build_topology
 
 
@@ -36,8 +40,10 @@ class CompiledModel:
     def __init__(self, model, *, cache: bool, backend: str, c_snippets: tuple = ()):
         """``c_snippets``: callables ``(nv, ng) -> str`` giving the C code the formulations
         add to the library (every registered formulation's, so that one library serves all)."""
-        self.model_name = model.name
         self.c_snippets = tuple(c_snippets)
+        model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
+        self.model_name = model.name
+        self.flat_model = model
         self.topology = build_topology(model)
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
@@ -51,16 +57,26 @@ class CompiledModel:
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
                                              len(self.topology.contacts))
-        description = structure_description(model, self.topology, self.layout, self.inputs)
         #: Everything about the model that decides the generated code (part of the cache key).
-        self.description = description + "\nlayout|" + self.output_layout.description()
-        self.key = codegen.structure_key(self.description)
+        self.description = (structure_description(model, self.topology, self.layout, self.inputs)
+                            + "\nlayout|" + self.output_layout.description())
+        self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
         self.cache_hit = False
         self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
+
+    def parameter_spec(self, key: str):
+        """``(owner, ParameterSpec)`` of a ``System.parameters`` key (``"spring.stiffness"``):
+        what ``with_parameters`` validates a new value against (None when unknown)."""
+        if key == "gravity":
+            return f"Model {self.model_name!r}", GRAVITY
+        name, _, attr = key.rpartition(".")
+        comp = self.topology.components.get(name)
+        spec = None if comp is None else type(comp).spec(attr)
+        return None if spec is None else (comp, spec)
 
     @property
     def program(self):
@@ -84,37 +100,54 @@ class CompiledModel:
         if backend not in ("auto", "c", "python"):
             raise ModelError(f"Model {self.model_name!r}", f"backend must be 'auto', 'c' or 'python', got {backend!r}")
         if backend in ("auto", "c"):
-            source = None
-            cached = codegen.cache_dir() / f"{self.key}.so"
-            if cache and cached.exists():
-                try:
-                    functions = CFunctions(cached, self.sizes)
-                    self.cache_hit = True
-                    return functions
-                except (OSError, AttributeError):
-                    cached.unlink(missing_ok=True)  # stale or damaged: rebuild it
-            from .integrators import c_integrators
-            source = (codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS)
-                      + self.output_layout.c_defines()
-                      + codegen.c_accelerations(self.topology.nv)
-                      + "".join(snippet(self.topology.nv, len(self.geometric_rows)) for snippet in self.c_snippets)
-                      + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
-                      + c_integrators(self.topology.state_map))
-            path = build_c_library(source, self.key, cache=cache)
-            if path is not None:
-                functions = CFunctions(path, self.sizes)
-                if not cache:
-                    shutil.rmtree(path.parent, ignore_errors=True)  # loaded: the file is no longer needed
+            functions = self._load_c(cache)
+            if functions is not None:
                 return functions
             if backend == "c":
                 raise ModelError(f"Model {self.model_name!r}", "backend 'c' needs a working C compiler (set $CC)")
-        source = codegen.read_cached(self.key, ".py") if cache else None
+        return self._load_python(cache)
+
+    def _c_templates(self) -> str:
+        """The hand-written C emitted with every model: the output layout's offsets, the tree
+        accelerations, the formulations' code and the integrators."""
+        from .integrators import c_integrators
+        nv, ng = self.topology.nv, len(self.geometric_rows)  # the mass matrix and accelerations are in speed space
+        return (self.output_layout.c_defines() + codegen.c_accelerations(nv)
+                + "".join(snippet(nv, ng) for snippet in self.c_snippets)
+                + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
+                + c_integrators(self.topology.state_map))
+
+    def _load_c(self, use_cache: bool):
+        compiler = c_compiler()
+        if compiler is None:
+            return None
+        templates = self._c_templates()
+        tools = cache.toolchain(compiler, C_FLAGS)
+        self.key = cache.entry_key(self.description, templates + codegen.generator_text(), tools)
+        if use_cache:
+            path = cache.verified(self.key, ".so", tools)
+            if path is not None:
+                try:
+                    functions = CFunctions(path, self.sizes)
+                    self.cache_hit = True
+                    return functions
+                except (OSError, AttributeError):
+                    cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
+        source = codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS) + templates
+        inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
+        return c_functions(source, self.sizes, key=self.key if use_cache else None, inputs=inputs)
+
+    def _load_python(self, use_cache: bool):
+        tools = cache.toolchain()
+        self.key = cache.entry_key(self.description, codegen.generator_text(), tools)
+        source = cache.read_text(self.key, ".py", tools) if use_cache else None
         if source is not None:
             self.cache_hit = True
         else:
             source = codegen.python_source(self.program, FUNCTIONS)
-            if cache:
-                codegen.write_cached(self.key, ".py", source)
+            if use_cache:
+                inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
+                cache.store(self.key, ".py", source.encode(), inputs)
         return PythonFunctions(source, self.key, self.sizes)
 
 

@@ -94,7 +94,7 @@ def input_layout(topology) -> dict[str, tuple[int, int]]:
     """Run-time inputs (callable forces and torques): ``{component name: (start, size)}``."""
     layout, size = {}, 0
     for comp in topology.forces:
-        width = comp.input_size() if hasattr(comp, "input_size") else 0
+        width = topology.input_sizes.get(comp.name, 0)
         if width:
             layout[comp.name] = (size, width)
             size += width
@@ -363,7 +363,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
         V, A = kin.V[parent], kin.A[parent]
         q0, v0 = topology.q_slice[joint.name].start, topology.v_slice[joint.name].start
         R = _rotate_frame(prog, R, getattr(joint, "parent_rotation", None))
-        for kind, axis, sq, sv in joint._walk():
+        for kind, axis, sq, sv in joint.walk():
             if kind == "B":
                 R, V, A = _ball_segment(prog, kin, prog.q[q0 + sq.start:q0 + sq.stop], v0 + sv.start, R, pos, V, A)
                 continue

@@ -1,19 +1,27 @@
-"""From the model users build to the flat component list the compiler reads.
+"""From the model users build to the frozen flat model the compiler reads.
 
-Two steps, both leaving the user's objects untouched:
+Three steps, all leaving the user's objects untouched:
 
-- ``flatten``: sub-model instances become components with dotted names
-  (``"left_leg.thigh.rod"``), their references and coordinate names follow;
+- sub-model instances become components with dotted names (``"left_leg.thigh.rod"``),
+  their references and coordinate names follow;
 - ``orient_joints``: a joint given "backwards" relative to the spanning tree (its
   child already reaches the ground, its parent does not) is replaced by the same joint
-  pointing the other way, so that joints may be given in either direction.
+  pointing the other way, so that joints may be given in either direction;
+- ``flatten``: the frozen copy the compiler works on.  Compiling never changes the
+  user's components and keeps no reference to them: the compiler reads a ``FlatModel``
+  whose components are copies (references between them stay consistent), frozen so
+  that nothing downstream can change them either.  Editing a component after
+  ``compile()`` therefore changes later compilations only, never a compiled ``System``.
+  A FlatModel is also the recipe to rebuild (unpickle) a System.
 """
 from __future__ import annotations
 
 import copy
-from typing import Any
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, Mapping
 
-from .components import Fixed, Joint, Prismatic, Revolute
+from .components import Component, Fixed, Joint, Prismatic, Revolute
 from .components.frame import Frame
 from .components._values import name_of
 
@@ -90,3 +98,44 @@ def copy_component(comp: Any, name: str, references: dict) -> Any:
                 object.__setattr__(new, attr, references[role])
     object.__setattr__(new, "name", name)
     return new
+
+
+@dataclass(frozen=True)
+class FlatModel:
+    """A model's name, gravity (m/s^2, world frame), ground and components (by name, in
+    the order they were added, ground first), all frozen copies."""
+
+    name: str
+    gravity: tuple
+    ground: Any
+    components: Mapping[str, Component]
+
+    def __getitem__(self, name: str) -> Component:
+        return self.components[name]
+
+    def flat(self) -> "FlatModel":
+        """Already flat (``Model.flat`` is the step before): itself."""
+        return self
+
+    def __reduce__(self):
+        return (FlatModel, (self.name, self.gravity, self.ground, dict(self.components)))
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.components, MappingProxyType):
+            object.__setattr__(self, "components", MappingProxyType(dict(self.components)))
+
+
+def flatten(model: Any) -> FlatModel:
+    """A frozen copy of ``model`` (a ``Model`` or a ``FlatModel``) for the compiler.
+
+    Components are deep-copied together (a joint's ``parent`` in the copy is the copy of
+    its parent body; a reference to an object that was never added stays a foreign
+    object, which the topology reports) and frozen; callables are shared, not copied.
+    """
+    components = dict(model.components)
+    memo: dict[int, Any] = {}
+    copies = copy.deepcopy(components, memo)
+    ground = copies.get(model.ground.name, copy.deepcopy(model.ground, memo))
+    for comp in list(copies.values()) + [ground]:
+        comp.freeze()
+    return FlatModel(model.name, tuple(float(g) for g in model.gravity), ground, copies)

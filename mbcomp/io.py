@@ -23,8 +23,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10: the tomli backpor
 
 import numpy as np
 
-from .components import (Body, Contact, Damper, Fixed, Force, JointTorque, Motor, Prismatic, Revolute,
-                         Slider, Spherical, Spring, TorsionSpring)
+from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
+                         Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 from .components._values import name_of
 from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
@@ -44,7 +44,10 @@ BODY_KEYS = ("mass", "com", "inertia")
 JOINT_COMMON = ("type", "parent", "child", "parent_point", "child_point", "parent_rotation", "child_rotation",
                 "coords")
 JOINT_KEYS = {"revolute": JOINT_COMMON + ("axis",), "prismatic": JOINT_COMMON + ("axis",),
-              "spherical": JOINT_COMMON + ("sequence",), "fixed": ("type", "parent", "child", "parent_point",
+              "spherical": JOINT_COMMON + ("sequence",), "ball": JOINT_COMMON + ("speeds",),
+              "free": JOINT_COMMON + ("speeds",), "universal": JOINT_COMMON + ("axes",),
+              "cylindrical": JOINT_COMMON + ("axis",), "planar": JOINT_COMMON + ("normal",),
+              "fixed": ("type", "parent", "child", "parent_point",
                                                                     "child_point", "parent_rotation",
                                                                     "child_rotation")}
 FORCE_KEYS = {"spring": ("type", "a", "b", "stiffness", "rest_length", "damping"),
@@ -346,6 +349,7 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
             model.add(body)
 
     coords_seen: dict[str, str] = {}
+    speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
     all_joints_read = True
     for comp_name, label, table in named_tables("joints"):
         joint = _read_joint(r, comp_name, label, table, bodies)
@@ -357,6 +361,7 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
             if coord in coords_seen:
                 r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
             coords_seen[coord] = f"[{label}]"
+        speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
         _add_component(r, model, joint, label)
 
     for comp_name, label, table in named_tables("forces"):
@@ -369,7 +374,8 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
     model.description = description
     model.named_parameters = dict(r.parameters)
     # With a broken joint the coordinate names are incomplete: check the values only.
-    model.initial = _read_initial(r, sections["initial"], coords_seen if all_joints_read else None)
+    model.initial = _read_initial(r, sections["initial"], coords_seen if all_joints_read else None,
+                                  speeds_seen)
     model.simulation = _read_simulation(r, sections["simulation"])
     model.path = path
     return model
@@ -441,7 +447,8 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
     if kind not in JOINT_KEYS:
         r.string(label, "type", kind, tuple(JOINT_KEYS))
         return None
-    r.keys(label, table, JOINT_KEYS[kind], ("parent", "child") + (("axis",) if kind in ("revolute", "prismatic") else ()))
+    r.keys(label, table, JOINT_KEYS[kind],
+           ("parent", "child") + (("axis",) if kind in ("revolute", "prismatic", "cylindrical") else ()))
     parent = r.reference(label, "parent", table["parent"], bodies, "body") if "parent" in table else BAD
     child = r.reference(label, "child", table["child"], bodies, "body") if "child" in table else BAD
     if child == "ground":
@@ -450,11 +457,34 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
     child_point = r.vector(label, "child_point", table["child_point"]) if "child_point" in table else ZERO3
     values = [parent, child, parent_point, child_point]
     options = {}
-    if kind in ("revolute", "prismatic"):
+    if kind in ("revolute", "prismatic", "cylindrical"):
         axis = r.axis(label, "axis", table["axis"]) if "axis" in table else BAD
         values.append(axis)
         options["axis"] = axis
-        count = 1
+        count = 2 if kind == "cylindrical" else 1
+    elif kind in ("ball", "free"):
+        count = 4 if kind == "ball" else 7
+        if "speeds" in table:
+            speeds = table["speeds"]
+            if not isinstance(speeds, list) or not all(isinstance(n, str) for n in speeds):
+                speeds = r.problem(label, "speeds", f"must be a list of names, got {_short(speeds)}")
+            values.append(speeds)
+            options["speeds"] = speeds
+    elif kind == "universal":
+        axes = table.get("axes", ["x", "y"])
+        if not isinstance(axes, list) or len(axes) != 2:
+            axes = r.problem(label, "axes", f"must be two axes such as [\"x\", \"y\"], got {_short(axes)}")
+        else:
+            axes = tuple(r.axis(label, f"axes[{i}]", a) for i, a in enumerate(axes))
+            axes = BAD if BAD in axes else axes
+        values.append(axes)
+        options["axes"] = axes
+        count = 2
+    elif kind == "planar":
+        normal = r.axis(label, "normal", table["normal"]) if "normal" in table else "z"
+        values.append(normal)
+        options["normal"] = normal
+        count = 3
     elif kind == "spherical":
         sequence = table.get("sequence", "xyz")
         if not isinstance(sequence, str) or not re.fullmatch(r"[xyz]{1,3}", sequence) or \
@@ -474,7 +504,8 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
         options["coords"] = coords
     if any(v is BAD for v in values) or count is None:
         return None
-    factory = {"revolute": Revolute, "prismatic": Prismatic, "spherical": Spherical, "fixed": Fixed}[kind]
+    factory = {"revolute": Revolute, "prismatic": Prismatic, "spherical": Spherical, "fixed": Fixed, "ball": Ball,
+               "free": Free, "universal": Universal, "cylindrical": Cylindrical, "planar": Planar}[kind]
     rotations = {key: _read_rotation(r, label, key, table[key]) for key in ("parent_rotation", "child_rotation")
                  if key in table}
     if any(v is BAD for v in rotations.values()):
@@ -573,9 +604,11 @@ def _read_force(r: _Reader, name: str, label: str, table: dict, bodies: dict, jo
             return None
         size = len(value) if isinstance(value, (tuple, TimeVector)) else 1
         n_coords = _coordinate_count(joints.get(joint))
-        if n_coords is not None and size != n_coords:
+        n_speeds = getattr(joints.get(joint), "nv", n_coords)
+        if n_coords is not None and size != n_speeds:
+            noun = "coordinate(s)" if n_speeds == n_coords else "speed(s)"
             r.problem(label, "value", f"has {size} entr{'y' if size == 1 else 'ies'}, joint {joint!r} has "
-                      f"{n_coords} coordinate(s)")
+                      f"{n_speeds} {noun}")
             return None
         return _construct(r, label, JointTorque, name, joint, value=value)
     joint = _one_dof(r, label, joint, joints, "a torsion spring")
@@ -659,10 +692,12 @@ def _read_contact(r: _Reader, name: str, label: str, table: dict, bodies: dict):
                       restitution=restitution)
 
 
-def _read_initial(r: _Reader, table: dict, coords: dict | None) -> dict:
+def _read_initial(r: _Reader, table: dict, coords: dict | None, speeds: dict | None = None) -> dict:
     initial: dict[str, dict[str, float]] = {"q": {}, "qd": {}}
     r.keys("initial", table, ("q", "qd"))
+    known = coords
     for which in ("q", "qd"):
+        coords = known if which == "q" or known is None else {**known, **(speeds or {})}
         values = table.get(which, {})
         label = f"initial.{which}"
         if not isinstance(values, dict):
@@ -771,13 +806,20 @@ def _component_table(comp: Any) -> tuple[str, dict]:
             else:
                 table["inertia"] = [_floats(row) for row in comp.inertia_matrix()]
         return "bodies", table
-    if isinstance(comp, (Revolute, Prismatic, Spherical, Fixed)):
-        kind = {Revolute: "revolute", Prismatic: "prismatic", Spherical: "spherical", Fixed: "fixed"}[type(comp)]
+    if isinstance(comp, (Revolute, Prismatic, Spherical, Fixed, Ball, Free, Universal, Cylindrical, Planar)):
+        kind = {Revolute: "revolute", Prismatic: "prismatic", Spherical: "spherical", Fixed: "fixed", Ball: "ball",
+                Free: "free", Universal: "universal", Cylindrical: "cylindrical", Planar: "planar"}[type(comp)]
         table = {"type": kind, "parent": name_of(comp.parent), "child": name_of(comp.child)}
-        if kind in ("revolute", "prismatic"):
+        if kind in ("revolute", "prismatic", "cylindrical"):
             table["axis"] = _axis_value(comp.axis)
         if kind == "spherical":
             table["sequence"] = comp.sequence
+        if kind == "universal":
+            table["axes"] = [_axis_value(a) for a in comp.axes]
+        if kind == "planar":
+            table["normal"] = _axis_value(comp.normal)
+        if kind in ("ball", "free") and comp.speeds != comp.default_speeds:
+            table["speeds"] = list(comp.speeds)
         if any(comp.parent_point):
             table["parent_point"] = _floats(comp.parent_point)
         if any(comp.child_point):

@@ -57,7 +57,7 @@ class Kernel:
             return self.compiled.no_inputs
         u = np.zeros(self.n_inputs)
         for name, (start, size) in self.compiled.inputs.items():
-            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd)
+            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd, size)
         return u
 
     def tau(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
@@ -70,7 +70,7 @@ class Kernel:
             return checked_output("tau", tau(t, q, qd), self.nv)
         arr = np.asarray(tau, dtype=float).reshape(-1)
         if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
-            raise ModelError("tau", f"must be {self.nv} finite numbers, got {tau!r}")
+            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
         return arr
 
     # -- generated functions ---------------------------------------------------------------------

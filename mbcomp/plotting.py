@@ -50,14 +50,17 @@ def _save(fig, path: Any, dpi: float | None = None) -> None:
 # ----------------------------------------------------------------------------------------------
 # Time histories
 # ----------------------------------------------------------------------------------------------
-def _coordinate_kinds(system) -> list[str]:
-    """``"length"`` or ``"angle"`` for every coordinate, in ``system.coords`` order."""
+def _coordinate_kinds(system, speeds: bool = False) -> list[str]:
+    """``"length"``, ``"angle"`` or ``"quaternion"`` for every coordinate, in ``system.coords``
+    order (with ``speeds``: ``"length"`` or ``"angle"`` for every speed, ``system.speeds`` order)."""
     topology = system.topology
-    kinds = ["angle"] * len(system.coords)
+    kinds = ["angle"] * (topology.nv if speeds else topology.nq)
     for joint in topology.tree_joints:
-        kind = "length" if type(joint).__name__ in _LENGTH_JOINTS else "angle"
-        for index in range(*topology.q_slice[joint.name].indices(len(kinds))):
-            kinds[index] = kind
+        start = (topology.v_slice if speeds else topology.q_slice)[joint.name].start
+        for kind, _, sq, sv in joint.walk():
+            part = sv if speeds else sq
+            for index in range(start + part.start, start + part.stop):
+                kinds[index] = {"P": "length", "R": "angle"}.get(kind, "angle" if speeds else "quaternion")
     return kinds
 
 
@@ -109,6 +112,8 @@ def _smooth_series(result: Any, max_points: int = 3000):
     if len(t) < 2 or per_step < 2 or q.shape[1] == 0:
         return None
     system = result.system
+    state_map = system.topology.state_map
+    rate = state_map.qdot(q, qd)  # q' (a ball's quaternion rate from its angular velocity)
     try:
         qdd = np.array([system.accelerations(q[i], qd[i], t[i], tau=getattr(result, "tau", None))
                         for i in range(len(t))])
@@ -125,9 +130,9 @@ def _smooth_series(result: Any, max_points: int = 3000):
         fine = np.concatenate([np.linspace(a, b, per_step, endpoint=False) for a, b in zip(piece[:-1], piece[1:])]
                               + [piece[-1:]])
         ts.append(fine)
-        qs.append(CubicHermiteSpline(piece, q[start:stop], qd[start:stop], axis=0)(fine))
+        qs.append(CubicHermiteSpline(piece, q[start:stop], rate[start:stop], axis=0)(fine))
         qds.append(CubicHermiteSpline(piece, qd[start:stop], qdd[start:stop], axis=0)(fine))
-    return np.concatenate(ts), np.concatenate(qs), np.concatenate(qds)
+    return np.concatenate(ts), state_map.normalize(np.concatenate(qs)), np.concatenate(qds)
 
 
 def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), *, path: Any = None,
@@ -172,12 +177,14 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
     t = np.asarray(result.t, dtype=float)
     coords = list(system.coords)
     coord_kinds = _coordinate_kinds(system)
+    speeds = list(getattr(system, "speeds", coords))
+    speed_kinds = _coordinate_kinds(system, speeds=True)
 
     # One panel per (quantity, unit): mixing rad and m on one axis hides the smaller one.
     panels: list[tuple[str, Any]] = []
     for kind in kinds:
         if kind in ("q", "qd"):
-            present = [k for k in ("angle", "length") if k in coord_kinds]
+            present = [k for k in ("angle", "length", "quaternion") if k in (coord_kinds if kind == "q" else speed_kinds)]
             panels.extend((kind, unit_kind) for unit_kind in present)
         else:
             panels.append((kind, None))
@@ -193,11 +200,12 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
     for ax, (kind, unit_kind) in zip(axes, panels):
         if kind in ("q", "qd"):
             values = q_line if kind == "q" else qd_line
-            for i, name in enumerate(coords):
-                if coord_kinds[i] == unit_kind:
-                    ax.plot(t_line, values[:, i], label=name if kind == "q" else f"d{name}/dt")
+            names, unit_kinds = (coords, coord_kinds) if kind == "q" else (speeds, speed_kinds)
+            for i, name in enumerate(names):
+                if unit_kinds[i] == unit_kind:
+                    ax.plot(t_line, values[:, i], label=name if kind == "q" or name not in coords else f"d{name}/dt")
             if kind == "q":
-                ax.set_ylabel("angle (rad)" if unit_kind == "angle" else "position (m)")
+                ax.set_ylabel({"angle": "angle (rad)", "length": "position (m)"}.get(unit_kind, "quaternion (1)"))
             else:
                 ax.set_ylabel("angular speed (rad/s)" if unit_kind == "angle" else "speed (m/s)")
         elif kind == "energy":
@@ -697,7 +705,9 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
                          f"use .gif or .mp4 (got {path.suffix or 'none'!r})")
     t = np.asarray(result.t, dtype=float)
     times = _frame_times(t, fps, duration, frames)
-    q = _resample(t, np.asarray(result.q, dtype=float), times, np.asarray(result.qd, dtype=float))
+    state_map = result.system.topology.state_map
+    q_samples = np.asarray(result.q, dtype=float)
+    q = state_map.normalize(_resample(t, q_samples, times, state_map.qdot(q_samples, np.asarray(result.qd, dtype=float))))
     scene = _Scene(result.system)
     points = scene.all_points(q)
     centre, half = _limits(points)

@@ -32,7 +32,7 @@ class StateMap:
         screw_q, screw_v, quat_q, quat_v, owners = [], [], [], [], []
         for joint in topology.tree_joints:
             q0, v0 = topology.q_slice[joint.name].start, topology.v_slice[joint.name].start
-            for kind, _, sq, sv in joint._walk():
+            for kind, _, sq, sv in joint.walk():
                 if kind == "B":
                     quat_q.append(q0 + sq.start)
                     quat_v.append(v0 + sv.start)

@@ -1,7 +1,6 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
-import copy
 from typing import Any, Mapping
 
 import numpy as np
@@ -12,6 +11,7 @@ from .errors import ModelError
 from .kernel import Kernel
 from .layout import body_fields
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
+from .params import validate
 
 
 class BodyState:
@@ -132,27 +132,24 @@ class System:
         return self._compiled.compile_time
 
     def with_parameters(self, values: Mapping[str, Any] | None) -> "System":
-        """A new System with some parameter values replaced (shares the compiled code)."""
+        """A new System with some parameter values replaced (shares the compiled code).
+
+        Each value is checked by the same ``ParameterSpec`` validation as the component's
+        constructor (``mbcomp.params.validate``); a ``ModelError`` names the component and
+        the attribute."""
         if not values:
             return self
         merged = dict(self._parameters)
         for key, value in values.items():
-            if key not in merged:
+            found = self._compiled.parameter_spec(key) if key in merged else None
+            if found is None:
                 raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
-            old = np.asarray(merged[key], dtype=float)
-            try:
-                new = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                raise ModelError(f"parameter {key!r}", f"must be numeric, got {value!r}") from None
-            if new.shape != old.shape:
-                raise ModelError(f"parameter {key!r}", f"must have shape {old.shape}, got {new.shape}")
-            if not np.all(np.isfinite(new)):
-                raise ModelError(f"parameter {key!r}", f"must be finite, got {value!r}")
-            if key.endswith(".mass") and float(new) <= 0:
-                raise ModelError(f"parameter {key!r}", f"mass must be positive, got {float(new)}")
-            if key.endswith(".restitution") and not 0.0 <= float(new) <= 1.0:
-                raise ModelError(f"parameter {key!r}", f"restitution must lie in [0, 1], got {float(new)}")
-            merged[key] = float(new) if new.ndim == 0 else tuple(new.tolist())
+            owner, spec = found
+            new = validate(spec, value, owner)  # the constructors' validator
+            if np.shape(new) != np.shape(merged[key]):
+                raise ModelError(owner, f"{spec.name} {new!r} changes the model's structure (shape "
+                                 f"{np.shape(merged[key])} -> {np.shape(new)}); change the model and compile again")
+            merged[key] = new
         return System(self._compiled, self._formulation, merged)
 
     # -- state handling -------------------------------------------------------------------
@@ -384,7 +381,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
     compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (copy.deepcopy(model), formulation, dict(options), backend)
+    compiled.recipe = (compiled.flat_model, formulation, dict(options), backend)
     formulation = formulation_class(compiled, **options)
     info = analyse(formulation, Kernel(compiled, compiled.default_parameters))
     return System(compiled, formulation.with_info(info), dict(compiled.default_parameters))

@@ -23,6 +23,10 @@ class Topology:
     before children); ``tree_joints[i]`` is the joint into ``bodies[i]``; ``coords``
     are the tree coordinates in that order and ``q_slice[joint name]`` their slice;
     ``speeds`` the tree speeds (``nv <= nq``) and ``v_slice[joint name]`` theirs.
+    ``input_sizes[component name]`` is the number of run-time input values of each
+    component with a callable (a force's 3, a joint torque's joint coordinates).
+
+    The components are the compiler's frozen copies (``flatten``), never the user's.
     """
 
     ground: Body
@@ -39,6 +43,7 @@ class Topology:
     graph: Any = field(repr=False, compare=False)
     speeds: tuple = ()
     v_slice: dict = field(default_factory=dict)
+    input_sizes: dict = field(default_factory=dict)
 
     @property
     def nq(self) -> int:
@@ -171,15 +176,17 @@ def build_topology(model) -> Topology:
             problems.append(f"coordinate name {name!r} is also the name of {describe(components[name])}")
 
     forces = tuple(c for c in components.values() if isinstance(c, ForceElement) and c.name not in broken)
+    input_sizes: dict[str, int] = {}
     for comp in forces:
-        if hasattr(comp, "bind_joint"):
-            joint = components[name_of(comp.joint)]
-            try:
-                comp.bind_joint(joint)
-            except ValueError as exc:
-                problems.append(str(exc))
-            if joint in cut_joints:
-                problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinates")
+        resolved = {role: components[name_of(ref)] for role, ref in comp.references().items()}
+        if hasattr(comp, "check"):
+            problems.extend(comp.check(resolved))
+        joint = resolved.get("joint")
+        if joint is not None and joint in cut_joints:
+            problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinates")
+        size = comp.input_size(joint) if hasattr(comp, "input_size") else 0
+        if size:
+            input_sizes[comp.name] = size
     constraints = tuple(c for c in components.values() if isinstance(c, Constraint) and c.name not in broken)
     for comp in constraints:
         joint = components.get(name_of(comp.joint)) if hasattr(comp, "joint") else None
@@ -199,7 +206,7 @@ def build_topology(model) -> Topology:
     return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),
                     parent_of=parent_of, coords=tuple(coords), q_slice=q_slice, forces=forces,
                     constraints=constraints, contacts=contacts, components=components, graph=graph,
-                    speeds=tuple(speeds), v_slice=v_slice)
+                    speeds=tuple(speeds), v_slice=v_slice, input_sizes=input_sizes)
 
 
 def _connected(tree: nx.DiGraph, a: str, b: str) -> bool:

@@ -1,10 +1,9 @@
-"""Code generation: the expression printer, Python/C agreement, and the on-disk cache helpers."""
+"""Code generation: the expression printer and Python/C agreement (the cache: test_cache.py)."""
 from __future__ import annotations
 
 import ctypes
 import math
 import subprocess
-import sys as _sys
 
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ import sympy as sp
 
 import mbcomp as mb
 from mbcomp import codegen
-from mbcomp.backend import FUNCTIONS, CFunctions, PythonFunctions, build_c_library, c_compiler
+from mbcomp.backend import FUNCTIONS, PythonFunctions, c_compiler, c_functions
 from conftest import arm_model, assert_close
 
 x, y, z, w = SYMBOLS = sp.symbols("x y z w")
@@ -152,7 +151,7 @@ class TestGeneratedPrograms:
         python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
         source = (codegen.c_source(program, FUNCTIONS, chunk=chunk) + compiled.output_layout.c_defines()
                   + codegen.c_accelerations(compiled.topology.nq))
-        c = CFunctions(build_c_library(source, f"test-chunk{chunk}"), compiled.sizes)
+        c = c_functions(source, compiled.sizes)
         for seed in range(3):
             args = _random_inputs(compiled, p, seed)
             for name in FUNCTIONS:
@@ -168,7 +167,7 @@ class TestGeneratedPrograms:
         program, nq = compiled.program, compiled.topology.nq
         python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
         source = codegen.c_source(program, FUNCTIONS) + compiled.output_layout.c_defines() + codegen.c_accelerations(nq)
-        c = CFunctions(build_c_library(source, "test-accelerations"), compiled.sizes)
+        c = c_functions(source, compiled.sizes)
         rng = np.random.default_rng(3)
         for seed in range(3):
             q, qd, p, u = _random_inputs(compiled, p, seed)
@@ -193,7 +192,7 @@ class TestGeneratedPrograms:
         compiled = m.compile(backend="python", cache=False)._compiled
         source = (codegen.c_source(compiled.program, FUNCTIONS) + compiled.output_layout.c_defines()
                   + codegen.c_accelerations(3))
-        c = CFunctions(build_c_library(source, "test-singular"), compiled.sizes)
+        c = c_functions(source, compiled.sizes)
         p = compiled.layout.pack(compiled.default_parameters)
         pointer = c.bind_parameters(p)
         status, _ = c.accelerations(np.array([0.3, 0.0, -0.4]), np.zeros(3), pointer, np.zeros(0), None)
@@ -233,55 +232,3 @@ class TestGeneratedPrograms:
         namespace = codegen.load_python(source, "test")
         assert set(FUNCTIONS) <= set(namespace)
         assert "import" in source.splitlines()[0] and "mbcomp" not in source
-
-
-# ----------------------------------------------------------------------------------
-# Cache helpers
-# ----------------------------------------------------------------------------------
-class TestCacheFiles:
-    def test_write_atomic_writes_and_leaves_no_temporary_files(self, tmp_path):
-        target = tmp_path / "deep" / "er" / "file.so"
-        codegen.write_atomic(target, b"first")
-        codegen.write_atomic(target, b"second version")
-        assert target.read_bytes() == b"second version"
-        assert [p.name for p in target.parent.iterdir()] == ["file.so"]
-
-    def test_failed_write_keeps_the_old_file_and_cleans_up(self, tmp_path):
-        target = tmp_path / "file.py"
-        codegen.write_atomic(target, b"good")
-        with pytest.raises(TypeError):
-            codegen.write_atomic(target, "not bytes")
-        assert target.read_bytes() == b"good"
-        assert [p.name for p in tmp_path.iterdir()] == ["file.py"]
-
-    def test_cached_text_round_trips(self, tmp_path, monkeypatch):
-        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path / "cache"))
-        assert codegen.read_cached("abc", ".py") is None
-        codegen.write_cached("abc", ".py", "x = 1\n")
-        assert codegen.read_cached("abc", ".py") == "x = 1\n"
-        assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["abc.py"]
-
-    @pytest.mark.parametrize("backend", ["python", "c"])
-    def test_unwritable_cache_is_not_an_error(self, tmp_path, monkeypatch, backend):
-        blocker = tmp_path / "file"
-        blocker.write_text("not a directory")
-        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(blocker / "cache"))
-        codegen.write_cached("abc", ".py", "x = 1\n")            # silently skipped
-        assert codegen.read_cached("abc", ".py") is None
-        sys = arm_model().compile(backend=backend)                # still compiles, without the cache
-        assert not sys._compiled.cache_hit and sys.backend == backend
-        assert sys.accelerations([0.1, 0.2, 0.3], None).shape == (3,)
-
-    def test_cache_dir_follows_environment(self, tmp_path, monkeypatch):
-        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path / "mine"))
-        assert codegen.cache_dir() == tmp_path / "mine"
-        monkeypatch.delenv("MBCOMP_CACHE_DIR")
-        monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-        if _sys.platform.startswith("linux"):
-            assert codegen.cache_dir() == tmp_path / "xdg" / "mbcomp"
-
-    def test_structure_key_is_stable_and_sensitive(self):
-        a = codegen.structure_key("Revolute|elbow|x")
-        assert a == codegen.structure_key("Revolute|elbow|x")
-        assert a != codegen.structure_key("Revolute|elbow|y")
-        assert len(a) == 32 and all(ch in "0123456789abcdef" for ch in a)

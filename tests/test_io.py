@@ -298,7 +298,7 @@ BROKEN = {
                     ["[joints.j] axis: must be 'x', 'y', 'z' or a 3-vector, got 2 components"]),
     "missing_axis": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('axis = "x"\n', ""), ["[joints.j] axis: missing (required)"]),
     "joint_type": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('"revolute"', '"hinge"'),
-                   ["[joints.j] type: must be one of 'revolute', 'prismatic', 'spherical', 'fixed', got 'hinge'"]),
+                   ["[joints.j] type: must be one of 'revolute', 'prismatic', 'spherical', 'ball', 'free', 'universal', 'cylindrical', 'planar', 'fixed', got 'hinge'"]),
     "key_of_other_joint_type": ("[bodies.b]\nmass = 1.0\n" + JOINT + 'sequence = "xy"\n', ["[joints.j] sequence: unknown key"]),
     "bad_sequence": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('"revolute"', '"spherical"').replace('axis = "x"', 'sequence = "xxa"'),
                      ["[joints.j] sequence: must be 1 to 3 axes from x, y, z"]),

@@ -48,8 +48,10 @@ def compile_or_skip(model, **options):
 
 
 def initial_state(model, system):
-    q = np.array([model.initial["q"].get(c, 0.0) for c in system.coords])
-    qd = np.array([model.initial["qd"].get(c, 0.0) for c in system.coords])
+    """The file's [initial] values; 0 elsewhere, the identity for a ball's quaternion."""
+    neutral = system.topology.state_map.neutral()
+    q = np.array([model.initial["q"].get(c, neutral[i]) for i, c in enumerate(system.coords)])
+    qd = np.array([model.initial["qd"].get(c, 0.0) for c in system.speeds])
     return q, qd
 
 
@@ -156,21 +158,40 @@ def check_spherical_pendulum(model, system):
 
 
 def check_spinning_top(model, system):
-    # psi and phi are cyclic: their momenta (M qd) are conserved; energy too.  The fast top
-    # precesses at about Omega = m g h / (I3 spin) instead of falling (gyroscopic terms).
+    # A Ball pivot: the energy, the vertical angular momentum and the spin (the symmetric
+    # top's body-z angular velocity) are conserved; the fast top precesses at about
+    # Omega = m g h / (I3 spin) instead of falling (gyroscopic terms).
     result = simulate(model, system, 1.0, n=201)
     assert_energy_conserved(result)
-
-    def momenta(q, qd):
-        p = system.mass_matrix(q) @ qd
-        return p[index(system, "psi")], p[index(system, "phi")]
-    start, end = momenta(result.q[0], result.qd[0]), momenta(result.q[-1], result.qd[-1])
-    np.testing.assert_allclose(end, start, rtol=1e-6)
     p = model.named_parameters
+    pivot_inertia = np.diag([p["I1"] + p["m"] * p["h"] ** 2, p["I1"] + p["m"] * p["h"] ** 2, p["I3"]])
+    rotations = [system.body_state("top", q).rotation for q in result.q]
+    L_vertical = [(R @ pivot_inertia @ w)[2] for R, w in zip(rotations, result.qd)]
+    np.testing.assert_allclose(L_vertical, L_vertical[0], rtol=1e-6)
+    np.testing.assert_allclose(result["pivot_wz"], result["pivot_wz"][0], rtol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(result.q, axis=1), 1.0, atol=1e-12)
+    axis = np.array([R[:, 2] for R in rotations])  # the symmetry axis in the world
+    azimuth = np.unwrap(np.arctan2(axis[:, 1], axis[:, 0]))
     omega = p["m"] * 9.81 * p["h"] / (p["I3"] * p["spin"])
-    rate = (result["psi"][-1] - result["psi"][0]) / (result.t[-1] - result.t[0])
+    rate = (azimuth[-1] - azimuth[0]) / (result.t[-1] - result.t[0])
     assert abs(rate - omega) < 0.05 * omega
-    assert np.max(np.abs(result["theta"] - 0.3)) < 0.05  # nutation stays small: it does not fall
+    assert np.max(np.abs(np.arccos(axis[:, 2]) - p["tilt"])) < 0.05  # nutation stays small: it does not fall
+
+
+def check_t_handle(model, system):
+    # Torque-free: the angular momentum (world) and the energy are constant while the
+    # handle flips over (the crossbar axis reverses along the angular momentum) and back.
+    result = simulate(model, system, 6.0, n=601, rtol=1e-10, atol=1e-12)
+    assert_energy_conserved(result, rtol=1e-8)
+    p = model.named_parameters
+    inertia = np.diag([p["Ixx"], p["Iyy"], p["Ixx"] + p["Iyy"]])
+    rotations = [system.body_state("handle", q).rotation for q in result.q]
+    L = np.array([R @ inertia @ v[3:] for R, v in zip(rotations, result.qd)])
+    np.testing.assert_allclose(L, np.tile(L[0], (len(L), 1)), atol=1e-8 * np.linalg.norm(L[0]))
+    along = np.array([R[:, 0] @ L[0] for R in rotations]) / np.linalg.norm(L[0])
+    assert along[0] > 0.99 and along.min() < -0.99
+    assert np.count_nonzero(np.diff(np.sign(along))) >= 2
+    np.testing.assert_allclose(result["flight_x"], 0.05 * result.t, atol=1e-9)
 
 
 def check_five_link_pendulum(model, system):

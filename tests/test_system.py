@@ -297,8 +297,8 @@ class TestParameters:
         ({"bob.weight": 1.0}, "unknown parameter 'bob.weight'"),
         ({"bob.mass": -1.0}, "mass must be positive"),
         ({"bob.mass": float("nan")}, "must be finite"),
-        ({"bob.com": (0, 1)}, "must have shape"),
-        ({"bob.mass": "heavy"}, "must be numeric"),
+        ({"bob.com": (0, 1)}, "Body 'bob': com must have 3 components, got 2"),
+        ({"bob.mass": "heavy"}, "Body 'bob': mass must be a number"),
     ], ids=["unknown", "negative-mass", "nan", "shape", "text"])
     def test_bad_parameter_values_are_rejected(self, values, match):
         sys = simple_pendulum().compile(backend="python")

@@ -4,18 +4,58 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 from ..errors import ModelError
+from ..params import ParameterSpec, validate
+
+KINDS: dict[str, type] = {}
+"""The component kind registry: ``kind`` (the file's ``type``, e.g. ``"revolute"``) -> class.
+A class that sets ``kind`` registers itself; io, cli and plotting look kinds up here."""
+
+
+def component_class(kind: str) -> type | None:
+    """The component class registered under ``kind`` (None when unknown)."""
+    return KINDS.get(kind) if isinstance(kind, str) else None
+
+
+def kinds_in(section: str) -> dict[str, type]:
+    """``{kind: class}`` of the classes whose file form lives in ``section`` ("joints", ...)."""
+    return {k: c for k, c in KINDS.items() if c.section == section}
+
+
+class FrozenComponentError(ModelError, AttributeError):
+    """An attempt to change a component that belongs to a compiled ``System``."""
 
 
 class Component:
     """Base of everything a user adds to a ``Model``.
 
     A component is a pure description: its constructor stores and validates its
-    arguments and touches nothing else.  ``parameters`` names the numeric
-    attributes that bind at run time (``"component.attribute"`` in
-    ``System.parameters``); everything else is structure.
+    arguments and touches nothing else.  ``params`` declares its numeric attributes as
+    ``ParameterSpec``s; every assignment to one of them, in the constructor or later
+    (``body.mass = 2.0``), goes through the one validator ``mbcomp.params.validate``,
+    so a value that a constructor rejects is rejected everywhere.  ``parameters`` names
+    the attributes that bind at run time (``"component.attribute"`` in
+    ``System.parameters``); the others (``structural=True``: axes, normals) decide the
+    generated code.  Compiling copies the components, so changing one after
+    ``compile()`` changes later compilations, never a compiled ``System``.
+
+    Class attributes: ``kind`` (registry key, the file's ``type``), ``section`` (the
+    model file table holding this kind: ``"bodies"``, ``"joints"``, ``"forces"``,
+    ``"constraints"``, ``"contacts"``), ``params``.
     """
 
+    kind: ClassVar[str] = ""
+    section: ClassVar[str] = ""
+    params: ClassVar[tuple[ParameterSpec, ...]] = ()
     parameters: ClassVar[tuple[str, ...]] = ()
+    _specs: ClassVar[dict[str, ParameterSpec]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        cls._specs = {spec.name: spec for spec in cls.params}
+        if "params" in cls.__dict__ and "parameters" not in cls.__dict__:
+            cls.parameters = tuple(spec.name for spec in cls.params if not spec.structural)
+        if cls.__dict__.get("kind"):
+            KINDS[cls.kind] = cls
 
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():
@@ -24,13 +64,41 @@ class Component:
             raise ModelError(type(self).__name__, f"name {name!r} may not contain '.', '[', ']' or edge spaces")
         self.name = name
 
+    def __setattr__(self, attr: str, value: Any) -> None:
+        """Declared parameters are validated on every assignment; the name is set once."""
+        if self.__dict__.get("_frozen"):
+            raise FrozenComponentError(self, f"is a compiled copy and cannot change ({attr}); change the "
+                                       "model's component and compile again, or use System.with_parameters")
+        spec = self._specs.get(attr)
+        if spec is not None:
+            value = validate(spec, value, self)
+        elif attr == "name" and "name" in self.__dict__ and value != self.__dict__["name"]:
+            raise ModelError(self, "the name of a component cannot change (models find components by name); "
+                             "make a new component instead")
+        object.__setattr__(self, attr, value)
+
+    def freeze(self) -> None:
+        """Make this component read-only (the compiler's copies; see ``mbcomp.flatten``)."""
+        object.__setattr__(self, "_frozen", True)
+
+    @classmethod
+    def spec(cls, attr: str) -> ParameterSpec | None:
+        """The ``ParameterSpec`` of attribute ``attr`` (None when it is not a declared value)."""
+        return cls._specs.get(attr)
+
     def references(self) -> dict[str, Any]:
         """The other components this one refers to, by role (``{"parent": ..., "child": ...}``)."""
         return {}
 
     def parameter_values(self) -> dict[str, Any]:
-        """Current numeric values of ``parameters`` (floats or tuples), by attribute."""
-        return {attr: getattr(self, attr) for attr in self.parameters}
+        """Current numeric values of ``parameters`` (floats or tuples), by attribute; a value
+        that is ``None`` or a callable (a run-time input) is not a parameter."""
+        values = {}
+        for attr in self.parameters:
+            value = getattr(self, attr, None)
+            if value is not None and not callable(value):
+                values[attr] = value
+        return values
 
     def structure(self) -> tuple:
         """What, besides names and references, decides the generated code (axes, shapes)."""

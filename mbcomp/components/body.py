@@ -5,9 +5,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelError
+from ..params import ParameterSpec, positive, spd_inertia
 from .base import Component
-from ._values import scalar, vector3
 
 
 class Body(Component):
@@ -21,16 +20,24 @@ class Body(Component):
     inertia : None, (3,) principal values or (3, 3) matrix, kg m^2, about the COM in
         the body frame. ``None`` or zeros make a point mass: no rotational terms are
         generated for it.  The matrix must be symmetric positive semi-definite and its
-        principal moments must satisfy the triangle inequality.
+        principal moments must satisfy the triangle inequality.  Stored as ``None``, the
+        3 principal values, or the 6 entries ``xx yy zz xy xz yz``.
     """
 
-    parameters = ("mass", "com", "inertia")
+    kind = "body"
+    section = "bodies"
+    params = (
+        ParameterSpec("mass", (), "kg", positive, doc="mass"),
+        ParameterSpec("com", (3,), "m", default=(0.0, 0.0, 0.0), doc="centre of mass in the body frame"),
+        ParameterSpec("inertia", (3,), "kg m^2", spd_inertia, default=None, optional=True,
+                      doc="inertia about the COM in the body frame (principal values or 3x3; None: point mass)"),
+    )
 
     def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None):
         super().__init__(name)
-        self.mass = scalar(mass, self, "mass", positive=True)
-        self.com = vector3(com, self, "com")
-        self.inertia = self._check_inertia(inertia)
+        self.mass = mass
+        self.com = com
+        self.inertia = inertia
 
     def frame(self, point: Any = (0.0, 0.0, 0.0), rotation: Any = None) -> "Frame":
         """A ``Frame`` fixed on this body at ``point`` (m, body frame), optionally rotated
@@ -57,54 +64,15 @@ class Body(Component):
         xx, yy, zz, xy, xz, yz = self.inertia
         return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
-    def parameter_values(self) -> dict[str, Any]:
-        values = {"mass": self.mass, "com": self.com}
-        if self.inertia is not None:
-            values["inertia"] = self.inertia
-        return values
-
     def structure(self) -> tuple:
         return ("point" if self.inertia is None else "full" if len(self.inertia) == 6 else "diag",)
-
-    def _check_inertia(self, inertia: Any):
-        """None (point mass), 3 principal values, or the 6 entries xx yy zz xy xz yz."""
-        if inertia is None:
-            return None
-        try:
-            arr = np.asarray(inertia, dtype=float)
-        except (TypeError, ValueError):
-            raise ModelError(self, f"inertia must be 3 principal values or a 3x3 matrix, got {inertia!r}") from None
-        if arr.shape == (3,):
-            matrix = np.diag(arr)
-        elif arr.shape == (3, 3):
-            matrix = arr
-        else:
-            raise ModelError(self, f"inertia must be 3 principal values or a 3x3 matrix, got shape {arr.shape}")
-        if not np.all(np.isfinite(matrix)):
-            raise ModelError(self, "inertia has a non-finite entry")
-        scale = max(float(np.max(np.abs(matrix))), 1e-300)
-        if not np.allclose(matrix, matrix.T, rtol=0, atol=1e-12 * scale):
-            raise ModelError(self, "inertia matrix is not symmetric")
-        if np.all(matrix == 0):
-            return None
-        moments = np.linalg.eigvalsh(0.5 * (matrix + matrix.T))
-        tol = 1e-9 * scale
-        if moments[0] < -tol:
-            raise ModelError(self, f"inertia is not positive semi-definite (principal moments {moments.round(12).tolist()})")
-        a, b, c = moments
-        if c > a + b + tol:
-            raise ModelError(self, f"inertia violates the triangle inequality: principal moment {c:g} > {a:g} + {b:g}")
-        if arr.shape == (3,):
-            return tuple(float(v) for v in arr)
-        if np.count_nonzero(matrix - np.diag(np.diag(matrix))) == 0:
-            return tuple(float(v) for v in np.diag(matrix))
-        return tuple(float(matrix[i, j]) for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
 
 
 class Ground(Body):
     """The fixed world body of a model (``Model.ground``); its frame is the world frame."""
 
-    parameters = ()
+    kind = ""
+    params = ()
 
     def __init__(self, name: str = "ground"):
         Component.__init__(self, name)

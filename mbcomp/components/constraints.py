@@ -6,11 +6,11 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import ModelError
-from ..rotations import AXIS_NAMES, unit_axis
+from ..params import ParameterSpec, unit_vector
+from ..rotations import AXIS_NAMES
 from .base import Constraint
 from .primitives import CoordinateEquation, DotEquation, PointEquation
 from .frame import split_frame
-from ._values import scalar, vector3
 
 WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
@@ -32,15 +32,20 @@ class Slider(Constraint):
     Reaction: the force (N) the line exerts on the body, along those two normals.
     """
 
+    kind = "slider"
+    section = "constraints"
     n_equations = 2
-    parameters = ("point", "origin")
+    params = (ParameterSpec("point", (3,), "m", default=(0.0, 0.0, 0.0), doc="body point, body frame"),
+              ParameterSpec("origin", (3,), "m", default=(0.0, 0.0, 0.0), doc="a point of the line, world frame"),
+              ParameterSpec("axis", (3,), "", unit_vector, default="x", structural=True,
+                            doc="direction of the line, world frame"))
 
     def __init__(self, name: str, body: Any, point: Any = None, origin: Any = (0.0, 0.0, 0.0), axis: Any = "x"):
         super().__init__(name)
         self.body, point, _ = split_frame(body, point, self, "body")
-        self.point = vector3(point, self, "point")
-        self.origin = vector3(origin, self, "origin")
-        self.axis = unit_axis(axis, owner=self)
+        self.point = point
+        self.origin = origin
+        self.axis = axis
 
     def references(self):
         return {"body": self.body}
@@ -60,8 +65,11 @@ class Motor(Constraint):
     force (N) the motor applies along the joint coordinate.
     """
 
+    kind = "motor"
+    section = "constraints"
     n_equations = 1
-    parameters = ()
+    params = (ParameterSpec("speed", (), "rad/s or m/s", default=None, optional=True,
+                            doc="constant speed of the joint coordinate (None when position is given)"),)
 
     def __init__(self, name: str, joint: Any, position: Callable[[float], float] | None = None,
                  speed: float | None = None):
@@ -72,9 +80,7 @@ class Motor(Constraint):
         if position is not None and not callable(position):
             raise ModelError(self, f"position must be a callable of t, got {position!r}")
         self.position = position
-        self.speed = None if speed is None else scalar(speed, self, "speed")
-        if speed is not None:
-            self.parameters = ("speed",)
+        self.speed = speed
 
     def references(self):
         return {"joint": self.joint}
@@ -102,8 +108,10 @@ class LoopClosure(Constraint):
         return {"joint": self.joint}
 
     def _equations(self, ground):
-        from .joints import Fixed, Prismatic, Revolute, Spherical
+        from .joints import Ball, Cylindrical, Fixed, Free, Planar, Prismatic, Revolute, Spherical, Universal
         j = self.joint
+        if isinstance(j, Free):
+            raise ModelError(j, "a Free joint constrains nothing, so it cannot close a loop")
         a, b, pa, pb = j.parent, j.child, f"{j.name}.parent_point", f"{j.name}.child_point"
         # Directions of the joint frames in their body frames (rotated frames: R_pf, R_cf).
         Rp, Rc = j.parent_frame_rotation, j.child_frame_rotation
@@ -112,6 +120,12 @@ class LoopClosure(Constraint):
         if isinstance(j, Prismatic):
             eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
             return eqs + _orientation_lock(a, b, in_a, in_b)
+        if isinstance(j, Cylindrical):  # on the axis line, the axis kept parallel
+            eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
+            return eqs + [DotEquation(a, in_a(j.axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(j.axis))]
+        if isinstance(j, Planar):  # in the plane, the normal kept parallel
+            eqs = [PointEquation(a, in_a(j.normal), a, pa, b, pb, "f")]
+            return eqs + [DotEquation(a, in_a(j.normal), b, in_b(n), f"t{i + 1}") for i, n in enumerate(j.plane_axes)]
         eqs = [PointEquation(ground, n, a, pa, b, pb, "fxyz"[i + 1]) for i, n in enumerate(WORLD_AXES)]
         if isinstance(j, Fixed):
             return eqs + _orientation_lock(a, b, in_a, in_b)
@@ -120,8 +134,12 @@ class LoopClosure(Constraint):
             return eqs + [DotEquation(a, in_a(axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(axis))]
         if isinstance(j, Spherical) and len(j.sequence) == 2:
             return eqs + [DotEquation(a, in_a(AXIS_NAMES[j.sequence[0]]), b, in_b(AXIS_NAMES[j.sequence[1]]), "t")]
-        if isinstance(j, Spherical):
+        if isinstance(j, (Spherical, Ball)):
             return eqs
+        if isinstance(j, Universal):
+            if abs(float(np.dot(j.axes[0], j.axes[1]))) > 1e-12:
+                raise ModelError(j, "a universal joint closes a loop only with perpendicular axes")
+            return eqs + [DotEquation(a, in_a(j.axes[0]), b, in_b(j.axes[1]), "t")]
         raise ModelError(j, "this joint type cannot close a loop")
 
 

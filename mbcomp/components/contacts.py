@@ -3,13 +3,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-from ..errors import ModelError
-from ..rotations import unit_axis
+from ..params import ParameterSpec, in_range, unit_vector
 from .base import Component
 from .frame import split_frame
-from ._values import scalar, vector3
 
 
 class Contact(Component):
@@ -18,23 +14,23 @@ class Contact(Component):
     closes, the normal velocity reverses with the coefficient ``restitution`` in [0, 1].
     """
 
-    parameters = ("point", "origin", "restitution")
+    kind = "contact"
+    section = "contacts"
+    params = (ParameterSpec("point", (3,), "m", default=(0.0, 0.0, 0.0), doc="body point, body frame"),
+              ParameterSpec("normal", (3,), "", unit_vector, default=(0.0, 0.0, 1.0), structural=True,
+                            doc="plane normal, world frame (stored as a unit vector)"),
+              ParameterSpec("origin", (3,), "m", default=(0.0, 0.0, 0.0), doc="a point of the plane, world frame"),
+              ParameterSpec("restitution", (), "", in_range(0.0, 1.0), default=0.0,
+                            doc="Newton's coefficient of restitution"))
 
     def __init__(self, name: str, body: Any, point: Any = None, normal: Any = (0.0, 0.0, 1.0),
                  origin: Any = (0.0, 0.0, 0.0), restitution: float = 0.0):
         super().__init__(name)
         self.body, point, _ = split_frame(body, point, self, "body")
-        self.point = vector3(point, self, "point")
-        if isinstance(normal, str):
-            self.normal = unit_axis(normal, owner=self)
-        else:
-            n = np.asarray(vector3(normal, self, "normal"))
-            length = float(np.linalg.norm(n))
-            if length < 1e-12:
-                raise ModelError(self, "normal has zero length")
-            self.normal = tuple(float(v) for v in n / length)
-        self.origin = vector3(origin, self, "origin")
-        self.restitution = scalar(restitution, self, "restitution", low=0.0, high=1.0)
+        self.point = point
+        self.normal = normal
+        self.origin = origin
+        self.restitution = restitution
 
     def references(self):
         return {"body": self.body}

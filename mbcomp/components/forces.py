@@ -12,18 +12,18 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelError
+from ..errors import ModelError, describe
+from ..params import ParameterSpec, nonnegative
 from .base import ForceElement
-from ._values import scalar, vector3
 from .frame import Frame, split_frame
 
 
 def _attachment(value: Any, owner: Any, role: str) -> tuple[Any, tuple[float, float, float]]:
     """``(body, point)`` from ``(body, point)``, a ``Frame`` or a bare body (point = origin)."""
     if isinstance(value, Frame):
-        return value.body, vector3(value.point, owner, f"{role} point")
+        return value.body, value.point
     if isinstance(value, (tuple, list)) and len(value) == 2 and not isinstance(value[0], (int, float)):
-        return value[0], vector3(value[1], owner, f"{role} point")
+        return value[0], value[1]
     if isinstance(value, (tuple, list)):
         raise ModelError(owner, f"{role} must be (body, point), got {value!r}")
     return value, (0.0, 0.0, 0.0)
@@ -33,8 +33,14 @@ def _dot(a, b):
     return sum(x * y for x, y in zip(a, b))
 
 
+_POINT_A = ParameterSpec("point_a", (3,), "m", default=(0.0, 0.0, 0.0), doc="end a in body a's frame")
+_POINT_B = ParameterSpec("point_b", (3,), "m", default=(0.0, 0.0, 0.0), doc="end b in body b's frame")
+
+
 class _TwoPointElement(ForceElement):
     """Shared geometry of elements acting along the line between two body points."""
+
+    section = "forces"
 
     def __init__(self, name: str, a: Any, b: Any):
         super().__init__(name)
@@ -79,13 +85,17 @@ class Spring(_TwoPointElement):
     stiffness : N/m, >= 0;  rest_length : m, >= 0;  damping : N s/m, >= 0
     """
 
-    parameters = ("point_a", "point_b", "stiffness", "rest_length", "damping")
+    kind = "spring"
+    params = (_POINT_A, _POINT_B,
+              ParameterSpec("stiffness", (), "N/m", nonnegative),
+              ParameterSpec("rest_length", (), "m", nonnegative, default=0.0),
+              ParameterSpec("damping", (), "N s/m", nonnegative, default=0.0))
 
     def __init__(self, name: str, a: Any, b: Any, stiffness: float, rest_length: float = 0.0, damping: float = 0.0):
         super().__init__(name, a, b)
-        self.stiffness = scalar(stiffness, self, "stiffness", nonnegative=True)
-        self.rest_length = scalar(rest_length, self, "rest_length", nonnegative=True)
-        self.damping = scalar(damping, self, "damping", nonnegative=True)
+        self.stiffness = stiffness
+        self.rest_length = rest_length
+        self.damping = damping
 
     def _loads(self, kin):
         pa, pb, d, dd, length = self._line(kin)
@@ -104,11 +114,12 @@ class Spring(_TwoPointElement):
 class Damper(_TwoPointElement):
     """Linear damper between two body points: tension ``damping * dl/dt`` (N)."""
 
-    parameters = ("point_a", "point_b", "damping")
+    kind = "damper"
+    params = (_POINT_A, _POINT_B, ParameterSpec("damping", (), "N s/m", nonnegative))
 
     def __init__(self, name: str, a: Any, b: Any, damping: float):
         super().__init__(name, a, b)
-        self.damping = scalar(damping, self, "damping", nonnegative=True)
+        self.damping = damping
 
     def _loads(self, kin):
         pa, pb, d, dd, length = self._line(kin)
@@ -125,16 +136,22 @@ class Force(ForceElement):
     evaluated at run time (``q``, ``qd`` arrays in ``System.coords`` order).
     """
 
-    parameters = ("point", "force")
+    kind = "force"
+    section = "forces"
+    params = (ParameterSpec("point", (3,), "m", default=(0.0, 0.0, 0.0), doc="point of application, body frame"),
+              ParameterSpec("force", (3,), "N", default=(0.0, 0.0, 0.0), time_input=True,
+                            doc="world-frame force, or a callable (t, q, qd) -> (3,)"))
 
     def __init__(self, name: str, body: Any, point: Any = None, force: Any = (0.0, 0.0, 0.0)):
         super().__init__(name)
         self.body, point, _ = split_frame(body, point, self, "body")
-        self.point = vector3(point, self, "point")
-        self.is_callable = callable(force)
-        self.force = force if self.is_callable else vector3(force, self, "force")
-        if self.is_callable:
-            self.parameters = ("point",)
+        self.point = point
+        self.force = force
+
+    @property
+    def is_callable(self) -> bool:
+        """True when ``force`` is evaluated at run time (an input, not a parameter)."""
+        return callable(self.force)
 
     def references(self):
         return {"body": self.body}
@@ -142,11 +159,11 @@ class Force(ForceElement):
     def structure(self):
         return ("callable" if self.is_callable else "constant",)
 
-    def input_size(self) -> int:
+    def input_size(self, joint: Any = None) -> int:
         """Number of run-time input values (the callable's vector), 0 when constant."""
         return 3 if self.is_callable else 0
 
-    def evaluate_input(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def evaluate_input(self, t: float, q: np.ndarray, qd: np.ndarray, size: int = 3) -> np.ndarray:
         """The callable's value, checked to be a finite 3-vector."""
         return checked_output(self, self.force(t, q, qd), 3)
 
@@ -164,23 +181,27 @@ class JointTorque(ForceElement):
     ``(t, q, qd)`` returning it.
     """
 
-    parameters = ("value",)
+    kind = "joint_torque"
+    section = "forces"
+    params = (ParameterSpec("value", (-1,), "N m or N (per joint coordinate)", default=0.0, time_input=True,
+                            doc="one value per joint coordinate, or a callable (t, q, qd)"),)
 
     def __init__(self, name: str, joint: Any, value: Any = 0.0):
         super().__init__(name)
         self.joint = joint
-        self.is_callable = callable(value)
+        self.value = value
+
+    @property
+    def is_callable(self) -> bool:
+        """True when ``value`` is evaluated at run time (an input, not a parameter)."""
+        return callable(self.value)
+
+    @property
+    def size(self) -> int | None:
+        """Number of values a constant ``value`` holds (None for a callable)."""
         if self.is_callable:
-            self.value = value
-            self.parameters = ()
-        else:
-            try:
-                arr = np.atleast_1d(np.asarray(value, dtype=float))
-            except (TypeError, ValueError):
-                raise ModelError(self, f"value must be a number, an array or a callable, got {value!r}") from None
-            if arr.ndim != 1 or not np.all(np.isfinite(arr)):
-                raise ModelError(self, f"value must be a finite number or 1-D array, got {value!r}")
-            self.value = float(arr[0]) if arr.size == 1 else tuple(float(v) for v in arr)
+            return None
+        return 1 if isinstance(self.value, float) else len(self.value)
 
     def references(self):
         return {"joint": self.joint}
@@ -188,19 +209,27 @@ class JointTorque(ForceElement):
     def structure(self):
         return ("callable" if self.is_callable else "constant",)
 
-    def input_size(self) -> int:
-        return self._size if self.is_callable else 0
-
-    def bind_joint(self, joint) -> None:
-        """Check the value's size against the resolved joint (called by the compiler)."""
-        self._size = joint.nv
+    def input_size(self, joint: Any = None) -> int:
+        """Run-time input values: the resolved ``joint``'s speed count for a callable
+        (0 for a constant value)."""
         if not self.is_callable:
-            size = 1 if isinstance(self.value, float) else len(self.value)
-            if size != joint.nv:
-                raise ModelError(self, f"value has {size} entries, joint {joint.name!r} has {joint.nv} speed(s)")
+            return 0
+        return joint.nv if joint is not None else 1
 
-    def evaluate_input(self, t, q, qd):
-        return checked_output(self, self.value(t, q, qd), self._size)
+    def check(self, resolved: dict) -> list[str]:
+        """Problems against the resolved references (``{"joint": Joint}``); sets nothing."""
+        joint = resolved["joint"]
+        if self.size is not None and self.size != joint.nv:
+            noun = "coordinate(s)" if joint.nv == joint.nq else "speed(s)"
+            return [f"{describe(self)}: value has {self.size} entries, joint {joint.name!r} has "
+                    f"{joint.nv} {noun}"]
+        return []
+
+    def evaluate_input(self, t, q, qd, size: int | None = None):
+        """The callable's value, checked to be ``size`` finite numbers."""
+        if size is None:
+            size = self.size or int(np.size(self.value(t, q, qd)))
+        return checked_output(self, self.value(t, q, qd), size)
 
     def _loads(self, kin):
         values = kin.input(self) if self.is_callable else kin.param(self, "value")
@@ -214,21 +243,28 @@ class TorsionSpring(ForceElement):
     Units: N m/rad and N m s/rad for a revolute (N/m, N s/m for a prismatic joint).
     """
 
-    parameters = ("stiffness", "rest", "damping")
+    kind = "torsion_spring"
+    section = "forces"
+    params = (ParameterSpec("stiffness", (), "N m/rad", nonnegative, doc="N/m on a prismatic joint"),
+              ParameterSpec("rest", (), "rad", default=0.0, doc="m on a prismatic joint"),
+              ParameterSpec("damping", (), "N m s/rad", nonnegative, default=0.0, doc="N s/m on a prismatic joint"))
 
     def __init__(self, name: str, joint: Any, stiffness: float, rest: float = 0.0, damping: float = 0.0):
         super().__init__(name)
         self.joint = joint
-        self.stiffness = scalar(stiffness, self, "stiffness", nonnegative=True)
-        self.rest = scalar(rest, self, "rest")
-        self.damping = scalar(damping, self, "damping", nonnegative=True)
+        self.stiffness = stiffness
+        self.rest = rest
+        self.damping = damping
 
     def references(self):
         return {"joint": self.joint}
 
-    def bind_joint(self, joint) -> None:
+    def check(self, resolved: dict) -> list[str]:
+        """Problems against the resolved references (``{"joint": Joint}``); sets nothing."""
+        joint = resolved["joint"]
         if joint.n_coords != 1:
-            raise ModelError(self, f"needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}")
+            return [f"{describe(self)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}"]
+        return []
 
     def _loads(self, kin):
         (q,), (qd,) = kin.q(self.joint), kin.qd(self.joint)

@@ -24,11 +24,14 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from ..errors import ModelError
+from ..params import ParameterSpec, unit_vector
 from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
 from .base import Component
-from ._values import vector3
 from .frame import split_frame
+
+AXIS = ParameterSpec("axis", (3,), "", unit_vector, structural=True,
+                     doc="'x', 'y', 'z' (optionally signed) or a 3-vector in the parent frame; stored as a unit vector")
 
 #: (coordinates, speeds) of each segment kind.
 SEGMENT_SIZES = {"R": (1, 1), "P": (1, 1), "B": (4, 3)}
@@ -57,17 +60,29 @@ class Joint(Component):
     """
 
     n_coords: ClassVar[int] = 0
-    parameters = ("parent_point", "child_point")
+    section = "joints"
+    coord_unit: ClassVar[str] = "rad"
+    params = (ParameterSpec("parent_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the parent body frame"),
+              ParameterSpec("child_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the child body frame"))
 
     def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
                  child_point: Any = None, coords: Any = None, speeds: Any = None):
         super().__init__(name)
         self.parent, parent_point, self.parent_rotation = split_frame(parent, parent_point, self, "parent")
         self.child, child_point, self.child_rotation = split_frame(child, child_point, self, "child")
-        self.parent_point = vector3(parent_point, self, "parent_point")
-        self.child_point = vector3(child_point, self, "child_point")
+        self.parent_point = parent_point
+        self.child_point = child_point
         self.coords = self._coord_names(coords)
-        self.speeds = self._speed_names(speeds)
+        self._speeds_given = None if speeds is None else ((speeds,) if isinstance(speeds, str) else tuple(speeds))
+        try:
+            self._speed_names(self._speeds_given)  # checked now where the segments are known already
+        except AttributeError:
+            pass  # a subclass sets its axes after this constructor: checked on first use
+
+    @property
+    def speeds(self) -> tuple[str, ...]:
+        """The names of the joint's speeds (``nv`` of them)."""
+        return self._speed_names(self._speeds_given)
 
     # -- contract -----------------------------------------------------------
     @property
@@ -82,6 +97,22 @@ class Joint(Component):
         """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
+
+    @property
+    def coord_units(self) -> tuple[str, ...]:
+        """Unit of each coordinate (``"rad"``, ``"m"``, or ``""`` for a quaternion), for plots and tables."""
+        units: list[str] = []
+        for kind, _ in self._segments():
+            units.extend(("",) * 4 if kind == "B" else ("m",) if kind == "P" else ("rad",))
+        return tuple(units)
+
+    @property
+    def speed_units(self) -> tuple[str, ...]:
+        """Unit of each speed (``"rad/s"`` or ``"m/s"``)."""
+        units: list[str] = []
+        for kind, _ in self._segments():
+            units.extend(("rad/s",) * 3 if kind == "B" else ("m/s",) if kind == "P" else ("rad/s",))
+        return tuple(units)
 
     def _segments(self) -> list[tuple[str, Any]]:
         """The joint's motion as segments (see the module docstring); screws by default."""
@@ -130,8 +161,8 @@ class Joint(Component):
         """(3, 3) rotation of the joint's child frame in the child body frame."""
         return np.eye(3) if self.child_rotation is None else np.array(self.child_rotation)
 
-    def _walk(self):
-        """``(kind, axis, q slice, v slice)`` of each segment, local to the joint."""
+    def walk(self):
+        """``(kind, axis, q slice, v slice)`` of each segment (see the module docstring), local to the joint."""
         iq = iv = 0
         for kind, axis in self._segments():
             nq, nv = SEGMENT_SIZES[kind]
@@ -148,7 +179,7 @@ class Joint(Component):
         """Coordinate rates ``q' = G(q) v`` (quaternion rates ``q (0, w) / 2``)."""
         q, v = self._checked(q, self.nq, "coordinate(s)"), self._checked(v, self.nv, "speed(s)")
         out = np.empty(self.nq)
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             out[sq] = quat_rate(q[sq], v[sv]) if kind == "B" else v[sv]
         return out
 
@@ -157,7 +188,7 @@ class Joint(Component):
         vector, child frame, for a ball segment); ``q + dv`` for a screw joint."""
         q, dv = self._checked(q, self.nq, "coordinate(s)"), self._checked(dv, self.nv, "speed(s)")
         out = q.copy()
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind == "B":
                 out[sq] = quat_normalize(quat_multiply(q[sq], quat_exp(dv[sv])), self)
             else:
@@ -168,7 +199,7 @@ class Joint(Component):
         """The step ``dv`` with ``integrate(q0, dv) = q1`` (the shorter rotation for a ball)."""
         q0, q1 = self._checked(q0, self.nq, "coordinate(s)"), self._checked(q1, self.nq, "coordinate(s)")
         out = np.empty(self.nv)
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind == "B":
                 a = quat_normalize(q0[sq], self)
                 out[sv] = quat_log(quat_multiply([a[0], -a[1], -a[2], -a[3]], quat_normalize(q1[sq], self)))
@@ -179,7 +210,7 @@ class Joint(Component):
     def normalize(self, q: Sequence[float]) -> np.ndarray:
         """``q`` with each quaternion scaled to unit length (``ModelError`` for a zero one)."""
         q = self._checked(q, self.nq, "coordinate(s)").copy()
-        for kind, _, sq, _ in self._walk():
+        for kind, _, sq, _ in self.walk():
             if kind == "B":
                 q[sq] = quat_normalize(q[sq], self)
         return q
@@ -193,7 +224,7 @@ class Joint(Component):
         q = self._checked(q, self.nq, "coordinate(s)")
         rotation = self.parent_frame_rotation
         translation = np.zeros(3)
-        for kind, axis, sq, _ in self._walk():
+        for kind, axis, sq, _ in self.walk():
             if kind == "R":
                 rotation = rotation @ axis_angle(axis, q[sq][0])
             elif kind == "P":
@@ -212,7 +243,7 @@ class Joint(Component):
         translation = np.zeros(3)
         w = np.zeros(3)
         u = np.zeros(3)  # velocity of the moving joint point
-        for kind, axis, sq, sv in self._walk():
+        for kind, axis, sq, sv in self.walk():
             if kind == "R":
                 w = w + rotation @ np.asarray(axis) * v[sv][0]
                 rotation = rotation @ axis_angle(axis, q[sq][0])
@@ -237,13 +268,19 @@ class Joint(Component):
             raise ModelError(self, f"coords {names} repeat a name")
         return names
 
-    def _speed_names(self, speeds: Any) -> tuple[str, ...]:
+    @property
+    def default_speeds(self) -> tuple[str, ...]:
+        """The speed names given no ``speeds``: a screw coordinate's name, ``NAME_wx`` .. for a ball."""
         default: list[str] = []
-        for kind, _, sq, _ in self._walk():
+        for kind, _, sq, _ in self.walk():
             if kind == "B":
                 default.extend(f"{self.name}_{s}" for s in self.speed_suffixes)
             else:
                 default.append(self.coords[sq.start])
+        return tuple(default)
+
+    def _speed_names(self, speeds: Any) -> tuple[str, ...]:
+        default = self.default_speeds
         if speeds is None:
             return tuple(default)
         names = (speeds,) if isinstance(speeds, str) else tuple(speeds)
@@ -251,11 +288,11 @@ class Joint(Component):
             raise ModelError(self, f"speeds must be {len(default)} non-empty name(s), got {speeds!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"speeds {names} repeat a name")
-        for kind, _, sq, sv in self._walk():
+        for kind, _, sq, sv in self.walk():
             if kind != "B" and names[sv.start] != self.coords[sq.start]:
                 raise ModelError(self, f"speed {names[sv.start]!r} must be named like its coordinate "
                                        f"{self.coords[sq.start]!r} (a screw coordinate's speed is its rate)")
-        clash = {names[i] for kind, _, _, sv in self._walk() if kind == "B"
+        clash = {names[i] for kind, _, _, sv in self.walk() if kind == "B"
                  for i in range(sv.start, sv.stop) if names[i] in self.coords}
         if clash:
             raise ModelError(self, f"speed name(s) {sorted(clash)} are also coordinate names")
@@ -268,11 +305,13 @@ class Revolute(Joint):
     Coordinate: the angle in rad, positive right-handed about ``axis``.
     """
 
+    kind = "revolute"
     n_coords = 1
+    params = Joint.params + (AXIS,)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
-        self.axis = unit_axis(axis, owner=f"Revolute {name!r}")
         super().__init__(name, parent, child, **options)
+        self.axis = axis
 
     def _screws(self):
         return [("R", self.axis)]
@@ -281,11 +320,14 @@ class Revolute(Joint):
 class Prismatic(Joint):
     """Translation of the child by ``q`` (m) along ``axis`` (parent frame)."""
 
+    kind = "prismatic"
     n_coords = 1
+    coord_unit = "m"
+    params = Joint.params + (AXIS,)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "x", **options: Any):
-        self.axis = unit_axis(axis, owner=f"Prismatic {name!r}")
         super().__init__(name, parent, child, **options)
+        self.axis = axis
 
     def _screws(self):
         return [("P", self.axis)]
@@ -298,6 +340,8 @@ class Spherical(Joint):
     coordinates are the angles in rad.  The mass matrix is singular where the first
     and last axes of a 3-axis sequence align (gimbal lock).
     """
+
+    kind = "spherical"
 
     def __init__(self, name: str, parent: Any, child: Any, sequence: str = "xyz", **options: Any):
         self.sequence = parse_sequence(sequence, owner=f"Spherical {name!r}")
@@ -321,6 +365,7 @@ class Spherical(Joint):
 class Fixed(Joint):
     """Rigid connection: the child frame keeps the parent frame's orientation."""
 
+    kind = "fixed"
     n_coords = 0
 
     def _screws(self):
@@ -335,6 +380,7 @@ class Ball(Joint):
     ``NAME_wz``).  The integrators keep the quaternion at unit length.
     """
 
+    kind = "ball"
     n_coords = 4
     coord_suffixes = ("qw", "qx", "qy", "qz")
 
@@ -349,6 +395,7 @@ class Free(Joint):
     speeds ``NAME_wx`` .. ``NAME_wz``, rad/s in the child frame).  7 coordinates, 6 speeds.
     """
 
+    kind = "free"
     n_coords = 7
     coord_suffixes = ("x", "y", "z", "qw", "qx", "qy", "qz")
 
@@ -369,6 +416,7 @@ class Universal(Joint):
     Coordinates ``NAME_<axis>`` for named axes (``NAME_1``, ``NAME_2`` otherwise).
     """
 
+    kind = "universal"
     n_coords = 2
 
     def __init__(self, name: str, parent: Any, child: Any, axes: Any = ("x", "y"), **options: Any):
@@ -394,12 +442,14 @@ class Cylindrical(Joint):
     """Rotation about (rad, ``NAME_angle``) and translation along (m, ``NAME_slide``) one
     ``axis`` of the parent frame through ``parent_point``."""
 
+    kind = "cylindrical"
     n_coords = 2
     coord_suffixes = ("angle", "slide")
+    params = Joint.params + (AXIS,)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
-        self.axis = unit_axis(axis, owner=f"Cylindrical {name!r}")
         super().__init__(name, parent, child, **options)
+        self.axis = axis
 
     def _screws(self):
         return [("R", self.axis), ("P", self.axis)]
@@ -412,6 +462,7 @@ class Planar(Joint):
     ``NAME_angle`` for a named normal (``NAME_u``, ``NAME_v``, ``NAME_angle`` otherwise).
     """
 
+    kind = "planar"
     n_coords = 3
     _IN_PLANE = {"x": ("y", "z"), "y": ("z", "x"), "z": ("x", "y")}
 

@@ -62,8 +62,8 @@ class TestConstruction:
         assert mb.Contact("c", "body", restitution=e).restitution == float(e)
 
     @pytest.mark.parametrize("kwargs, message", [
-        (dict(restitution=-0.1), r"restitution must lie in \[0.0, 1.0\], got -0.1"),
-        (dict(restitution=1.01), r"restitution must lie in \[0.0, 1.0\], got 1.01"),
+        (dict(restitution=-0.1), r"restitution must lie in \[0, 1\], got -0.1"),
+        (dict(restitution=1.01), r"restitution must lie in \[0, 1\], got 1.01"),
         (dict(restitution=float("nan")), "restitution must be finite"),
         (dict(restitution=float("inf")), "restitution must be finite"),
         (dict(restitution="hard"), "restitution must be a number"),

@@ -55,10 +55,17 @@ class TestRevolute:
             # The child point, carried to the parent frame, coincides with the parent point.
             assert_close(p + R @ np.array(joint.child_point), joint.parent_point, atol=1e-14, name="joint point")
 
-    @pytest.mark.parametrize("axis", [(0, 0, 0), (1e-14, 0, 0)], ids=["zero", "tiny"])
-    def test_zero_axis_is_rejected(self, parts, axis):
+    def test_zero_axis_is_rejected(self, parts):
         with pytest.raises(mb.ModelError, match="Revolute 'elbow': axis has zero length"):
-            mb.Revolute("elbow", *parts, axis=axis)
+            mb.Revolute("elbow", *parts, axis=(0, 0, 0))
+
+    @pytest.mark.parametrize("axis, unit", [((1e-200, 0, 0), (1, 0, 0)), ((0, -1e-14, 0), (0, -1, 0)),
+                                            ((1e200, 1e200, 0), (2 ** -0.5, 2 ** -0.5, 0))],
+                             ids=["tiny", "small", "huge"])
+    def test_any_nonzero_axis_is_a_direction(self, parts, axis, unit):
+        # Only the direction matters: very small and very large vectors are not zero or overflow.
+        joint = mb.Revolute("elbow", *parts, axis=axis)
+        assert_close(joint.axis, unit, atol=1e-15, name="unit axis")
 
     @pytest.mark.parametrize("axis", ["w", (1, 0), (1, 0, float("nan")), "xy"], ids=["letter", "short", "nan", "two-letters"])
     def test_bad_axis_is_rejected(self, parts, axis):
