@@ -4,7 +4,10 @@
 from .model import Model
 from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
                          Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
+from .components import DCMotor, Drive, JointFriction, JointLimit
+from .components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from .components.frame import Frame, rpy
+from .compose import Option, Parameter, Submodel
 
 # The compiled system and its results
 from .result import Energy, Event, Result
@@ -36,7 +39,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "Frame", "rpy", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "ModelError", "CompileError", "SimulationError", "load", "sweep",
+    "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
 ]
 
 

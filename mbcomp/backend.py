@@ -21,6 +21,7 @@ FUNCTIONS = {
     "kinematics": ["kinematics"],
     "constraints": ["constraints"],
     "contacts": ["contacts"],
+    "drives": ["drive_forces", "state_rates"],
 }
 #: Called per output sample or step, not per right-hand side: compiled without optimisation.
 COLD_FUNCTIONS = ("energy", "kinematics", "contacts")

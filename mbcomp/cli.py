@@ -368,6 +368,12 @@ def cmd_info(args: argparse.Namespace) -> int:
     cut = [j.name for j in getattr(system.topology, "cut_joints", ())]
     for line in describe_components(model, cut):
         print(line)
+    tree = model.tree()
+    if tree.children:   # sub-model instances with their parameters
+        print("instances")
+        for child in tree.children:
+            for line in child.lines("  "):
+                print(line)
     print(f"coordinates  {', '.join(system.coords) or 'none'} ({system.nq})")
     if tuple(system.speeds) != tuple(system.coords):
         print(f"speeds       {', '.join(system.speeds)} ({system.nv}; a ball's: its angular velocity in the child frame)")

@@ -7,7 +7,7 @@ from typing import Callable
 
 import sympy as sp
 
-CODEGEN_VERSION = "9"
+CODEGEN_VERSION = "10"
 
 
 # -- printing ---------------------------------------------------------------------------
@@ -64,12 +64,30 @@ class Printer:
             return f"sin({self(e.args[0])})"
         if isinstance(e, sp.cos):
             return f"cos({self(e.args[0])})"
+        if isinstance(e, sp.tanh):
+            return f"tanh({self(e.args[0])})"
+        if isinstance(e, (sp.Min, sp.Max)):  # signals: limits and clipping
+            name = ("fmin" if isinstance(e, sp.Min) else "fmax") if self.c else ("min" if isinstance(e, sp.Min) else "max")
+            args = [self(a) for a in e.args]
+            out = args[0]
+            for a in args[1:]:
+                out = f"{name}({out}, {a})"
+            return out
+        if isinstance(e, sp.Piecewise):
+            (value, cond), *rest = e.args
+            other = sp.Piecewise(*rest) if len(rest) > 1 or rest and rest[0][1] is not sp.true else \
+                (rest[0][0] if rest else sp.nan)
+            if self.c:
+                return f"(({self(cond)}) ? ({self(value)}) : ({self(other)}))"
+            return f"({self(value)} if {self(cond)} else {self(other)})"
+        if isinstance(e, sp.core.relational.Relational) and e.rel_op in ("<", "<=", ">", ">="):
+            return f"({self(e.lhs)} {e.rel_op} {self(e.rhs)})"
         raise TypeError(f"cannot print {type(e).__name__}: {e}")
 
 
 def _names(prog, language: str) -> dict:
     names = {}
-    for vec, label in ((prog.q, "q"), (prog.qd, "qd"), (prog.u, "u")):
+    for vec, label in ((prog.q, "q"), (prog.qd, "qd"), (prog.u, "u"), (getattr(prog, "du", ()), "u")):
         for i, s in enumerate(vec):
             names[s] = f"{label}[{i}]"
     for i, s in enumerate(prog.p):
@@ -84,7 +102,7 @@ def python_source(prog, functions: dict) -> str:
     (``{name: [output names]}``), each ``f(q, qd, p, u) -> list of floats``."""
     names = _names(prog, "python")
     printer = Printer(names, "python")
-    lines = ["from math import sin, cos, sqrt", ""]
+    lines = ["from math import sin, cos, sqrt, tanh", ""]
     for fname, outputs in functions.items():
         lines.append(f"def {fname}(q, qd, p, u):")
         for symbol, expr in prog.needed(outputs):

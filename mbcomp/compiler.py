@@ -11,6 +11,7 @@ from . import cache, codegen
 from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
 from .components._values import name_of
 from .equations import build_program, input_layout, parameter_layout, parameter_values
+from .drive_equations import drive_layout
 from .errors import ModelError
 from .layout import OutputLayout
 from .flatten import flatten
@@ -20,7 +21,7 @@ GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world fr
 from .topology import build_topology
 
 
-def structure_description(model, topology, layout, inputs) -> str:
+def structure_description(model, topology, layout, inputs, drives=None) -> str:
     """Everything that decides the generated code, as text (names included)."""
     parts = [f"gravity|{len(topology.coords)}"]
     for comp in topology.components.values():
@@ -30,6 +31,8 @@ def structure_description(model, topology, layout, inputs) -> str:
     parts.append("coords|" + ",".join(topology.coords))
     parts.append("params|" + ",".join(f"{k}:{v}" for k, v in layout.entries.items()))
     parts.append("inputs|" + ",".join(f"{k}:{v}" for k, v in inputs.items()))
+    if drives is not None:
+        parts.append(drives.description())
     return "\n".join(parts)
 
 
@@ -48,6 +51,7 @@ class CompiledModel:
         self.default_parameters = parameter_values(model)
         self.layout = parameter_layout(self.default_parameters)
         self.inputs = input_layout(self.topology)
+        self.drives = drive_layout(self.topology)
         from .constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
@@ -56,9 +60,9 @@ class CompiledModel:
         self.tril = np.tril_indices(self.topology.nv)
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
-                                             len(self.topology.contacts))
+                                             len(self.topology.contacts), self.drives.nz)
         #: Everything about the model that decides the generated code (part of the cache key).
-        self.description = (structure_description(model, self.topology, self.layout, self.inputs)
+        self.description = (structure_description(model, self.topology, self.layout, self.inputs, self.drives)
                             + "\nlayout|" + self.output_layout.description())
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
@@ -83,7 +87,7 @@ class CompiledModel:
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations)
+            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
             self._check_layout(self._program)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program

@@ -300,7 +300,7 @@ def _combine(nv, *terms):
 def constraint_outputs(prog: Program, kin, equations, output: str = "constraints") -> None:
     """Output ``output``: residual g, Jacobian rows (row-major) and acceleration bias of the
     geometric constraint equations (point and dot), as ``constraint_set`` documents."""
-    from .components.primitives import DotEquation, PointEquation
+    from .components.primitives import CoordinateGap, DotEquation, PointEquation
     nv = kin.topology.nv
     g_out, J_out, bias_out = [], [], []
     for eq in equations:
@@ -325,6 +325,12 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             row = _combine(nv, (axis, Jwb), ([-c for c in axis], Jwa))
             rate = [x + y for x, y in zip(cross(cross(wb, ub), ua), cross(ub, cross(wa, ua)))]
             bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
+        elif isinstance(eq, CoordinateGap):
+            k = kin.topology.q_slice[name_of(eq.joint)].start
+            kv = kin.topology.v_slice[name_of(eq.joint)].start  # a 1-DOF screw joint: its speed
+            g = eq.sign * (prog.q[k] - kin.layout.symbols(eq.bound))
+            row = [sp.Integer(eq.sign if i == kv else 0) for i in range(nv)]
+            bias = sp.Integer(0)
         else:
             continue
         g_out.append(prog.let(g))
@@ -333,7 +339,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
     prog.outputs[output] = g_out + J_out + bias_out
 
 
-def build_program(topology, layout: ParameterLayout, inputs: dict, equations=()) -> Program:
+def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
@@ -450,6 +456,11 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
             if j <= i:
                 M[i, j] = prog.let(dot(kin.S[j], F))
         forces.append(prog.let(generalized[i] - dot(kin.S[i], wrench[body.name])))
+    for element in topology.forces:  # reflected rotor inertias of drives (drivetrain.py)
+        for joint, value in element.armature(kin) if hasattr(element, "armature") else ():
+            i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
+            M[i, i] = prog.let(M[i, i] + value)
+            kinetic += value * prog.qd[i] ** 2 / 2
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
     prog.outputs["forces"] = forces
     prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
@@ -461,6 +472,8 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=())
     prog.outputs["kinematics"] = kinematics
     constraint_outputs(prog, kin, equations)
     constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
+    from .drive_equations import drive_outputs
+    drive_outputs(prog, kin, drives)
     prog.kin = kin
     return prog
 

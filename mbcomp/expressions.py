@@ -71,7 +71,9 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
         if node.id in CONSTANTS:
             return ("num", CONSTANTS[node.id])
         if node.id in names:
-            return ("num", float(names[node.id]))
+            value = names[node.id]
+            # a sub-model parameter (an expression object) stays linked; numbers inline
+            return ("num", float(value)) if isinstance(value, (int, float)) else ("obj", value)
         if node.id in FUNCTIONS:
             raise ExpressionError(f"{text!r}: {node.id} is a function; call it as {node.id}(...)")
         known = ", ".join(sorted(names)) or "none defined"
@@ -98,14 +100,17 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
 def evaluate(node: tuple, t: float = 0.0) -> float:
     """Value of a node tree at time ``t``; ``ArithmeticError`` or ``ValueError`` on a math error."""
     kind = node[0]
-    if kind == "num":
+    if kind == "num" or kind == "obj":
         return node[1]
     if kind == "t":
         return t
     if kind == "neg":
         return -evaluate(node[1], t)
     if kind == "call":
-        return _ALL_FUNCTIONS[node[1]](evaluate(node[2], t))
+        arg = evaluate(node[2], t)
+        if not isinstance(arg, float) and hasattr(arg, node[1]):
+            return getattr(arg, node[1])()   # a parameter expression object
+        return _ALL_FUNCTIONS[node[1]](arg)
     a, b = evaluate(node[1], t), evaluate(node[2], t)
     if kind == "+":
         return a + b
@@ -115,6 +120,8 @@ def evaluate(node: tuple, t: float = 0.0) -> float:
         return a * b
     if kind == "/":
         return a / b
+    if not (isinstance(a, float) and isinstance(b, float)):
+        return a ** b  # a parameter expression object
     return math.pow(a, b)  # "**": math.pow raises instead of returning a complex number
 
 

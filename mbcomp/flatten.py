@@ -21,9 +21,12 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Mapping
 
+import numpy as np
+
 from .components import Component, Fixed, Joint, Prismatic, Revolute
 from .components.frame import Frame
 from .components._values import name_of
+from .compose import copy_component
 
 
 def reversed_joint(joint: Joint) -> Joint | None:
@@ -84,22 +87,6 @@ def _reachable(components: dict, ground_name: str) -> set:
     return reach
 
 
-def copy_component(comp: Any, name: str, references: dict) -> Any:
-    """A shallow copy of ``comp`` named ``name`` whose reference attributes are replaced
-    by ``references`` (role -> new reference)."""
-    new = copy.copy(comp)
-    roles = comp.references()
-    state = vars(comp)
-    for role, ref in roles.items():
-        if role not in references:
-            continue
-        for attr, value in state.items():
-            if attr != "name" and value is ref:
-                object.__setattr__(new, attr, references[role])
-    object.__setattr__(new, "name", name)
-    return new
-
-
 @dataclass(frozen=True)
 class FlatModel:
     """A model's name, gravity (m/s^2, world frame), ground and components (by name, in
@@ -139,3 +126,120 @@ def flatten(model: Any) -> FlatModel:
     for comp in list(copies.values()) + [ground]:
         comp.freeze()
     return FlatModel(model.name, tuple(float(g) for g in model.gravity), ground, copies)
+
+
+# -- sub-model instances --------------------------------------------------------------------------
+def _walk(instance) -> list:
+    """``(full name, component, scope path)`` of an instance's components, in build order."""
+    from .compose import Submodel
+    out = []
+    for item in instance.members().values():
+        if isinstance(item, Submodel):
+            out += _walk(item)
+        else:
+            out.append((f"{instance.path}.{item.name}", item, instance.path))
+    return out
+
+
+def flatten_instances(model) -> tuple[dict, "Derivation"]:
+    """Components of ``model`` with every sub-model instance expanded: copies named by
+    their paths, references resolved (objects by identity, names within the instance's
+    scope first), joint coordinates prefixed with the instance path."""
+    from .compose import Submodel
+    entries = [("ground", model.ground, "")]
+    for item in model.entries:
+        entries += _walk(item) if isinstance(item, Submodel) else [(item.name, item, "")]
+    full_of = {id(comp): full for full, comp, _ in entries}
+    names = {full for full, _, _ in entries}
+
+    def resolve(ref: Any, scope: str) -> Any:
+        if isinstance(ref, str):
+            if scope and f"{scope}.{ref}" in names:
+                return f"{scope}.{ref}"
+            return ref
+        return full_of.get(id(ref), ref)
+
+    components: dict = {}
+    expressions = []
+    for full, comp, scope in entries:
+        if full == "ground":
+            components[full] = comp
+            continue
+        refs = {role: resolve(ref, scope) for role, ref in comp.references().items()}
+        if scope or any(not isinstance(ref, str) and new != ref.name for ref, new in
+                        zip(comp.references().values(), refs.values()) if isinstance(new, str)):
+            new = copy_component(comp, full, refs)
+            if scope and isinstance(comp, Joint):
+                object.__setattr__(new, "coords", tuple(f"{scope}.{c}" for c in comp.coords))
+        else:
+            new = comp
+        components[full] = new
+        if getattr(comp, "expression_args", None) is not None:
+            expressions.append((full, comp))
+    registry = model.registry
+    return components, Derivation(dict(registry.parameters), expressions)
+
+
+class Derivation:
+    """How component values follow sub-model parameters: the parameters (in instantiation
+    order, each a number or an expression of outer ones) and the components built from
+    parameter expressions, rebuilt with new numbers on a run-time change (their
+    constructors validate the values, and their structure must not change)."""
+
+    def __init__(self, parameters: dict, components: list):
+        self.parameters = parameters
+        self.components = [(full, comp, _dependencies(comp)) for full, comp in components]
+
+    def values(self) -> dict[str, float]:
+        """``{parameter path: value}`` as instantiated."""
+        return {path: entry.value for path, entry in self.parameters.items()}
+
+    def apply(self, current: dict, changes: dict) -> dict:
+        """New values of the sub-model parameters and of every component value derived
+        from them, for ``changes`` (``{parameter path: value}``) applied to ``current``."""
+        from .components.expr import Expr, substitute
+        from .errors import ModelError
+        env: dict[str, float] = {}
+        for path, entry in self.parameters.items():
+            if path in changes:
+                env[path] = entry.spec.check(changes[path], f"parameter {path!r}")
+            elif isinstance(entry.binding, Expr):
+                env[path] = entry.spec.check(entry.binding.evaluate(env), f"parameter {path!r} "
+                                             f"(= {entry.binding!r})")
+            else:
+                env[path] = float(current[path])
+        touched = {p for p, v in env.items() if v != current.get(p)}
+        updates: dict[str, Any] = dict(env)
+        for full, comp, deps in self.components:
+            if not deps & touched:
+                continue
+            args, kwargs = comp.expression_args
+            try:
+                new = type(comp)(*substitute(args, env), **substitute(kwargs, env))
+            except ModelError as exc:
+                raise ModelError(full, f"with {sorted(touched)} = {[env[p] for p in sorted(touched)]}: {exc}") from None
+            if new.structure() != comp.structure():
+                raise ModelError(full, f"changing {sorted(deps & touched)} changes the structure "
+                                 f"({comp.structure()} -> {new.structure()}); build and compile the model again")
+            for attr, value in new.parameter_values().items():
+                updates[f"{full}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
+        return updates
+
+
+def _dependencies(comp) -> set:
+    from .components.expr import Expr
+    found: set = set()
+
+    def visit(value):
+        if isinstance(value, Expr):
+            found.update(value.parameters())
+        elif isinstance(value, (tuple, list)):
+            for v in value:
+                visit(v)
+        elif isinstance(value, dict):
+            for v in value.values():
+                visit(v)
+        elif type(value).__name__ == "Frame":
+            visit(value.point)
+    visit(comp.expression_args)
+    return found

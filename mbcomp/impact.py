@@ -46,7 +46,8 @@ def contact_indices(kernel, contacts) -> list[int]:
 
 def restitution_of(kernel, index: int) -> float:
     """The contact's restitution as currently bound (a parameter, so it can be rebound)."""
-    return float(kernel.parameters[f"{kernel.topology.contacts[index].name}.restitution"])
+    contact = kernel.topology.contacts[index]
+    return float(kernel.parameters[getattr(contact, "restitution_key", f"{contact.name}.restitution")])
 
 
 def solve_impact(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, active: list[int], restitution=None,

@@ -332,6 +332,10 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return "the model has contacts"
     if kernel.n_inputs:
         return "the model has callable forces or torques"
+    if kernel.compiled.drives.callables:
+        return "the model's drives or signals use Python callables"
+    if kernel.compiled.drives.elements:
+        return "drive elements step in Python"
     if callable(tau):
         return "tau is a callable"
     return None

@@ -28,8 +28,9 @@ from .components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force,
 from .components._values import name_of
 from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
-from .library import find_library_model, library_dirs, library_models, read_description
+from .library import find_library_model, find_library_part, library_dirs, library_models, library_parts, read_description
 from .model import Model
+from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame, rotation_matrix
 
 __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
@@ -38,8 +39,9 @@ __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "Expressio
 # ----------------------------------------------------------------------------------------------
 # Schema
 # ----------------------------------------------------------------------------------------------
-TOP_KEYS = ("name", "description", "gravity", "parameters", "bodies", "joints", "forces", "constraints",
-            "contacts", "initial", "simulation")
+TOP_KEYS = ("name", "description", "gravity", "parameters", "ports", "submodels", "bodies", "joints", "forces",
+            "constraints", "contacts", "initial", "simulation")
+PART_SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts")
 BODY_KEYS = ("mass", "com", "inertia")
 JOINT_COMMON = ("type", "parent", "child", "parent_point", "child_point", "parent_rotation", "child_rotation",
                 "coords")
@@ -99,8 +101,10 @@ class _Reader:
 
     def __init__(self, label: str):
         self.label = label
+        self.speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
         self.problems: list[str] = []
         self.parameters: dict[str, float] = {}
+        self.ports: set[str] = set()   # names bound to Frames by the user of a sub-model file
 
     # -- reporting ------------------------------------------------------------------------
     def problem(self, table: str | None, key: str | None, message: str) -> _Bad:
@@ -154,6 +158,7 @@ class _Reader:
                 x = float(value)
             except OverflowError:
                 return self.problem(table, key, f"{value} is too large")
+        linked, x = x, float(x)   # a sub-model file's parameter expression keeps its link
         if not math.isfinite(x):
             return self.problem(table, key, f"must be finite, got {x}")
         if positive and x <= 0:
@@ -162,7 +167,7 @@ class _Reader:
             return self.problem(table, key, f"must not be negative, got {x:g}")
         if (low is not None and x < low) or (high is not None and x > high):
             return self.problem(table, key, f"must lie in [{low:g}, {high:g}], got {x:g}")
-        return x
+        return linked
 
     def vector(self, table: str, key: str, value: Any, *, time: bool = False, owner: str = "") -> Any:
         """Three numbers (entries may be expressions)."""
@@ -205,6 +210,11 @@ class _Reader:
             plural = "bodies" if kind == "body" else kind + "s"
             return self.problem(table, key, f"unknown {kind} {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
                                 + f"; {plural}: {names}")
+        if value in self.ports:   # a port: the Frame (or body) its user bound
+            bound = known[value]
+            if isinstance(bound, Frame) and bound.rotation is None and not any(float(c) for c in bound.point):
+                return bound.body
+            return bound
         return value
 
     def inertia(self, table: str, value: Any) -> Any:
@@ -225,7 +235,7 @@ class _Reader:
         """``"body"`` or ``{body = "...", point = [x, y, z]}``."""
         if isinstance(value, str):
             body = self.reference(table, key, value, bodies, "body")
-            return BAD if body is BAD else (body, ZERO3)
+            return BAD if body is BAD else body if isinstance(body, Frame) else (body, ZERO3)
         if isinstance(value, dict):
             where = f"{table}.{key}"
             self.keys(where, value, ("body", "point"), ("body",))
@@ -272,12 +282,16 @@ def _parse_toml(path: Path, label: str) -> dict:
 
 
 def load(path: str | os.PathLike) -> Model:
-    """Read a TOML model file into a ``Model`` (schema: docs/files.md).
+    """Read a TOML model file into a ``Model`` (schema: docs/files.md and docs/composition.md).
 
     Every problem (unknown or missing key, wrong type, wrong vector length, non-finite
     number, reference to an undeclared body or joint, disallowed expression, TOML syntax)
     is collected and reported in one ``ModelError``, each with the file, table and key:
     ``arm.toml [joints.elbow] axis: must be 'x', 'y', 'z' or a 3-vector, got 'w'``.
+
+    ``[submodels.NAME]`` tables instantiate other files (``use = "part.toml"``, beside or
+    below this file, or ``"library:NAME"``) with port bindings and parameter overrides.
+    A file read as a model on its own binds its ``"external"`` ports to the ground.
 
     The returned model also carries the file's extras as attributes: ``description``
     (str), ``named_parameters`` ({name: float}), ``initial`` (``{"q": {coord: value},
@@ -313,16 +327,43 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
         gravity = g if g is not BAD else gravity
 
     model = Model(name.strip() if isinstance(name, str) else "model", gravity=gravity)
+    sections = _sections(r, data, ("initial", "simulation"))
+    bodies: dict[str, Any] = {"ground": model.ground}
+    external, exposed = _read_ports(r, data.get("ports", {}))
+    for port in external:   # read on its own, a part hangs from the ground
+        bodies[port] = model.ground
+        r.ports.add(port)
+    context = _FileContext(path, (path.resolve(),), {})
+    coords_seen = _read_parts(r, data, model, bodies, context, exposed)
+
+    model.description = description
+    model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
+    # With a broken joint the coordinate names are incomplete: check the values only.
+    model.initial = _read_initial(r, sections["initial"], coords_seen, r.speeds_seen)
+    model.simulation = _read_simulation(r, sections["simulation"])
+    model.path = path
+    return model
+
+
+def _sections(r: _Reader, data: dict, extra: tuple = ()) -> dict:
     sections = {}
-    for section in ("bodies", "joints", "forces", "constraints", "contacts", "initial", "simulation"):
+    for section in PART_SECTIONS + ("submodels",) + extra:
         value = data.get(section, {})
         if not isinstance(value, dict):
             r.problem(None, section, f"must be a table ([{section}] or [{section}.NAME]), got {_type_name(value)}")
             value = {}
         sections[section] = value
+    return sections
 
+
+def _read_parts(r: _Reader, data: dict, target: Any, bodies: dict, context: "_FileContext",
+                exposed: dict) -> dict | None:
+    """Read bodies, sub-model instances, joints, forces, constraints and contacts into
+    ``target`` (a Model or a sub-model instance being built); returns the coordinate names
+    seen (``None`` when a joint could not be read) and sets the exposed ports on a sub-model."""
+    sections = _sections(r, data)
     used_names: dict[str, str] = {"ground": "the ground"}
-    bodies: dict[str, Any] = {"ground": model.ground}
+    used_names.update({port: "a port" for port in r.ports})
     joints: dict[str, Any] = {}
 
     def named_tables(section: str):
@@ -342,15 +383,55 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
             used_names[comp_name] = f"[{label}]"
             yield comp_name, label, table
 
+    scope = getattr(target, "path", None) if not isinstance(target, Model) else None
     for comp_name, label, table in named_tables("bodies"):
         body = _read_body(r, comp_name, label, table)
         bodies[comp_name] = body if body is not None else comp_name
         if body is not None:
-            model.add(body)
+            target.add(body)
+            if scope:
+                bodies[f"{scope}.{comp_name}"] = body   # its full name, for inner parts
 
+    def expose(ports: dict) -> None:
+        for port, spec in ports.items():
+            frame = _port_frame(r, port, spec, bodies)
+            if frame is BAD:
+                continue
+            bodies[port] = frame
+            r.ports.add(port)
+            if not isinstance(target, Model):
+                setattr(target, port, frame)
+
+    # Ports on this file's own bodies first (sub-models may bind to them), the rest after.
+    own = {p: s for p, s in exposed.items() if (s if isinstance(s, str) else s.get("body")) in bodies}
+    expose(own)
     coords_seen: dict[str, str] = {}
-    speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
     all_joints_read = True
+    for comp_name, label, table in named_tables("submodels"):
+        instance = _read_submodel(r, comp_name, label, table, bodies, context)
+        if instance is None:
+            all_joints_read = False
+            continue
+        try:
+            target.add(instance)
+        except ModelError as exc:
+            r.problems.extend(p if p.startswith(r.label.split(" ")[0]) else f"{r.label} [{label}]: {p}"
+                              for p in exc.problems)
+            all_joints_read = False
+            continue
+        for key, value in vars(instance).items():
+            if isinstance(value, Frame):
+                for port in {f"{comp_name}.{key}", f"{instance.path}.{key}"}:
+                    bodies[port] = value
+                    r.ports.add(port)
+        for full, member in _instance_bodies(instance, instance.path):
+            bodies[full] = member
+            r.ports.add(full)
+        for full, member in _instance_joints(instance, comp_name):
+            joints[full] = member
+        for coord in _instance_coords(instance, comp_name):
+            coords_seen[coord] = f"[{label}]"
+
     for comp_name, label, table in named_tables("joints"):
         joint = _read_joint(r, comp_name, label, table, bodies)
         joints[comp_name] = joint if joint is not None else comp_name
@@ -361,24 +442,256 @@ def _read_model(r: _Reader, data: dict, path: Path) -> Model:
             if coord in coords_seen:
                 r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
             coords_seen[coord] = f"[{label}]"
-        speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
-        _add_component(r, model, joint, label)
+        r.speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
+        _add_component(r, target, joint, label)
 
     for comp_name, label, table in named_tables("forces"):
-        _add_component(r, model, _read_force(r, comp_name, label, table, bodies, joints), label)
+        _add_component(r, target, _read_force(r, comp_name, label, table, bodies, joints), label)
     for comp_name, label, table in named_tables("constraints"):
-        _add_component(r, model, _read_constraint(r, comp_name, label, table, bodies, joints), label)
+        _add_component(r, target, _read_constraint(r, comp_name, label, table, bodies, joints), label)
     for comp_name, label, table in named_tables("contacts"):
-        _add_component(r, model, _read_contact(r, comp_name, label, table, bodies), label)
+        _add_component(r, target, _read_contact(r, comp_name, label, table, bodies), label)
 
-    model.description = description
-    model.named_parameters = dict(r.parameters)
-    # With a broken joint the coordinate names are incomplete: check the values only.
-    model.initial = _read_initial(r, sections["initial"], coords_seen if all_joints_read else None,
-                                  speeds_seen)
-    model.simulation = _read_simulation(r, sections["simulation"])
-    model.path = path
-    return model
+    expose({p: s for p, s in exposed.items() if p not in own})
+    return coords_seen if all_joints_read else None
+
+
+def _instance_bodies(instance: Any, path: str) -> list:
+    """``(path, body)`` of every body inside a sub-model instance (nested ones too)."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_bodies(member, f"{path}.{local}")
+        elif isinstance(member, Body):
+            out.append((f"{path}.{local}", member))
+    return out
+
+
+def _instance_joints(instance: Any, path: str) -> list:
+    """``(path, joint)`` of every joint inside a sub-model instance (nested ones too)."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_joints(member, f"{path}.{local}")
+        elif isinstance(member, (Revolute, Prismatic, Spherical, Fixed)):
+            out.append((f"{path}.{local}", member))
+    return out
+
+
+def _instance_coords(instance: Any, path: str) -> list[str]:
+    """The (prefixed) coordinate names of a sub-model instance, for [initial] checks."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_coords(member, f"{path}.{local}")
+        elif isinstance(member, (Revolute, Prismatic, Spherical, Fixed)):
+            out += [f"{path}.{c}" for c in member.coords]
+    return out
+
+
+# -- ports and sub-models ----------------------------------------------------------------------
+PORT_KEYS = ("body", "point", "rotation")
+
+
+def _read_ports(r: _Reader, table: Any) -> tuple[list[str], dict]:
+    """``[ports]``: ``NAME = "external"`` (bound by the user of the file) or an exposed
+    frame ``NAME = {body = "...", point = [...], rotation = [[...]]}`` (or a body name)."""
+    if not isinstance(table, dict):
+        r.problem(None, "ports", f"must be a table [ports], got {_type_name(table)}")
+        return [], {}
+    external, exposed = [], {}
+    for port, spec in table.items():
+        if not _is_valid_name(port) or not port.isidentifier():
+            r.problem("ports", port, f"{port!r} is not a valid port name (letters, digits, _)")
+        elif spec == "external":
+            external.append(port)
+        elif isinstance(spec, (str, dict)):
+            exposed[port] = spec
+        else:
+            r.problem("ports", port, f'must be "external", a body name or {{body = "...", point = [x, y, z]}}, '
+                      f"got {_type_name(spec)} ({_short(spec)})")
+    return external, exposed
+
+
+def _port_frame(r: _Reader, port: str, spec: Any, bodies: dict) -> Any:
+    """The Frame an exposed port stands for."""
+    where = f"ports.{_toml_key(port)}"
+    if isinstance(spec, str):
+        body = r.reference("ports", port, spec, bodies, "body")
+        return body if body is BAD or isinstance(body, Frame) else Frame(bodies.get(body, body))
+    r.keys(where, spec, PORT_KEYS, ("body",))
+    body = r.reference(where, "body", spec["body"], bodies, "body") if "body" in spec else BAD
+    point = r.vector(where, "point", spec["point"]) if "point" in spec else ZERO3
+    rotation = _read_rotation(r, where, "rotation", spec["rotation"]) if "rotation" in spec else None
+    if BAD in (body, point) or rotation is BAD:
+        return BAD
+    if isinstance(body, Frame):
+        return r.problem(where, "body", "must be a body of this file, not another port")
+    try:
+        return Frame(bodies.get(body, body), point, rotation)
+    except ModelError as exc:
+        return r.problem(where, None, str(exc))
+
+
+class _FileContext:
+    """Where a file is read from: its path, the chain of files including it (for cycles)
+    and the sub-model classes made so far (one per file)."""
+
+    def __init__(self, path: Path, chain: tuple, classes: dict):
+        self.path, self.chain, self.classes = path, chain, classes
+
+
+def _resolve_use(r: _Reader, label: str, use: Any, context: _FileContext) -> Path | None:
+    if not isinstance(use, str) or not use.strip():
+        r.problem(label, "use", f'must be a file name ("part.toml") or "library:NAME", got {_short(use)}')
+        return None
+    if use.startswith("library:"):
+        found = find_library_part(use[len("library:"):])
+        if found is None:
+            r.problem(label, "use", f"no library part or model {use[len('library:'):]!r}; parts: "
+                      f"{', '.join(library_parts())}; models: {', '.join(library_models())}")
+        return found
+    base = context.path.resolve().parent
+    target = (base / use).resolve()
+    if not target.is_relative_to(base):
+        r.problem(label, "use", f"{use!r} leaves the directory of {context.path.name}: a file may use files "
+                  "beside or below it, or library:NAME")
+        return None
+    if not target.is_file():
+        r.problem(label, "use", f"file {use!r} not found beside {context.path.name}")
+        return None
+    return target
+
+
+def _read_submodel(r: _Reader, name: str, label: str, table: dict, bodies: dict, context: _FileContext):
+    """A sub-model instance from ``[submodels.NAME]``: ``use``, port bindings, parameter
+    overrides (numbers or expressions of this file's parameters) and dicts of modifiers
+    for the part's own sub-models."""
+    if "use" not in table:
+        if table and all(key in PART_SECTIONS + ("submodels",) for key in table):
+            return _inline_class(r, label, table, bodies, context)(name)
+        r.problem(label, "use", 'missing (required): the part file ("part.toml" or "library:NAME"), or the '
+                  "part's own [bodies], [joints], ... tables")
+        return None
+    path = _resolve_use(r, label, table["use"], context)
+    if path is None:
+        return None
+    resolved = path.resolve()
+    if resolved in context.chain:
+        cycle = " -> ".join(str(p) for p in context.chain[context.chain.index(resolved):] + (resolved,))
+        r.problem(label, "use", f"files use each other in a cycle: {cycle}")
+        return None
+    cls = context.classes.get(resolved)
+    if cls is None:
+        try:
+            cls = _part_class(path, _FileContext(path, context.chain + (resolved,), context.classes))
+        except ModelError as exc:
+            r.problems.extend(exc.problems)
+            return None
+        context.classes[resolved] = cls
+    params, ports = cls.declared_parameters(), cls.port_names()
+    modifiers: dict[str, Any] = {}
+    ok = True
+    for key, value in table.items():
+        if key == "use":
+            continue
+        if key in ports:
+            bound = r.reference(label, key, value, bodies, "body")
+            if bound is BAD:
+                ok = False
+            else:
+                modifiers[key] = bodies.get(bound, bound) if isinstance(bound, str) else bound
+        elif key in params:
+            x = r.number(label, key, value)
+            ok = ok and x is not BAD
+            modifiers[key] = x
+        elif isinstance(value, dict):
+            inner = {k: r.number(f"{label}.{key}", k, v) for k, v in value.items()}
+            ok = ok and not any(v is BAD for v in inner.values())
+            modifiers[key] = inner
+        else:
+            r.problem(label, key, f"unknown key; {path.name} has parameters {sorted(params)} and ports {sorted(ports)}")
+            ok = False
+    missing = [p for p in ports if p not in table]
+    if missing:
+        r.problem(label, None, f"port(s) {missing} of {path.name} are not bound")
+        ok = False
+    if not ok:
+        return None
+    try:
+        return cls(name, **modifiers)
+    except ModelError as exc:
+        r.problem(label, None, str(exc))
+        return None
+
+
+def _part_class(path: Path, context: _FileContext) -> type:
+    """A ``Submodel`` class for a part file: its [parameters] become Parameters (a number,
+    or a table {value, unit, min, max, doc}), its external [ports] the ports of build."""
+    label = str(path)
+    data = _parse_toml(path, label)
+    r = _Reader(label)
+    r.keys("", data, TOP_KEYS)
+    params_table = data.get("parameters", {})
+    declared: dict[str, Any] = {}
+    if not isinstance(params_table, dict):
+        r.problem(None, "parameters", f"must be a table [parameters], got {_type_name(params_table)}")
+        params_table = {}
+    for key, value in params_table.items():
+        if not key.isidentifier() or key in RESERVED:
+            r.problem("parameters", key, f"{key!r} is not a valid parameter name")
+            continue
+        spec = value if isinstance(value, dict) else {"value": value}
+        r.keys(f"parameters.{key}", spec, ("value", "unit", "min", "max", "doc"), ("value",))
+        default = r.number("parameters", key, spec.get("value", BAD)) if "value" in spec else BAD
+        if default is BAD:
+            continue
+        try:
+            declared[key] = Parameter(float(default), unit=spec.get("unit"), min=spec.get("min"),
+                                      max=spec.get("max"), doc=str(spec.get("doc", "")))
+        except ModelError as exc:
+            r.problem("parameters", key, str(exc))
+    external, exposed = _read_ports(r, data.get("ports", {}))
+    if r.problems:
+        raise ModelError(problems=r.problems)
+    name = data.get("name", path.stem)
+
+    def port_names(cls) -> dict:
+        return {p: _PORT_REQUIRED for p in external}
+
+    def build(self, **ports: Any) -> None:
+        reader = _Reader(label)
+        reader.parameters = {key: getattr(self, key) for key in declared}
+        reader.ports = set(ports)
+        bodies: dict[str, Any] = {"ground": "ground", **ports}
+        _read_parts(reader, data, self, bodies, context, exposed)
+        if reader.problems:
+            raise ModelError(problems=reader.problems)
+
+    namespace = {**declared, "build": build, "port_names": classmethod(port_names),
+                 "__doc__": data.get("description", f"Part read from {path.name}"), "source": path}
+    return type(_class_name(name), (FileSubmodel,), namespace)
+
+
+def _inline_class(r: _Reader, label: str, table: dict, bodies: dict, context: _FileContext) -> type:
+    """A ``Submodel`` class for a part written inline (as ``save`` writes Python sub-models):
+    its tables name their own components locally and anything else by its full path."""
+    outer = dict(bodies)
+    where = f"{r.label} {label}"
+
+    def build(self) -> None:
+        reader = _Reader(where)
+        reader.parameters = dict(r.parameters)
+        _read_parts(reader, table, self, dict(outer), context, {})
+        if reader.problems:
+            raise ModelError(problems=reader.problems)
+
+    return type("InlinePart", (FileSubmodel,), {"build": build, "__doc__": f"Part written inline in {where}"})
+
+
+def _class_name(name: Any) -> str:
+    text = "".join(ch if ch.isalnum() else "_" for ch in str(name)) or "Part"
+    return text if text[0].isalpha() else "Part_" + text
 
 
 def _add_component(r: _Reader, model: Model, component: Any, label: str) -> None:
@@ -408,6 +721,11 @@ def _read_parameters(r: _Reader, table: Any) -> None:
             why = "is reserved" if key in RESERVED else "is not a valid name (letters, digits, _)"
             r.problem("parameters", key, f"{key!r} {why}")
             continue
+        if isinstance(value, dict):   # {value = ..., unit, min, max, doc} as part files declare them
+            r.keys(f"parameters.{key}", value, ("value", "unit", "min", "max", "doc"), ("value",))
+            value = value.get("value", BAD)
+            if value is BAD:
+                continue
         x = r.number("parameters", key, value)
         if x is not BAD:
             r.parameters[key] = x
@@ -455,6 +773,11 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
         child = r.problem(label, "child", "the ground cannot be a child (it does not move)")
     parent_point = r.vector(label, "parent_point", table["parent_point"]) if "parent_point" in table else ZERO3
     child_point = r.vector(label, "child_point", table["child_point"]) if "child_point" in table else ZERO3
+    # A port (a Frame): the point is an offset in the port frame's axes.
+    if isinstance(parent, Frame) and parent_point is not BAD:
+        parent, parent_point = _offset_frame(parent, parent_point), None
+    if isinstance(child, Frame) and child_point is not BAD:
+        child, child_point = _offset_frame(child, child_point), None
     values = [parent, child, parent_point, child_point]
     options = {}
     if kind in ("revolute", "prismatic", "cylindrical"):
@@ -512,14 +835,30 @@ def _read_joint(r: _Reader, name: str, label: str, table: dict, bodies: dict):
         return None
     if rotations:
         try:
-            parent = Frame(parent, parent_point, rotations.get("parent_rotation"))
-            child = Frame(child, child_point, rotations.get("child_rotation"))
+            parent = _framed(parent, parent_point, rotations.get("parent_rotation"))
+            child = _framed(child, child_point, rotations.get("child_rotation"))
         except ModelError as exc:
             r.problem(label, None, str(exc))
             return None
         return _construct(r, label, factory, name, parent, child, **options)
     return _construct(r, label, factory, name, parent, child, parent_point=parent_point,
                       child_point=child_point, **options)
+
+
+def _framed(end: Any, point: Any, rotation: Any) -> Frame:
+    """A joint end as a Frame: a body with a point and rotation, or a port Frame turned
+    further by ``rotation`` (given in the port frame's axes)."""
+    if isinstance(end, Frame):
+        R = end.rotation_matrix if rotation is None else end.rotation_matrix @ np.asarray(rotation)
+        return Frame(end.body, end.point, R)
+    return Frame(end, ZERO3 if point is None else point, rotation)
+
+
+def _offset_frame(frame: Frame, offset: tuple) -> Frame:
+    """``frame`` moved by ``offset`` (given in the frame's own axes); expressions stay linked."""
+    R = frame.rotation_matrix
+    point = tuple(frame.point[i] + sum(float(R[i][j]) * offset[j] for j in range(3)) for i in range(3))
+    return Frame(frame.body, point, frame.rotation)
 
 
 def _read_rotation(r: _Reader, label: str, key: str, value: Any) -> Any:
@@ -880,16 +1219,10 @@ def dumps(model: Model) -> str:
     parameters = getattr(model, "named_parameters", None) or {}
     if parameters:
         lines += ["", "[parameters]"] + [f"{_toml_key(k)} = {_toml_value(float(v))}" for k, v in parameters.items()]
-    sections: dict[str, list[tuple[str, dict]]] = {}
-    for comp in model.components.values():
-        if comp is model.ground:
-            continue
-        section, table = _component_table(comp)
-        sections.setdefault(section, []).append((comp.name, table))
-    for section in ("bodies", "joints", "forces", "constraints", "contacts"):
-        for name, table in sections.get(section, []):
-            lines += ["", f"[{section}.{_toml_key(name)}]"]
-            lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
+    if model.registry is not None:
+        lines += _part_lines(model, model.entries, "", "")
+    else:
+        lines += _section_lines([c for c in model.components.values() if c is not model.ground], "")
     initial = getattr(model, "initial", None) or {}
     for which in ("q", "qd"):
         values = initial.get(which) or {}
@@ -900,6 +1233,46 @@ def dumps(model: Model) -> str:
     if simulation:
         lines += ["", "[simulation]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in simulation.items()]
     return "\n".join(lines) + "\n"
+
+
+def _section_lines(components: list, prefix: str) -> list[str]:
+    """TOML tables of ``components`` under ``prefix`` (``""`` or ``"submodels.NAME."``)."""
+    lines = []
+    sections: dict[str, list[tuple[str, dict]]] = {}
+    for comp in components:
+        section, table = _component_table(comp)
+        sections.setdefault(section, []).append((comp.name, table))
+    for section in PART_SECTIONS:
+        for name, table in sections.get(section, []):
+            lines += ["", f"[{prefix}{section}.{_toml_key(name)}]"]
+            lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
+    return lines
+
+
+def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[str]:
+    """A model with sub-model instances, nested as ``[submodels.NAME...]`` tables: each
+    instance's components under their local names, references outside it by full path."""
+    names = model.registry.names
+    known = set(names.values())
+
+    def written(ref: Any) -> Any:
+        if isinstance(ref, str):
+            full = f"{scope}.{ref}" if scope and f"{scope}.{ref}" in known else ref
+        else:
+            full = names.get(id(ref), getattr(ref, "name", ref))
+        if scope and full.startswith(scope + ".") and "." not in full[len(scope) + 1:]:
+            return full[len(scope) + 1:]
+        return full
+
+    components = [copy_component(c, c.name, {role: written(ref) for role, ref in c.references().items()})
+                  for c in members if not isinstance(c, Submodel)]
+    lines = _section_lines(components, prefix)
+    for item in members:
+        if isinstance(item, Submodel):
+            head = f"{prefix}submodels.{_toml_key(item.name)}"
+            lines += ["", f"# sub-model instance {item.path!r}, written with its values", f"[{head}]"]
+            lines += _part_lines(model, list(item.members().values()), item.path, head + ".")
+    return lines
 
 
 def save(model: Model, path: str | os.PathLike) -> None:

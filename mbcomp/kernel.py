@@ -127,6 +127,17 @@ class Kernel:
         out = self.layout.unpack("constraints", self.call("constraints", q, qd))
         return out["residual"], out["jacobian"], out["bias"]
 
+    def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nv) and the rates
+        of their states (nz) at time ``t`` (s), with states ``z`` (raw arrays: the hot path)."""
+        drives = self.compiled.drives
+        out = self.layout.unpack("drives", self.call("drives", q, qd, drives.inputs(t, z, q, qd)))
+        total = float(out["forces"].sum() + out["rates"].sum())
+        if total - total != 0.0:
+            raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
+                                  f"{format_state(q)}, states {format_state(z)}")
+        return out["forces"], out["rates"]
+
     # -- the tree solve ----------------------------------------------------------------------------
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Lower Cholesky factor of ``M``, or a ``SimulationError`` naming why M is singular."""

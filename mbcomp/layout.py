@@ -74,9 +74,11 @@ class OutputLayout:
     functions: Mapping[str, tuple[Block, ...]]
 
     @classmethod
-    def of(cls, nv: int, n_bodies: int, n_constraint_rows: int, n_contacts: int) -> "OutputLayout":
+    def of(cls, nv: int, n_bodies: int, n_constraint_rows: int, n_contacts: int,
+           n_drive_states: int = 0) -> "OutputLayout":
         """The layout of a model with ``nv`` speeds, ``n_bodies`` moving bodies,
-        ``n_constraint_rows`` geometric constraint equations and ``n_contacts`` contacts."""
+        ``n_constraint_rows`` geometric constraint equations, ``n_contacts`` contacts and
+        ``n_drive_states`` states of drive elements."""
         ng, nk = n_constraint_rows, n_contacts
         return cls({
             "dynamics": _blocks(("mass_matrix", (nv, nv), "tril"), ("forces", (nv,))),
@@ -84,6 +86,7 @@ class OutputLayout:
             "kinematics": _blocks(("bodies", (n_bodies, BODY_ROW)), ("columns", (nv, 6))),
             "constraints": _blocks(("residual", (ng,)), ("jacobian", (ng, nv)), ("bias", (ng,))),
             "contacts": _blocks(("gap", (nk,)), ("jacobian", (nk, nv)), ("bias", (nk,))),
+            "drives": _blocks(("forces", (nv,)), ("rates", (n_drive_states,))),
         })
 
     def block(self, function: str, name: str) -> Block:

@@ -36,6 +36,26 @@ def find_library_model(name: str) -> Path | None:
     return library_models().get(stem)
 
 
+def find_library_part(name: str) -> Path | None:
+    """The path of library part ``name`` (``library/parts/NAME.toml``), else of the library
+    model ``name``, or None (what ``use = "library:NAME"`` in a model file refers to)."""
+    stem = name[:-5] if name.endswith(".toml") else name
+    for folder in library_dirs():
+        path = folder / "parts" / f"{stem}.toml"
+        if path.is_file():
+            return path
+    return find_library_model(stem)
+
+
+def library_parts() -> dict[str, Path]:
+    """``{name: path}`` of every library part (``library/parts/*.toml``), sorted."""
+    found: dict[str, Path] = {}
+    for folder in library_dirs():
+        for path in sorted((folder / "parts").glob("*.toml")):
+            found.setdefault(path.stem, path)
+    return dict(sorted(found.items()))
+
+
 def read_description(path: str | os.PathLike) -> str:
     """The ``description`` of a model file without validating the rest ("" if unreadable)."""
     try:

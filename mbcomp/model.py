@@ -31,6 +31,11 @@ class Model:
         self.gravity = vector3(gravity, f"Model {name!r}", "gravity")
         self.ground = Ground("ground")
         self._components: dict[str, Component] = {"ground": self.ground}
+        self._instances: dict[str, Any] = {}      # top-level sub-model instances by name
+        self._entries: list = []                  # components and instances in the order added
+        self._registry = None                     # what the instances produced (mbcomp.compose)
+        #: On a flattened model: how component values follow sub-model parameters.
+        self.derivation = None
 
     # -- composition ----------------------------------------------------------
     def add(self, *components: Component) -> Component:
@@ -40,9 +45,21 @@ class Model:
         """
         if not components:
             raise ModelError(f"Model {self.name!r}", "add() needs at least one component")
+        from .compose import Registry, Submodel
         for comp in components:
+            if isinstance(comp, Submodel):
+                if comp.name in self._components or comp.name in self._instances:
+                    raise ModelError(f"{type(comp).__name__} {comp.name!r}", f"name {comp.name!r} is already used "
+                                     f"in model {self.name!r}")
+                if self._registry is None:
+                    self._registry = Registry(names={id(self.ground): "ground"})
+                comp.instantiate("", self._registry)
+                self._instances[comp.name] = comp
+                self._entries.append(comp)
+                continue
             if not isinstance(comp, Component):
-                raise ModelError(f"Model {self.name!r}", f"cannot add {comp!r}: not an mbcomp component")
+                raise ModelError(f"Model {self.name!r}", f"cannot add {comp!r}: not an mbcomp component "
+                                 "or Submodel")
             if isinstance(comp, Ground):
                 raise ModelError(comp, "a model has exactly one ground (model.ground)")
             existing = self._components.get(comp.name)
@@ -50,7 +67,10 @@ class Model:
                 raise ModelError(comp, "was already added to this model")
             if existing is not None:
                 raise ModelError(comp, f"name {comp.name!r} is already used by {describe(existing)}")
+            if comp.name in self._instances:
+                raise ModelError(comp, f"name {comp.name!r} is already used by a sub-model instance")
             self._components[comp.name] = comp
+            self._entries.append(comp)
         return components[0]
 
     def connect(self, a: Any, b: Any, name: str | None = None) -> Component:
@@ -67,35 +87,68 @@ class Model:
         return self.add(Fixed(name, a, b))
 
     def flat(self) -> "Model":
-        """The model the compiler reads: joints oriented along the spanning tree (the model
-        itself when nothing changes)."""
-        from .flatten import orient_joints
-        components = orient_joints(self._components, self.ground.name)
+        """The model the compiler reads: sub-model instances expanded into components with
+        dotted names, joints oriented along the spanning tree (the model itself when
+        nothing changes).  The user's components are never modified."""
+        from .flatten import flatten_instances, orient_joints
+        components, derivation = self._components, self.derivation
+        if self._instances:
+            components, derivation = flatten_instances(self)
+        components = orient_joints(components, self.ground.name)
         if components is self._components:
             return self
         flat = Model.__new__(Model)
         flat.name, flat.gravity, flat.ground = self.name, self.gravity, self.ground
-        flat._components = components
+        flat._components, flat._instances, flat._entries, flat._registry = components, {}, list(components.values())[1:], None
+        flat.derivation = derivation
         return flat
 
-    def __getitem__(self, name: str) -> Component:
-        try:
+    @property
+    def entries(self) -> list:
+        """Top-level components and sub-model instances in the order they were added."""
+        return list(self._entries)
+
+    @property
+    def registry(self):
+        """What the sub-model instances of this model produced (``None`` without any)."""
+        return self._registry
+
+    def tree(self):
+        """The instance tree: every sub-model instance with its parameters and options, and
+        the components of each level (``str()`` of it prints an indented outline)."""
+        from .compose import TreeNode, tree_of
+        return TreeNode(self.name, "Model", {}, {}, [n for n in self._components if n != "ground"],
+                        [tree_of(inst) for inst in self._instances.values()])
+
+    def __getitem__(self, name: str) -> Any:
+        """A component by name, or inside sub-model instances by its dotted path
+        (``m["lower.rod"]``); ``m["lower"]`` is the instance itself."""
+        if name in self._components:
             return self._components[name]
-        except KeyError:
-            raise KeyError(f"model {self.name!r} has no component {name!r}") from None
+        head, _, rest = name.partition(".")
+        if head in self._instances:
+            instance = self._instances[head]
+            return instance[rest] if rest else instance
+        raise KeyError(f"model {self.name!r} has no component {name!r}") from None
 
     def __contains__(self, name: str) -> bool:
-        return name in self._components
+        try:
+            self[name]
+            return True
+        except KeyError:
+            return False
 
     @property
     def components(self) -> dict[str, Component]:
         """All components by name, in the order they were added (ground first)."""
+        if self._instances:
+            return dict(self.flat()._components)  # sub-model components under their dotted names
         return dict(self._components)
 
     @property
     def bodies(self) -> list[Body]:
         """The moving bodies, in the order they were added."""
-        return [c for c in self._components.values() if isinstance(c, Body) and c is not self.ground]
+        return [c for c in self.components.values() if isinstance(c, Body) and c is not self.ground]
 
     # -- compilation ------------------------------------------------------------
     def compile(self, formulation: Any = "lagrange", *, cache: bool = True, backend: str = "auto",

@@ -43,8 +43,12 @@ def reactions(system: Any, result: Any) -> dict[str, np.ndarray]:
     series: dict[str, list] = {}
     closed = result.closed_contacts or [()] * len(result.t)
     contacts = [c.name for c in system.topology.contacts]
-    for t, q, qd, shut in zip(result.t, result.q, result.qd, closed):
-        values = system.reactions(q, qd, t, tau=result.tau, offsets=result.offsets, contacts=shut)
+    z = getattr(result, "z", None)
+    states = z if getattr(result, "extra_states", ()) and z is not None and len(z) == len(result.t) \
+        else [None] * len(result.t)
+    for t, q, qd, shut, z in zip(result.t, result.q, result.qd, closed, states):
+        values = system.reactions(q, qd, t, tau=result.tau, offsets=result.offsets, contacts=shut,
+                                  **({} if z is None else {"states": z}))
         for name in contacts:
             values.setdefault(name, 0.0)
         for name, value in values.items():

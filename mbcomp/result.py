@@ -67,6 +67,13 @@ class Result:
     parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
     formulation: str = ""
     _reactions: dict | None = field(default=None, repr=False, compare=False)
+    z: np.ndarray | None = field(default=None, repr=False)  #: (m, nz) drive-element states
+    extra_states: tuple = ()  #: names of the columns of ``z`` (motor currents, PID integrals)
+
+    def _z(self) -> np.ndarray:
+        if self.z is None or self.z.shape != (len(self.t), len(self.extra_states)):
+            return np.zeros((len(self.t), len(self.extra_states)))
+        return self.z
 
     def __post_init__(self):
         if self.system is not None:
@@ -78,8 +85,11 @@ class Result:
                 self.parameters = self.system.parameters
             if not self.formulation:
                 self.formulation = self.system.formulation
+            if not self.extra_states:
+                self.extra_states = tuple(getattr(self.system, "extra_states", ()))
         self.coords = tuple(self.coords)
         self.speeds = tuple(self.speeds or self.coords)
+        self.extra_states = tuple(self.extra_states)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
@@ -108,10 +118,13 @@ class Result:
             return self.q[:, coords.index(name)]
         if name in speeds:
             return self.qd[:, speeds.index(name)]
+        if name in self.extra_states:
+            return self._z()[:, self.extra_states.index(name)]
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
             if speed in speeds:
                 return self.qd[:, speeds.index(speed)]
-        raise KeyError(f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}")
+        raise KeyError(f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}"
+                       + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
         """Kinetic, potential and total energy (J) at every sample."""
@@ -134,12 +147,14 @@ class Result:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""
         energy = self.energy()
         header = (["t"] + list(self.coords) + [f"{c}_d" if c in self.coords else c for c in self.speeds]
-                  + ["kinetic", "potential", "total"])
+                  + list(self.extra_states) + ["kinetic", "potential", "total"])
+        z = self._z()
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for i in range(len(self.t)):
-                row = [self.t[i], *self.q[i], *self.qd[i], energy.kinetic[i], energy.potential[i], energy.total[i]]
+                row = [self.t[i], *self.q[i], *self.qd[i], *z[i], energy.kinetic[i], energy.potential[i],
+                       energy.total[i]]
                 writer.writerow([repr(float(v)) for v in row])
 
     def to_dataframe(self):
@@ -150,6 +165,7 @@ class Result:
             raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
         data = {c: self.q[:, i] for i, c in enumerate(self.coords)}
         data.update({f"{c}_d" if c in self.coords else c: self.qd[:, i] for i, c in enumerate(self.speeds)})
+        data.update({name: self._z()[:, i] for i, name in enumerate(self.extra_states)})
         return pd.DataFrame(data, index=pd.Index(self.t, name="t"))
 
     def plot(self, *args: Any, **kwargs: Any):

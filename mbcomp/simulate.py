@@ -12,6 +12,7 @@ from scipy.integrate._ivp.ivp import METHODS
 from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
 from .impact import GAP_TOLERANCE
+from .drive_runtime import DriveTorque, DriveWorkspace
 from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
@@ -72,9 +73,11 @@ def check_settings(t_end, rtol, atol, t_eval):
 class _Recorder:
     """Collects output samples: every step, or the requested ``t_eval`` times."""
 
-    def __init__(self, t_eval, closed=lambda: ()):
+    def __init__(self, t_eval, closed=lambda: (), states=lambda: ()):
         self.t_eval = t_eval
         self.closed_now = closed
+        self.states_now = states  # drive-element states at the sample (set by full_state)
+        self.z: list[np.ndarray] = []
         self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
         self.t: list[float] = []
@@ -83,6 +86,7 @@ class _Recorder:
 
     def add(self, t, q, qd):
         self.closed.append(tuple(self.closed_now()))
+        self.z.append(np.array(self.states_now(), dtype=float))
         self.t.append(float(t))
         self.q.append(np.array(q, dtype=float))
         self.qd.append(np.array(qd, dtype=float))
@@ -127,11 +131,12 @@ class _Recorder:
 def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-             dt: float | None = None) -> Result:
-    """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds) at t = 0 to
-    ``t_end`` with ``formulation`` on ``kernel``; see ``System.simulate``.  The Result carries
-    no System (the caller binds one)."""
+             dt: float | None = None, z0: np.ndarray | None = None) -> Result:
+    """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds; ``z0`` the
+    drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
+    ``System.simulate``.  The Result carries no System (the caller binds one)."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
+    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     if tau is not None and not callable(tau):
         kernel.tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
@@ -162,16 +167,22 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     if integrator == "compiled" and reason is not None or integrator == "compiled" and progress:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason or 'progress=True'}")
     cls = solver_class(method)
+    drive = None
+    if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
+        drive = tau = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
     watch = ContactWatch(kernel, formulation, rest_speed, offsets, tau) if kernel.topology.contacts else None
     if watch is not None:
         qd0 = watch.start(q0, qd0)
     workspace = formulation.start(kernel, 0.0, q0, qd0, tau, watch.persistent if watch else ())
+    if drive is not None:
+        workspace = DriveWorkspace(workspace, drive)
     if watch is not None and workspace.y0.size == 0:
         max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
     bar = _Progress(t_end, progress)
-    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()))
+    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()),
+                         (lambda: drive.z) if drive is not None else (lambda: ()))
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
 
     def fun(t, y):
@@ -245,6 +256,8 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
             if t_restart >= t_end:
                 break
             workspace = formulation.start(kernel, t_restart, q_r, qd_r, tau, watch.persistent)
+            if drive is not None:
+                workspace = DriveWorkspace(workspace, drive)
             workspace.offsets = offsets
             solver = make_solver(t_restart, workspace.y0)
     except SimulationError as exc:
@@ -261,7 +274,9 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
              "message": "The solver successfully reached the end of the integration interval.",
              "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
     events = watch.events if watch else []
-    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, stats=stats, tau=tau, offsets=offsets,
+    z = np.array(recorder.z).reshape(len(recorder.t), -1)
+    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, z=z, stats=stats,
+                   tau=tau if drive is None else drive.tau, offsets=offsets,
                   events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
                   closed_contacts=recorder.closed)
 
@@ -283,8 +298,10 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
         corrected = workspace.after_step(t, solver.y)
         recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
         return t, None, corrected, watch.gaps(q, qd).g
-    q, qd = workspace.full_state(te, dense(te) if te != t else solver.y)
+    y_event = dense(te) if te != t else solver.y
+    q, qd = workspace.full_state(te, y_event)
     recorder.record_until(workspace, solver, dense, t_old, te, q, qd)
+    workspace.full_state(te, y_event)  # samples moved the drive states: back to the event's
     if te == t_close:
         qd, changed = watch.impact(te, q, qd)
         if not changed:  # closed but not closing: it rests on its surface
@@ -321,5 +338,6 @@ def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, 
 def _result(kernel, formulation, **data) -> Result:
     """A Result recording what the run used (names, parameter values, formulation)."""
     topology = kernel.topology
-    return Result(system=None, coords=tuple(topology.coords), speeds=tuple(getattr(topology, "speeds", topology.coords)),
-                  parameters=dict(kernel.parameters), formulation=formulation.name, **data)
+    return Result(system=None, coords=tuple(topology.coords), speeds=tuple(topology.speeds),
+                  parameters=dict(kernel.parameters), formulation=formulation.name,
+                  extra_states=tuple(kernel.compiled.drives.states), **data)

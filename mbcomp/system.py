@@ -1,6 +1,7 @@
 """System: the compiled model's numeric API (immutable; parameters rebind, never recompile)."""
 from __future__ import annotations
 
+import copy
 from typing import Any, Mapping
 
 import numpy as np
@@ -89,6 +90,70 @@ class System:
         return self._compiled.topology.nv
 
     @property
+    def extra_states(self) -> tuple[str, ...]:
+        """States of drive elements (motor currents, PID integrals): ``"component.state"``."""
+        return self._compiled.drives.states
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """Every state of a simulation: coordinates, their speeds (``NAME_d``), then the
+        states of drive elements (``extra_states``)."""
+        return (tuple(self.coords) + tuple(f"{c}_d" if c in self.coords else c for c in self.speeds)
+                + self.extra_states)
+
+    def extra_state_vector(self, x0: Any = None) -> np.ndarray:
+        """Initial values of ``extra_states`` from ``{name: value}`` (missing ones 0)."""
+        names = self.extra_states
+        z = np.zeros(len(names))
+        if x0 is None:
+            return z
+        if not isinstance(x0, Mapping):
+            raise ModelError("x0", f"must be a dict {{state name: value}}, got {x0!r}")
+        for key, value in x0.items():
+            if key not in names:
+                raise ModelError("x0", f"unknown state {key!r}; the states of drive elements are {list(names)}")
+            try:
+                z[names.index(key)] = float(value)
+            except (TypeError, ValueError):
+                raise ModelError("x0", f"{key!r} must be a number, got {value!r}") from None
+            if not np.isfinite(z[names.index(key)]):
+                raise ModelError("x0", f"{key!r} must be finite, got {value!r}")
+        return z
+
+    def integration_path(self, method: str = "DOP853", tau: Any = None) -> str:
+        """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
+        ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
+        from .integrators import why_not_compiled
+        reason = why_not_compiled(self._kernel, self._formulation, method, tau)
+        return "compiled" if reason is None else f"python: {reason}"
+
+    @property
+    def has_drives(self) -> bool:
+        """True when drive elements (drives, motors, signal torques, PIDs) act on the model."""
+        return bool(self._compiled.drives.elements)
+
+    def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray):
+        """``(tau_drive, z_rates)``: the drive elements' generalised forces (nv, speed space)
+        and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
+        ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
+        return self._kernel.drive_outputs(t, q, qd, z)
+
+    def _applied(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray, states: Any = None):
+        """``tau`` plus the drive elements' generalised forces (their states from ``states``:
+        a dict by name or an array in ``extra_states`` order; 0 when not given)."""
+        tau = self._kernel.tau(tau, t, q, qd)
+        if not self._compiled.drives.elements:
+            return tau
+        if states is None or isinstance(states, Mapping):
+            z = self.extra_state_vector(states)
+        else:
+            z = np.asarray(states, dtype=float).reshape(-1)
+            if z.shape != (len(self.extra_states),):
+                raise ModelError("states", f"must give {len(self.extra_states)} values {list(self.extra_states)}")
+        drive = self.drive_outputs(t, q, qd, z)[0]
+        return drive if tau is None else tau + drive
+
+    @property
     def ndof(self) -> int:
         """Degrees of freedom left after constraints."""
         return self._formulation.ndof
@@ -139,8 +204,18 @@ class System:
         the attribute."""
         if not values:
             return self
+        derivation = getattr(self._compiled, "derivation", None)
+        if derivation is not None and any(key in derivation.parameters for key in values):
+            # Sub-model parameters: every component value derived from them follows (as a
+            # fresh build would give it); component values given in the same call win.
+            changes = {k: v for k, v in values.items() if k in derivation.parameters}
+            values = {**derivation.apply(self._parameters, changes),
+                      **{k: v for k, v in values.items() if k not in changes}}
         merged = dict(self._parameters)
         for key, value in values.items():
+            if derivation is not None and key in derivation.parameters:
+                merged[key] = float(value)   # checked against its Parameter by derivation.apply
+                continue
             found = self._compiled.parameter_spec(key) if key in merged else None
             if found is None:
                 raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
@@ -213,13 +288,14 @@ class System:
         M, _ = self._kernel.dynamics(t, q, np.zeros(self.nv))
         return self._kernel.check_finite(M, "mass matrix", q)
 
-    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None) -> np.ndarray:
-        """(nv,) accelerations (rates of the speeds), consistent with every constraint."""
+    def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
+        """(nv,) accelerations (rates of the speeds), consistent with every constraint (drive
+        elements act with their ``states``, by name; 0 when not given)."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self._kernel, t, q, qd, self._kernel.tau(tau, t, q, qd))
+        return self._formulation.accelerations(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states))
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
-                  contacts: Any = ()) -> dict[str, np.ndarray]:
+                  contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
@@ -228,7 +304,8 @@ class System:
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
-        return self._formulation.reactions(self._kernel, t, q, qd, self._kernel.tau(tau, t, q, qd), offsets, closed)
+        return self._formulation.reactions(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
+                                           closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv,) generalised forces that, applied, hold the system at rest at ``q``
@@ -295,7 +372,7 @@ class System:
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
                  max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-                 dt: float | None = None):
+                 dt: float | None = None, x0: Mapping[str, float] | None = None):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
@@ -306,13 +383,14 @@ class System:
         (C backend; a tree, or a ``dae`` model whose constraints are all loops and sliders; no
         contacts, motors or callable inputs); ``"scipy"``
         forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
+        ``x0`` gives initial values of ``extra_states`` by name (default 0).
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
         q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
         result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
                           atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
-                          rest_speed=rest_speed, integrator=integrator, dt=dt)
+                          rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0))
         return result.with_system(system)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
@@ -381,10 +459,18 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
     compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
-    compiled.recipe = (compiled.flat_model, formulation, dict(options), backend)
+    derivation = getattr(model, "derivation", None)
+    # How to rebuild this System elsewhere (pickling for process pools and clusters); a
+    # model with sub-models keeps how its values follow their parameters.
+    compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
+                       dict(options), backend)
+    compiled.derivation = derivation
+    parameters = dict(compiled.default_parameters)
+    if derivation is not None:
+        parameters.update(derivation.values())  # sub-model parameters, by path
     formulation = formulation_class(compiled, **options)
-    info = analyse(formulation, Kernel(compiled, compiled.default_parameters))
-    return System(compiled, formulation.with_info(info), dict(compiled.default_parameters))
+    info = analyse(formulation, Kernel(compiled, parameters))
+    return System(compiled, formulation.with_info(info), parameters)
 
 
 def rebuild_system(model, formulation, options, backend, parameters) -> System:

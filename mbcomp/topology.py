@@ -201,6 +201,12 @@ def build_topology(model) -> Topology:
     for comp in contacts:
         if name_of(comp.body) == ground.name:
             problems.append(f"{describe(comp)}: is on the ground, which never moves; put it on a moving body")
+    for comp in components.values():  # joint stops (drivetrain.JointLimit): a contact per bound
+        if hasattr(comp, "sides") and comp.name not in broken:
+            joint = components[name_of(comp.joint)]
+            if joint.n_coords != 1 or joint in cut_joints:
+                problems.append(f"{describe(comp)}: needs a 1-DOF joint of the tree, {describe(joint)} is not one")
+            contacts += comp.sides()
     if problems:
         raise CompileError(problems=problems)
     return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),

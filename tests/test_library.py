@@ -249,6 +249,56 @@ def check_pendulum_wall(model, system):
     assert abs(np.max(result["q"][result.t > t_hit]) - q1) < 1e-4
 
 
+def check_double_pendulum_parts(model, system):
+    # Built from two `link` parts: the same numbers as the pendulum written out flat.
+    assert system.coords == ("upper.angle", "lower.angle")
+    flat = mb.Model("flat")
+    a = flat.add(mb.Body("a", mass=1.0, com=(0, 0, -0.15), inertia=(0.09 / 12, 0.09 / 12, 0.0)))
+    b = flat.add(mb.Body("b", mass=0.5, com=(0, 0, -0.1), inertia=(0.02 / 12, 0.02 / 12, 0.0)))
+    flat.add(mb.Revolute("ja", flat.ground, a, axis="x"), mb.Revolute("jb", a, b, axis="x", parent_point=(0, 0, -0.3)))
+    q, qd = initial_state(model, system)
+    np.testing.assert_allclose(system.accelerations(q, qd + 0.3), flat.compile().accelerations(q, qd + 0.3),
+                               rtol=1e-12, atol=1e-12)
+    assert_energy_conserved(simulate(model, system, 1.0))
+
+
+def check_walker_legs(model, system):
+    # Two two-link leg parts on a torso turning about z: energy and the angular momentum
+    # about the vertical (the yaw coordinate's momentum, gravity has no moment about z).
+    assert system.nq == 5 and system.parameters["right.thigh.length"] == 0.4
+    result = simulate(model, system, 1.0)
+    assert_energy_conserved(result)
+    k = index(system, "yaw")
+    start = (system.mass_matrix(result.q[0]) @ result.qd[0])[k]
+    end = (system.mass_matrix(result.q[-1]) @ result.qd[-1])[k]
+    assert abs(end - start) <= 1e-6 * abs(start)
+
+
+def check_four_bar_parts(model, system):
+    # The four_bar part on the ground is the four_bar library model with nested names.
+    flat = load(MODELS["four_bar"]).compile()
+    q, qd = initial_state(model, system)
+    np.testing.assert_array_equal(system.accelerations(q, qd), flat.accelerations(q, qd))
+    assert_energy_conserved(simulate(model, system, 1.0))
+
+
+def check_slider_crank_parts(model, system):
+    # The motor turns the crank at omega; the piston follows x = r cos(theta) +
+    # sqrt(l^2 - r^2 sin(theta)^2) (r = 0.1, l = 0.3 in the part).
+    result = simulate(model, system, 0.5, n=51)
+    theta, x = result["engine.theta"], result["engine.x"]
+    np.testing.assert_allclose(theta, 2 * np.pi * result.t, atol=1e-7)
+    np.testing.assert_allclose(x, 0.1 * np.cos(theta) + np.sqrt(0.09 - 0.01 * np.sin(theta) ** 2), atol=1e-7)
+
+
+def check_wheel_pendulum(model, system):
+    # The wheel spins about the arm's long axis, which stays perpendicular to the arm's own
+    # rotation axis: no torque reaches the spin, so its rate stays what it was (5 rad/s).
+    result = simulate(model, system, 1.0)
+    assert_energy_conserved(result)
+    np.testing.assert_allclose(result.qd[:, index(system, "wheel.angle")], 5.0, rtol=1e-8)
+
+
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
 
 

@@ -57,6 +57,20 @@ class Component:
         if cls.__dict__.get("kind"):
             KINDS[cls.kind] = cls
 
+    def __new__(cls, *args: Any, **kwargs: Any):
+        # Arguments holding sub-model parameter expressions are kept, so that a run-time
+        # parameter change can rebuild this component's values (mbcomp.compose).
+        obj = super().__new__(cls)
+        if args or kwargs:
+            from .expr import contains_expr
+            if contains_expr(args) or contains_expr(kwargs):
+                object.__setattr__(obj, "expression_args", (args, kwargs))
+        return obj
+
+    #: ``(args, kwargs)`` of the constructor call when they hold sub-model parameter
+    #: expressions (``None`` otherwise).
+    expression_args: Any = None
+
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():
             raise ModelError(type(self).__name__, f"name must be a non-empty string, got {name!r}")

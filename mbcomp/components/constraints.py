@@ -101,7 +101,8 @@ class LoopClosure(Constraint):
     """
 
     def __init__(self, joint):
-        super().__init__(joint.name)
+        super().__init__("closure")
+        object.__setattr__(self, "name", joint.name)  # may be a nested (dotted) name
         self.joint = joint
 
     def references(self):

@@ -189,7 +189,17 @@ class JointTorque(ForceElement):
     def __init__(self, name: str, joint: Any, value: Any = 0.0):
         super().__init__(name)
         self.joint = joint
-        self.value = value
+        from .signals import Signal
+        if isinstance(value, Signal):  # compiled with the drives (drive_equations), not a parameter
+            object.__setattr__(self, "value", value)
+        else:
+            self.value = value
+
+    @property
+    def signal(self):
+        """The ``Signal`` the value comes from, or None."""
+        from .signals import Signal
+        return self.value if isinstance(self.value, Signal) else None
 
     @property
     def is_callable(self) -> bool:
@@ -198,16 +208,43 @@ class JointTorque(ForceElement):
 
     @property
     def size(self) -> int | None:
-        """Number of values a constant ``value`` holds (None for a callable)."""
+        """Number of values a constant ``value`` holds (None for a callable; 1 for a signal)."""
         if self.is_callable:
             return None
+        if self.signal is not None:
+            return 1
         return 1 if isinstance(self.value, float) else len(self.value)
 
+    def parameter_values(self) -> dict[str, Any]:
+        return {} if self.signal is not None else super().parameter_values()
+
     def references(self):
+        if self.signal is not None:
+            from .signals import signal_references
+            return {"joint": self.joint, **signal_references([self.signal])}
         return {"joint": self.joint}
 
     def structure(self):
+        if self.signal is not None:
+            return ("signal", self.signal.describe())
         return ("callable" if self.is_callable else "constant",)
+
+    # A signal value makes this a drive element (drive_equations): generated with the drives.
+    @property
+    def drive_element(self) -> bool:
+        return self.signal is not None
+
+    def signals(self) -> list:
+        return [] if self.signal is None else [self.signal]
+
+    def state_names(self) -> tuple:
+        return ()
+
+    def drive_loads(self, ctx):
+        return [(self.joint, ctx.signal(self.signal))]
+
+    def state_rates(self, ctx):
+        return []
 
     def input_size(self, joint: Any = None) -> int:
         """Run-time input values: the resolved ``joint``'s speed count for a callable
@@ -232,6 +269,8 @@ class JointTorque(ForceElement):
         return checked_output(self, self.value(t, q, qd), size)
 
     def _loads(self, kin):
+        if self.signal is not None:
+            return []
         values = kin.input(self) if self.is_callable else kin.param(self, "value")
         values = values if isinstance(values, (list, tuple)) else [values]
         return [("generalized", self.joint, list(values))]

@@ -41,3 +41,15 @@ class CoordinateEquation:
     position: Callable[[float], float] | None = None
     speed: float | None = None
     label: str = ""
+
+
+@dataclass(frozen=True)
+class CoordinateGap:
+    """A unilateral gap on a tree coordinate: ``sign * (q_k - bound)`` with the bound a
+    parameter key (a ``JointLimit`` side); its multiplier is the generalised force along
+    ``sign`` times the coordinate."""
+
+    joint: Any
+    bound: str
+    sign: int
+    label: str = ""
