@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                                               "one model file (to copy and edit).")
     library.add_argument("name", nargs="?", help="print this model's file")
     library.set_defaults(handler=cmd_library)
+
+    from .cli_analyse import register
+    register(commands, sys.modules[__name__])
     return parser
 
 

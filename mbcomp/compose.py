@@ -143,12 +143,34 @@ class Submodel:
 
     # -- declarations ---------------------------------------------------------------------------
     @classmethod
+    def _declared(cls, kind: type) -> dict:
+        key = ("declared", kind)
+        cache = cls.__dict__.get("_declaration_cache")
+        if cache is None:
+            cache = {}
+            type.__setattr__(cls, "_declaration_cache", cache)
+        if key not in cache:
+            found: dict = {}
+            for klass in reversed(cls.__mro__):
+                for name, value in vars(klass).items():
+                    if isinstance(value, (Parameter, Option)):
+                        found.pop(name, None)
+                        if isinstance(value, kind):
+                            found[name] = value
+                    elif name in found:
+                        found.pop(name)
+            cache[key] = dict(sorted(found.items()))
+        return cache[key]
+
+    @classmethod
     def declared_parameters(cls) -> dict[str, Parameter]:
-        return {k: v for k in dir(cls) if isinstance(v := inspect.getattr_static(cls, k), Parameter)}
+        """The class's ``Parameter`` declarations by name (inherited ones included)."""
+        return cls._declared(Parameter)
 
     @classmethod
     def declared_options(cls) -> dict[str, Option]:
-        return {k: v for k in dir(cls) if isinstance(v := inspect.getattr_static(cls, k), Option)}
+        """The class's ``Option`` declarations by name (inherited ones included)."""
+        return cls._declared(Option)
 
     @classmethod
     def port_names(cls) -> dict[str, Any]:

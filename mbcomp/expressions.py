@@ -73,7 +73,10 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
         if node.id in names:
             value = names[node.id]
             # a sub-model parameter (an expression object) stays linked; numbers inline
-            return ("num", float(value)) if isinstance(value, (int, float)) else ("obj", value)
+            # A sub-model parameter (an expression object) stays linked, except in
+            # expressions of t (motor positions, forces), which keep its value as built.
+            linked = not allow_t and not isinstance(value, (int, float))
+            return ("obj", value) if linked else ("num", float(value))
         if node.id in FUNCTIONS:
             raise ExpressionError(f"{text!r}: {node.id} is a function; call it as {node.id}(...)")
         known = ", ".join(sorted(names)) or "none defined"

@@ -205,17 +205,15 @@ class System:
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)
-        if derivation is not None and any(key in derivation.parameters for key in values):
-            # Sub-model parameters: every component value derived from them follows (as a
-            # fresh build would give it); component values given in the same call win.
-            changes = {k: v for k, v in values.items() if k in derivation.parameters}
-            values = {**derivation.apply(self._parameters, changes),
-                      **{k: v for k, v in values.items() if k not in changes}}
         merged = dict(self._parameters)
+        if derivation is not None and any(key in derivation.parameters for key in values):
+            # Sub-model parameters: every component value derived from them follows, as a
+            # fresh build gives it (the components' constructors validated those values);
+            # component values given in the same call win.
+            changes = {k: v for k, v in values.items() if k in derivation.parameters}
+            merged.update(derivation.apply(self._parameters, changes))
+            values = {k: v for k, v in values.items() if k not in changes}
         for key, value in values.items():
-            if derivation is not None and key in derivation.parameters:
-                merged[key] = float(value)   # checked against its Parameter by derivation.apply
-                continue
             found = self._compiled.parameter_spec(key) if key in merged else None
             if found is None:
                 raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
@@ -413,6 +411,54 @@ class System:
         q = self.state_vector(q)
         values = self._kernel.contacts(q, np.zeros(self.nv))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
+
+    # -- analysis (mbcomp.analysis) ----------------------------------------------------------
+    def tree_dynamics(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(M, f)``: tree mass matrix and generalised forces (gravity, springs, applied forces,
+        velocity terms) with ``M qdd = f + tau + J^T lam``; constraints are not applied."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        M, f = self._dynamics(t, q, qd)
+        return self._check_finite(M, "mass matrix", q), self._check_finite(f, "generalised forces", q)
+
+    def constraint_values(self, q: Any, qd: Any = None, t: float = 0.0):
+        """Every constraint equation at a state: ``.g`` (residuals), ``.J`` (Jacobian, one column
+        per speed), ``.g_t`` (``gdot = J qd + g_t``) and ``.bias`` (``gddot = J qdd + bias``).
+        Rows are in ``constraint_rows`` order; a speed motor holds its present position."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        offsets = self._formulation.motor_offsets(q, t)
+        return self._formulation.constraint_values(self, t, q, qd, offsets)
+
+    @property
+    def constraint_rows(self) -> list[str]:
+        """The constraint owning each row of ``constraint_values`` (by name)."""
+        cs = self._formulation.constraints
+        return [] if cs is None else list(cs.owner)
+
+    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0) -> np.ndarray:
+        """``q`` at rest with every constraint met, near ``q_guess`` (see ``mbcomp.analysis``)."""
+        from .analysis import equilibrium
+        return equilibrium(self, q_guess, tau=tau, t=t)
+
+    def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
+                  independent: Any = None):
+        """State-space ``.A``, ``.B`` in the independent coordinates (see ``mbcomp.analysis``)."""
+        from .analysis import linearize
+        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent)
+
+    def modes(self, q: Any, t: float = 0.0, tau: Any = None):
+        """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
+        from .analysis import modes
+        return modes(self, q, t=t, tau=tau)
+
+    def jacobian(self, frame: Any, q: Any, point: Any = None) -> np.ndarray:
+        """(6, n) angular then linear velocity (world) of a body point per speed (see ``mbcomp.analysis``)."""
+        from .analysis import jacobian
+        return jacobian(self, frame, q, point=point)
+
+    def inverse_dynamics(self, q: Any, qd: Any, qdd: Any, t: float = 0.0, actuated: Any = None):
+        """Generalised forces producing ``qdd`` (and the reactions; see ``mbcomp.analysis``)."""
+        from .analysis import inverse_dynamics
+        return inverse_dynamics(self, q, qd, qdd, t=t, actuated=actuated)
 
     # -- display ----------------------------------------------------------------------------------
     def equations(self):

@@ -223,3 +223,46 @@ def test_sweep_over_a_sub_model_parameter():
     for L, res in zip((0.2, 0.3, 0.5), results):
         fresh = double_pendulum(l1=L).compile().simulate(0.3, [0.2, 0.0])
         assert_close(res.q[-1], fresh.q[-1], rtol=1e-12, atol=1e-14, name=f"sweep at length {L}")
+
+
+class Telescope(mb.Submodel):
+    """A rod on a prismatic joint along z (a replacement for Link)."""
+    length = mb.Parameter(0.5, min=0.0)
+    mass = mb.Parameter(1.0, min=0.0)
+    axis = mb.Option("z")
+
+    def build(self, parent):
+        rod = self.add(mb.Body("rod", mass=self.mass, com=(0, 0, -self.length / 2)))
+        self.add(mb.Prismatic("joint", parent, rod, axis=self.axis, coords="extension"))
+        self.tip = rod.frame((0, 0, -self.length))
+
+
+class Arm(mb.Submodel):
+    """Two segments of a replaceable kind (Modelica's `replaceable`)."""
+    segment = mb.Option(Link)
+
+    def build(self, base):
+        first = self.add(self.segment("first", parent=base))
+        self.add(self.segment("second", parent=first.tip))
+
+
+def test_option_holding_a_submodel_class_replaces_the_part():
+    m = mb.Model("m")
+    m.add(Arm("arm", base=m.ground.frame()))
+    assert m.compile(backend="python").coords == ("arm.first.angle", "arm.second.angle")
+    m = mb.Model("m")
+    m.add(Arm("arm", base=m.ground.frame(), segment=Telescope))
+    s = m.compile(backend="python")
+    assert s.coords == ("arm.first.extension", "arm.second.extension")
+    # two point masses sliding along z under gravity: both fall freely
+    assert_close(s.accelerations([0.0, 0.0], [0.0, 0.0]), [-G, 0.0], atol=1e-12, name="free fall")
+
+
+def test_results_and_plots_use_nested_names(tmp_path):
+    res = double_pendulum().compile().simulate(0.2, [0.3, 0.1])
+    assert res.coords == ("upper.angle", "lower.angle")
+    assert_close(res["lower.angle"], res.q[:, 1], name="series by nested name")
+    res.to_csv(tmp_path / "r.csv")
+    assert (tmp_path / "r.csv").read_text().splitlines()[0].startswith("t,upper.angle,lower.angle,")
+    labels = [line.get_label() for ax in res.plot().axes for line in ax.lines]
+    assert "upper.angle" in labels and "lower.angle" in labels

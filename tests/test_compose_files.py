@@ -202,3 +202,28 @@ def test_info_prints_the_instance_tree(files, capsys):
     out = capsys.readouterr().out
     assert "instances\n  upper (link)  length=0.3, mass=1\n" in out
     assert "  lower (link)  length=0.2, mass=0.5\n" in out
+
+
+def test_time_expressions_in_parts_use_the_built_value(tmp_path):
+    (tmp_path / "part.toml").write_text('''[parameters]
+amp = 0.5
+[ports]
+base = "external"
+[bodies.rod]
+mass = 1.0
+com = [0.0, 0.0, -0.2]
+inertia = [0.01, 0.01, 0.001]
+[joints.j]
+type = "revolute"
+parent = "base"
+child = "rod"
+axis = "x"
+coords = "a"
+[constraints.drive]
+type = "motor"
+joint = "j"
+position = "amp*sin(t)"
+''')
+    (tmp_path / "top.toml").write_text('[submodels.p]\nuse = "part.toml"\nbase = "ground"\namp = 0.3\n')
+    res = mb.load(tmp_path / "top.toml").compile().simulate(1.0, [0.0], [0.3], t_eval=[0.5, 1.0])
+    assert_close(res["p.a"], 0.3 * np.sin([0.5, 1.0]), atol=1e-8, name="motor position")
