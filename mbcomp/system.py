@@ -417,8 +417,7 @@ class System:
         """``(M, f)``: tree mass matrix and generalised forces (gravity, springs, applied forces,
         velocity terms) with ``M qdd = f + tau + J^T lam``; constraints are not applied."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        M, f = self._dynamics(t, q, qd)
-        return self._check_finite(M, "mass matrix", q), self._check_finite(f, "generalised forces", q)
+        return self._kernel.checked_dynamics(t, q, qd)
 
     def constraint_values(self, q: Any, qd: Any = None, t: float = 0.0):
         """Every constraint equation at a state: ``.g`` (residuals), ``.J`` (Jacobian, one column
@@ -426,7 +425,7 @@ class System:
         Rows are in ``constraint_rows`` order; a speed motor holds its present position."""
         q, qd = self.state_vector(q), self._velocity(qd)
         offsets = self._formulation.motor_offsets(q, t)
-        return self._formulation.constraint_values(self, t, q, qd, offsets)
+        return self._formulation.constraint_values(self._kernel, t, q, qd, offsets)
 
     @property
     def constraint_rows(self) -> list[str]:
