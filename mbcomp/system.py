@@ -439,15 +439,15 @@ class System:
         return equilibrium(self, q_guess, tau=tau, t=t)
 
     def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
-                  independent: Any = None):
+                  independent: Any = None, states: Any = None):
         """State-space ``.A``, ``.B`` in the independent coordinates (see ``mbcomp.analysis``)."""
         from .analysis import linearize
-        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent)
+        return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent, states=states)
 
-    def modes(self, q: Any, t: float = 0.0, tau: Any = None):
+    def modes(self, q: Any, t: float = 0.0, tau: Any = None, states: Any = None):
         """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
         from .analysis import modes
-        return modes(self, q, t=t, tau=tau)
+        return modes(self, q, t=t, tau=tau, states=states)
 
     def jacobian(self, frame: Any, q: Any, point: Any = None) -> np.ndarray:
         """(6, n) angular then linear velocity (world) of a body point per speed (see ``mbcomp.analysis``)."""

@@ -213,6 +213,25 @@ def test_linearize_agrees_with_sympy_linearizer_on_a_four_bar(fourbars):
     assert_close(lin.A, np.array(A_sym, dtype=float), rtol=1e-8, atol=1e-9, name="A vs sympy Linearizer")
 
 
+def test_linearize_includes_drive_states():
+    """A DC motor on a pendulum: states theta, omega, current; the textbook model
+    I_eff w' = -m g l theta + n k i, L i' = -R i - k n w, I_eff = I + n^2 J_r."""
+    n, R, L, k, Jr, length = 10.0, 2.0, 0.01, 0.05, 1e-4, 0.5
+    model = mb.Model("servo", gravity=(0, 0, -G))
+    bob = model.add(mb.Body("bob", mass=1.0, com=(0, 0, -length)))
+    model.add(mb.Revolute("pivot", model.ground, bob, axis="x", coords="theta"))
+    model.add(mb.DCMotor("motor", "pivot", ratio=n, resistance=R, inductance=L, k=k, voltage=0.0,
+                         rotor_inertia=Jr))
+    system = model.compile()
+    lin = system.linearize([0.0], inputs="pivot")
+    assert lin.states == ("theta", "theta_dot", "motor.current")
+    inertia = length ** 2 + n ** 2 * Jr
+    expected = [[0, 1, 0], [-G * length / inertia, 0, n * k / inertia], [0, -k * n / L, -R / L]]
+    assert_close(lin.A, expected, rtol=1e-8, atol=1e-8, name="A with a motor current")
+    assert_close(lin.B, [[0], [1 / inertia], [0]], rtol=1e-10, name="B")
+    assert system.modes([0.0]).stable  # the back EMF damps the swing
+
+
 def test_linearize_rejects_bad_inputs(pendulum, fourbars):
     with pytest.raises(mb.ModelError, match="neither a joint nor a speed"):
         pendulum.linearize([0.0], inputs="nope")

@@ -19,7 +19,7 @@ class Linearization:
 
     ``states``: the independent tangent coordinates (named after their speeds; for joints
     other than ``Ball`` these are the coordinates themselves) then their speeds, named
-    ``"<speed>_dot"``.  ``inputs``: the speeds whose generalised forces are inputs (N or N m).
+    ``"<speed>_dot"``, then the states of drive elements (``"component.state"``).  ``inputs``: the speeds whose generalised forces are inputs (N or N m).
     ``basis`` (n, k) maps independent speed (or position) deviations to all speeds, so a
     deviation of all coordinates is ``basis @ z[:k]``.  ``q``, ``qd``, ``t``: the operating point.
     """
@@ -68,7 +68,8 @@ def _central(fun, z0: np.ndarray, steps: np.ndarray) -> np.ndarray:
 
 
 def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[str] | str | None = None,
-              tau: Any = None, independent: Sequence[str] | None = None, step: float = STEP) -> Linearization:
+              tau: Any = None, independent: Sequence[str] | None = None, step: float = STEP,
+              states: Any = None) -> Linearization:
     """Linearise the equations of motion about ``(q, qd)`` at time ``t`` (``tau``: constant or
     callable generalised forces kept at the operating point, e.g. holding forces).
 
@@ -82,6 +83,10 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     Derivatives are fourth-order central differences of the compiled accelerations (relative
     step ``step``; error ~1e-10 relative); ``B`` is exact (the accelerations are linear in the
     forces).  ``inputs``: joints (all their speeds) or speeds whose generalised forces are inputs.
+
+    States of drive elements (motor currents, PID integrals; ``system.extra_states``) follow
+    the mechanical ones in the state vector, at the values ``states`` (``{name: value}``,
+    default 0).
     """
     q = system.state_vector(q)
     n = len(speed_names(system))
@@ -96,22 +101,31 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     v0i = v0[ind]
     input_idx = [] if inputs is None else joint_speed_indices(system, inputs, "inputs")
 
+    extra_names = tuple(getattr(system, "extra_states", ()))
+    w0 = system.extra_state_vector(states) if extra_names else np.zeros(0)
+
     def derivative(z: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
         qz, x = chart.position(z[:k])
-        v = chart.velocity(qz, z[k:])
+        v = chart.velocity(qz, z[k:2 * k])
         extra = force_vector(system, tau, t, qz, v)
         if u is not None:
             extra = u if extra is None else extra + u
-        a = system.accelerations(qz, v, t, tau=extra)
-        return np.concatenate((chart.rate(qz, x, v)[ind], a[ind]))
+        if not extra_names:
+            a = system.accelerations(qz, v, t, tau=extra)
+            return np.concatenate((chart.rate(qz, x, v)[ind], a[ind]))
+        w = z[2 * k:]
+        a = system.accelerations(qz, v, t, tau=extra, states=w)
+        return np.concatenate((chart.rate(qz, x, v)[ind], a[ind], system.drive_outputs(t, qz, v, w)[1]))
 
-    z0 = np.concatenate((np.zeros(k), v0i))
+    z0 = np.concatenate((np.zeros(k), v0i, w0))
     f0 = derivative(z0)
-    steps = np.concatenate((np.full(k, step), step * np.maximum(1.0, np.abs(v0i))))
+    steps = np.concatenate((np.full(k, step), step * np.maximum(1.0, np.abs(v0i)),
+                            step * np.maximum(1.0, np.abs(w0))))
     A = _central(derivative, z0, steps)
     if len(names) == len(system.coords):  # speeds are coordinate rates: dx/dt = v exactly
-        A[:k] = np.hstack((np.zeros((k, k)), np.eye(k)))
-    B = np.zeros((2 * k, len(input_idx)))
+        A[:k] = 0.0
+        A[:k, k:2 * k] = np.eye(k)
+    B = np.zeros((len(z0), len(input_idx)))
     for c, j in enumerate(input_idx):
         u = np.zeros(n)
         u[j] = 1.0
@@ -119,6 +133,6 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     if not np.all(np.isfinite(A)) or not np.all(np.isfinite(B)):
         raise SimulationError(f"the linearisation is not finite at q = {format_state(q)}")
     ind_names = tuple(names[i] for i in ind)
-    return Linearization(A=A, B=B, states=ind_names + tuple(f"{s}_dot" for s in ind_names),
+    return Linearization(A=A, B=B, states=ind_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
                          inputs=tuple(names[i] for i in input_idx), independent=ind_names,
                          basis=chart.basis(q), q=q, qd=v0, t=float(t), state_derivative=f0)

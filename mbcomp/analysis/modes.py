@@ -55,11 +55,12 @@ class Modes:
         return f"Modes([{rows}], stable={self.stable})"
 
 
-def modes(system, q: Any, t: float = 0.0, tau: Any = None) -> Modes:
+def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> Modes:
     """Modes of the motion about the equilibrium ``q`` (``tau``: generalised forces held constant,
-    e.g. ``system.holding_forces(q)`` to study a pose held by constant torques).
+    e.g. ``system.holding_forces(q)`` to study a pose held by constant torques; ``states``: values
+    of drive-element states, whose eigenvalues join the mechanical ones).
     ``SimulationError`` when ``q`` is not an equilibrium (find one with ``equilibrium``)."""
-    lin = linearize(system, q, None, t=t, tau=tau)
+    lin = linearize(system, q, None, t=t, tau=tau, states=states)
     k = len(lin.independent)
     A = lin.A
     stiffness = max(1.0, float(np.linalg.norm(A[k:, :k]))) if k else 1.0
