@@ -1,10 +1,12 @@
 """Many simulations of one System: parameter studies on threads, processes or a Dask cluster."""
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Iterable, Mapping
 
 from .errors import ModelError
+from .integrators import step_hook
 from .result import Result
 
 _CASE_KEYS = {"q0", "qd0", "t_end", "parameters", "tau", "t_eval", "method", "rtol", "atol", "max_step", "dt",
@@ -33,6 +35,12 @@ def _run(system, case: dict) -> Result:
     return system.simulate(t_end, q0, qd0, **case).with_system(None)
 
 
+def _run_stoppable(system, case: dict, stop: threading.Event) -> Result:
+    """One simulation on a worker thread that ends early (SimulationError) once ``stop`` is set."""
+    with step_hook(lambda t: stop.is_set()):
+        return _run(system, case)
+
+
 def _run_many(system, cases: list) -> list:
     """Several simulations in one task."""
     return [_run(system, case) for case in cases]
@@ -51,13 +59,23 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     series included (reactions of resting contacts and motors: each Result records what
     they need).
     """
+    if isinstance(cases, (str, bytes, Mapping)) or not isinstance(cases, Iterable):
+        raise ModelError("sweep", f"cases must be a sequence of mappings of simulate() arguments, got {cases!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ModelError("sweep", f"threads must be a positive whole number or None, got {threads!r}")
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
     if client is None:
         if threads == 1 or len(cases) <= 1:
             outputs = [_run(system, case) for case in cases]
         else:
+            stop = threading.Event()
             with ThreadPoolExecutor(max_workers=threads) as pool:
-                outputs = list(pool.map(lambda case: _run(system, case), cases))
+                try:
+                    outputs = list(pool.map(lambda case: _run_stoppable(system, case, stop), cases))
+                except BaseException:
+                    stop.set()  # Ctrl-C or a failed case: running cases stop at their next check
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    raise
     else:
         # Cases go to the workers in chunks (a few per worker): scheduling a task costs
         # milliseconds, more than a short compiled simulation.

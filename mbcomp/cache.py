@@ -120,8 +120,8 @@ def _secret(directory: Path) -> bytes:
             info = None
         if info is not None:
             uid = _uid()
-            private = (stat.S_ISREG(info.st_mode) and not info.st_mode & 0o077
-                       and (uid is None or info.st_uid == uid) and info.st_size == 32)
+            private = (stat.S_ISREG(info.st_mode) and info.st_size == 32
+                       and (uid is None or (info.st_uid == uid and not info.st_mode & 0o077)))
             if private:
                 with open(path, "rb") as fh:
                     return fh.read()
@@ -211,10 +211,10 @@ def store(key: str, suffix: str, data: bytes, inputs: Mapping[str, Any]) -> Path
 # -- reading ----------------------------------------------------------------------------------
 def _private_file(path: Path) -> os.stat_result | None:
     info = os.lstat(path)
-    uid = _uid()
-    if not stat.S_ISREG(info.st_mode) or info.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+    uid = _uid()  # None where ownership and mode bits do not exist (Windows)
+    if not stat.S_ISREG(info.st_mode):
         return None
-    if uid is not None and info.st_uid != uid:
+    if uid is not None and (info.st_uid != uid or info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
         return None
     return info
 

@@ -263,15 +263,7 @@ def run_summary(model, path: Path, system, result) -> str:
 
 
 def _is_conservative(model) -> bool:
-    from .components import Constraint, Contact, Damper, Force, JointTorque, Spring, TorsionSpring
-    for comp in model.components.values():
-        if isinstance(comp, (Damper, Force, JointTorque, Contact)):
-            return False
-        if isinstance(comp, (Spring, TorsionSpring)) and comp.damping:
-            return False
-        if isinstance(comp, Constraint) and type(comp).__name__ == "Motor":
-            return False
-    return True
+    return all(comp.is_conservative() for comp in model.components.values())
 
 
 def _has_constraints(model) -> bool:
@@ -285,39 +277,32 @@ def _has_constraints(model) -> bool:
 def describe_components(model, cut_joints: Sequence[str] = ()) -> list[str]:
     """One line per component group, in the file's vocabulary (``cut_joints``: the names of
     the joints that close loops; their coordinates are not among the system's)."""
-    from .components import Body, Constraint, Contact, ForceElement, Joint
-    from .components._values import name_of
     comps = [c for c in model.components.values() if c is not model.ground]
+    by_section: dict[str, list] = {}
+    for comp in comps:
+        by_section.setdefault(comp.section, []).append(comp)
     lines = []
-    bodies = [c for c in comps if isinstance(c, Body)]
+    bodies = by_section.get("bodies", [])
     lines.append(f"bodies       {len(bodies)}: " + ", ".join(
         f"{b.name} ({b.mass:g} kg{', point mass' if b.is_point_mass else ''})" for b in bodies))
-    joints = [c for c in comps if isinstance(c, Joint)]
+    joints = by_section.get("joints", [])
     if joints:
         lines.append("joints")
         for j in joints:
-            kind = type(j).__name__.lower()
-            detail = {"revolute": lambda: f" about {_axis_text(j.axis)}", "prismatic": lambda: f" along {_axis_text(j.axis)}",
-                      "spherical": lambda: f" {j.sequence!r}",
-                      "universal": lambda: f" about {_axis_text(j.axes[0])} then {_axis_text(j.axes[1])}",
-                      "cylindrical": lambda: f" about and along {_axis_text(j.axis)}",
-                      "planar": lambda: f" normal {_axis_text(j.normal)}",
-                      "ball": lambda: " (quaternion)", "free": lambda: " (translation + quaternion)"}.get(kind, lambda: "")()
             coords = f" [{', '.join(j.coords)}]" if j.coords else ""
             if j.name in cut_joints:
                 coords = ", closes a loop"
-            lines.append(f"  {j.name}: {kind}{detail}, {name_of(j.parent)} -> {name_of(j.child)}{coords}")
-    for title, cls in (("forces", ForceElement), ("constraints", Constraint), ("contacts", Contact)):
-        group = [c for c in comps if isinstance(c, cls)]
-        lines.append(f"{title:<12} " + (", ".join(f"{c.name} ({type(c).__name__.lower()})" for c in group)
+            ends = " -> ".join(_name(ref) for ref in j.references().values())
+            lines.append(f"  {j.name}: {j.summary()}, {ends}{coords}")
+    for title in ("forces", "constraints", "contacts"):
+        group = by_section.get(title, [])
+        lines.append(f"{title:<12} " + (", ".join(f"{c.name} ({c.summary()})" for c in group)
                                          if group else "none"))
     return lines
 
 
-def _axis_text(axis) -> str:
-    from .io import _axis_value
-    value = _axis_value(axis)
-    return value if isinstance(value, str) else "(" + ", ".join(f"{c:g}" for c in value) + ")"
+def _name(ref) -> str:
+    return ref if isinstance(ref, str) else ref.name
 
 
 def numeric_equations(system, simplify: bool = False):
@@ -386,7 +371,7 @@ def cmd_info(args: argparse.Namespace) -> int:
               + (f" (loop closures: {', '.join(cut)})" if cut else ""))
         print(f"redundant    {', '.join(system.redundant_constraints) or 'none'}"
               + (" (dependent on the others, found by rank and left out)" if system.redundant_constraints else ""))
-    constraints = [c for c in model.components.values() if type(c).__name__ in ("Slider", "Motor")]
+    constraints = [c for c in model.components.values() if c.section == "constraints"]
     if not args.equations:
         return EXIT_OK
     print()

@@ -162,7 +162,17 @@ def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
             lines.append(f"    out[{k}] = {printer(e)};")
         lines.append("}")
         lines.append("")
+        lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
     return "\n".join(lines)
+
+
+#: ``name_many``: the function at ``m`` states in one call (rows of q, qd, u with the given
+#: strides in doubles; a stride of 0 repeats the first row), ``size`` outputs per row.
+MANY_TEMPLATE = """void {name}_many(long m, const double *q, long sq, const double *qd, long sqd, const double *p,
+                const double *u, long su, double *out) {{
+    for (long i = 0; i < m; ++i) {name}(q + i * sq, qd + i * sqd, p, u + i * su, out + i * {size});
+}}
+"""
 
 
 def c_accelerations(nq: int) -> str:
@@ -236,7 +246,7 @@ def generator_text() -> str:
         parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source)]
     except (OSError, TypeError):
         parts = []
-    return "\n".join([CODEGEN_VERSION, *parts])
+    return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])
 
 
 def load_python(source: str, key: str) -> dict[str, Callable]:

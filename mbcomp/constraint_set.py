@@ -101,12 +101,13 @@ class ConstraintSet:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
             J[r, self.topology.v_slice[name_of(eq.joint)].start] = 1.0  # a 1-DOF screw joint
-            if eq.speed is not None and motor_offsets is not None and r in motor_offsets:
-                g[r] = q[k] - motor_offsets[r] - eq.speed * t
-                g_t[r] = -eq.speed
-            elif eq.speed is not None:
+            speed = self.motor_speed(kernel, r)
+            if speed is not None and motor_offsets is not None and r in motor_offsets:
+                g[r] = q[k] - motor_offsets[r] - speed * t
+                g_t[r] = -speed
+            elif speed is not None:
                 g[r] = np.nan  # a speed motor without a start value constrains qd only
-                g_t[r] = -eq.speed
+                g_t[r] = -speed
             else:
                 try:
                     s, s1, s2 = _derivatives(eq.position, t, exact=self.exact_derivatives.get(r))
@@ -116,6 +117,35 @@ class ConstraintSet:
                 g_t[r] = -s1
                 bias[r] = -s2
         return ConstraintValues(g, J, g_t, bias)
+
+    def residual_series(self, kernel, t: np.ndarray, q: np.ndarray, motor_offsets: dict | None = None) -> np.ndarray:
+        """Residuals ``g`` at many samples, (m, nc): the geometric rows from one call of the
+        generated code, motor rows in numpy (NaN for speed motors without start values)."""
+        m = len(q)
+        G = np.zeros((m, self.nc))
+        rows = self.geometric_rows
+        if rows and m:
+            G[:, rows] = kernel.evaluate_series("constraints", q)[:, :len(rows)]
+        for r in self.coordinate_rows:
+            eq = self.equations[r]
+            k = self.topology.q_slice[name_of(eq.joint)].start
+            speed = self.motor_speed(kernel, r)
+            if speed is not None:
+                G[:, r] = q[:, k] - motor_offsets[r] - speed * t if motor_offsets and r in motor_offsets else np.nan
+                continue
+            try:
+                G[:, r] = q[:, k] - np.array([float(eq.position(ti)) for ti in t])
+            except Exception as exc:  # the user's callable failed
+                raise SimulationError(f"position(t) failed: {exc}", self.groups_by_row(r)) from None
+        return G
+
+    def motor_speed(self, kernel, r: int) -> float | None:
+        """The speed of the speed motor of row ``r`` with the System's parameter values (a
+        run-time change of ``motor.speed`` takes effect), None for other rows."""
+        eq = self.equations[r]
+        if not isinstance(eq, CoordinateEquation) or eq.speed is None:
+            return None
+        return float(kernel.parameters.get(f"{self.owner[r]}.speed", eq.speed))
 
     def groups_by_row(self, r: int):
         for name, comp, _ in self.groups:

@@ -39,6 +39,13 @@ class CompileError(ModelError):
     """A model whose structure cannot be compiled (collects every problem found)."""
 
 
+class UnknownNameError(ModelError, KeyError):
+    """A name that is not there (a coordinate of a Result, ...): a ``ModelError`` that is
+    also the ``KeyError`` a lookup by name is expected to raise."""
+
+    __str__ = ModelError.__str__
+
+
 class SimulationError(RuntimeError):
     """Evaluation or simulation failed: the message says which component and why."""
 

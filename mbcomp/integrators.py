@@ -11,7 +11,10 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
-FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST = 0, 1, -1, -2, -3, -5
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
+#: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
+#: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
+COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
 
 
 def _array(name: str, values) -> str:
@@ -30,6 +33,9 @@ def c_integrators(state_map) -> str:
         "#include <stdlib.h>",
         "#include <string.h>",
         "#include <float.h>",
+        "#include <time.h>",
+        f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
+        f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
         f"#define NY {nq + nv}",
         f"#define NCOORD {nq}",
         f"#define NQUAT {state_map.quat_q.size}",
@@ -89,6 +95,30 @@ static void normalize_state(double *y) {
 #endif
 }
 
+/* The step hook: called with the simulated time about every `hook_interval` s of processor
+   time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
+   around each run to react to Ctrl-C, to stop requests and to show progress. */
+typedef int (*step_hook_t)(double);
+static __thread step_hook_t step_hook = 0;
+static __thread double hook_interval = 0.0;
+static __thread clock_t hook_last = 0;
+static __thread long hook_tick = 0;
+
+void set_step_hook(step_hook_t hook, double interval) {
+    step_hook = hook;
+    hook_interval = interval;
+    hook_last = clock();
+    hook_tick = 0;
+}
+
+static int hook_says_stop(double t) {
+    if (!step_hook || (++hook_tick & 15)) return 0;
+    clock_t now = clock();
+    if ((double)(now - hook_last) < hook_interval * CLOCKS_PER_SEC) return 0;
+    hook_last = now;
+    return step_hook(t) != 0;
+}
+
 static int all_finite(const double *v, int n) {
     for (int i = 0; i < n; ++i) if (!(fabs(v[i]) <= DBL_MAX)) return 0;
     return 1;
@@ -142,7 +172,8 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
     double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
     double *F = malloc(sizeof(double) * 7 * NY);
     int status = FINISHED_CODE;
-    double t = state[0], h_abs = state[1];
+    double t = state[0], h_abs = state[1], window_t0 = state[0];
+    long window_n = 0;
     if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
     if (h_abs <= 0) {
         RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
@@ -157,6 +188,7 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
         int rejected = 0;
         double h, t_new, err;
         for (;;) {
+            if (hook_says_stop(t)) { status = -6; goto done; }
             if (h_abs < min_step) { status = -1; goto done; }
             t_new = t + h_abs;
             if (t_new > t_end) t_new = t_end;
@@ -248,6 +280,14 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
             memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
             ++*n_steps;
         }
+        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
+            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
+                status = -7;
+                goto done;
+            }
+            window_n = 0;
+            window_t0 = t;
+        }
     }
 done:
     state[0] = t;
@@ -287,6 +327,7 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
     for (long s = 0; s < n; ++s) {
         const double *y = y_out + s * NY;
         double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        if (hook_says_stop(t)) { status = -6; goto done; }
         RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
@@ -309,8 +350,12 @@ done:
 
 
 # -- Python drivers ------------------------------------------------------------------------------
+import contextlib  # noqa: E402
 import ctypes  # noqa: E402
+import signal  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
+from typing import Callable, Iterator  # noqa: E402
 
 from .errors import ModelError, SimulationError  # noqa: E402
 
@@ -339,6 +384,112 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
     if callable(tau):
         return "tau is a callable"
     return None
+
+
+# -- the step hook: Ctrl-C, stop requests and progress inside compiled loops -------------------
+#: Processor time (s) between two calls of the hook from a compiled loop.
+HOOK_INTERVAL = 0.05
+_HOOK_TYPE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
+_hooks = threading.local()  # this thread's callbacks (step_hook)
+try:
+    _check_signals = ctypes.pythonapi.PyErr_CheckSignals  # runs Python's handlers: Ctrl-C raises here
+    _check_signals.argtypes, _check_signals.restype = [], ctypes.c_int
+except AttributeError:  # not CPython: handlers still run when the hook's own code executes
+    _check_signals = None
+
+
+@contextlib.contextmanager
+def step_hook(callback: Callable[[float], bool], interval: float = HOOK_INTERVAL) -> Iterator[None]:
+    """Within the block, compiled loops run by this thread call ``callback(t)`` (t: the
+    simulated time reached, s) about every ``interval`` seconds of processor time; a true
+    return stops the run with a ``SimulationError``.  For progress displays and for stopping
+    runs from another thread (``sweep`` uses it to stop its workers)."""
+    stack = _hooks.__dict__.setdefault("stack", [])
+    stack.append((callback, float(interval)))
+    try:
+        yield
+    finally:
+        stack.remove((callback, float(interval)))
+
+
+def poll_step_hooks(t: float) -> None:
+    """For Python-stepped loops: call this thread's ``step_hook`` callbacks once; raise
+    ``SimulationError`` when one asks to stop."""
+    for callback, _ in getattr(_hooks, "stack", ()):
+        if callback(t):
+            raise SimulationError(f"stopped at t = {t:.6g} s by a step hook")
+
+
+class _Hook:
+    """What a compiled loop calls back: notes Ctrl-C (main thread), then asks this thread's
+    ``step_hook`` callbacks.  Python runs signal handlers when the hook's code starts, where
+    an exception could not cross the C loop: so during a run SIGINT only sets a flag, and
+    the previous handler (``KeyboardInterrupt`` by default) gets the signal once the loop has
+    returned."""
+
+    def __init__(self):
+        self.callbacks = list(getattr(_hooks, "stack", ()))
+        self.interval = min([HOOK_INTERVAL] + [interval for _, interval in self.callbacks])
+        self.main = threading.current_thread() is threading.main_thread()
+        self.previous = None      # the SIGINT handler to restore (when one was replaced)
+        self.signal = None        # (signum, frame) of a SIGINT received during the run
+        self.error: BaseException | None = None
+        self.pointer = _HOOK_TYPE(self)  # kept alive with this object
+
+    def __call__(self, t: float) -> int:
+        try:
+            if self.main and _check_signals is not None:
+                _check_signals()
+            if self.signal is not None:
+                return 1
+            return int(any(callback(t) for callback, _ in self.callbacks))
+        except BaseException as exc:  # noqa: BLE001 - re-raised by stopped()
+            self.error = exc
+            return 1
+
+    def _on_sigint(self, signum, frame) -> None:
+        self.signal = (signum, frame)
+
+    def install(self, lib) -> None:
+        if self.main:
+            try:
+                previous = signal.getsignal(signal.SIGINT)
+                if callable(previous):
+                    signal.signal(signal.SIGINT, self._on_sigint)
+                    self.previous = previous
+            except ValueError:  # not the main interpreter
+                pass
+        setter = lib.set_step_hook
+        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
+        setter(self.pointer, self.interval)
+
+    def remove(self, lib) -> None:
+        """Unset the hook, restore the SIGINT handler and deliver a pending Ctrl-C to it."""
+        lib.set_step_hook(_HOOK_TYPE(), 0.0)
+        self._deliver()
+
+    def _deliver(self, where: str = "") -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+        previous, self.previous = self.previous, None
+        pending, self.signal = self.signal, None
+        if pending is not None and previous is not None:
+            try:
+                previous(*pending)  # the default handler raises KeyboardInterrupt
+            except BaseException as exc:
+                if where and hasattr(exc, "add_note"):
+                    exc.add_note(where)
+                raise
+
+    def stopped(self, t: float, method: str):
+        """Raise for a run the hook stopped at simulated time ``t``."""
+        where = f"compiled {method} interrupted at t = {t:.6g} s"
+        self._deliver(where)
+        if self.error is not None:
+            if hasattr(self.error, "add_note"):
+                self.error.add_note(where)
+            raise self.error
+        raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
 
 
 def _bind(lib):
@@ -377,6 +528,22 @@ def compiled_jacobian(kernel, tau):
     return jac
 
 
+def _diagnose(kernel, t: float, y: np.ndarray, method: str) -> None:
+    """Evaluate the tree accelerations at the state the compiled loop stopped at through the
+    checked Python path, which names the cause (a zero-length spring, a singular joint)."""
+    n = kernel.nq
+    if not np.all(np.isfinite(y)):
+        return
+    when = f"at t = {t:.6g} s" if np.isfinite(t) else "during the run"
+    q, qd = y[:n], y[n:]
+    try:
+        kernel.tree_solve(*kernel.checked_dynamics(t if np.isfinite(t) else 0.0, q, qd), q)
+    except SimulationError as exc:
+        raise SimulationError(f"compiled {method} stopped {when}: {exc}") from None
+    except ModelError:
+        pass
+
+
 def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
     n = kernel.nq
     if status == RANK_LOST:
@@ -384,12 +551,50 @@ def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
+    if status in (SINGULAR, NOT_FINITE):
+        _diagnose(kernel, t, y, method)
     if status == SINGULAR:
-        kernel.tree_solve(*kernel.dynamics(t, y[:n], y[n:]), y[:n])  # raises with the diagnosis
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
+    if status == COLLAPSED:
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
+
+
+class CollapseWatch:
+    """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
+    that window's pace the rest of the interval would need more than ``limit`` steps, or more
+    than ``limit / 10`` while the pace has fallen a thousandfold below the run's best (a state
+    running away, not a model that needs small steps throughout)."""
+
+    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
+        self.t_end, self.window, self.limit = t_end, window, limit
+        self.t0, self.n, self.best = t0, 0, 0.0
+        self.projected = 0.0  # steps the rest of the run would need at the last window's pace
+
+    def collapsed(self, t: float) -> bool:
+        self.n += 1
+        if self.n < self.window:
+            return False
+        pace, self.t0, self.n = (t - self.t0) / self.window, t, 0
+        self.best = max(self.best, pace)
+        rest = self.t_end - t
+        self.projected = rest / pace if pace > 0 else float("inf")
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 10 * pace and pace < 1e-3 * self.best))
+
+
+def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
+                     projected: float = COLLAPSE_STEPS) -> str:
+    """Why a run whose step size collapsed gave up, and the largest speed it reached."""
+    speeds = np.abs(np.asarray(speeds, dtype=float))
+    largest = ""
+    if speeds.size:
+        i = int(speeds.argmax())
+        largest = f"; largest speed {speeds[i]:.3g} ({names[i] if len(names) == speeds.size else f'speed {i}'})"
+    return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
+            f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
+            f"(check the initial state and the forces)")
 
 
 class RankLost(Exception):
@@ -406,6 +611,15 @@ def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndar
 
 
 def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+    finally:
+        hook.remove(lib)
+
+
+def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
     run, rk4 = _bind(lib)
     ny = kernel.nq + kernel.nv
     p = kernel.p
@@ -423,8 +637,10 @@ def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         counts = np.zeros(3, dtype=np.int64)
         status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
                      counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(kernel, status, float("nan"), y, method)
+            _fail(kernel, status, counts[1] * dt, out[counts[1]], method)
         t = np.arange(steps + 1) * dt
         if t_eval is not None:
             out, t = _hermite(kernel, t, out, t_eval, tau_arr), np.asarray(t_eval)
@@ -444,6 +660,8 @@ def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
         status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                      rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                      None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(state[0], method)
         if status:
             _fail(kernel, status, state[0], y, method)
         times, values = t_out, y_out
@@ -462,6 +680,8 @@ def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step,
             if status == BUFFER_FULL:
                 cap = min(cap * 4, 1 << 20)
                 continue
+            if status == STOPPED:
+                hook.stopped(state[0], method)
             if status:
                 _fail(kernel, status, state[0], y, method)
             break

@@ -68,7 +68,10 @@ class Kernel:
         if callable(tau):
             from .components.forces import checked_output
             return checked_output("tau", tau(t, q, qd), self.nv)
-        arr = np.asarray(tau, dtype=float).reshape(-1)
+        try:
+            arr = np.asarray(tau, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}") from None
         if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
             raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
         return arr
@@ -126,6 +129,13 @@ class Kernel:
         constraint equations (loops and sliders)."""
         out = self.layout.unpack("constraints", self.call("constraints", q, qd))
         return out["residual"], out["jacobian"], out["bias"]
+
+    def evaluate_series(self, name: str, q: np.ndarray, qd: np.ndarray | None = None) -> np.ndarray:
+        """The generated function ``name`` at many states (rows of ``q`` (m, nq) and ``qd``
+        (m, nv); zero speeds when None) in one call: (m, size)."""
+        q = np.asarray(q, dtype=float)
+        qd = np.zeros((len(q), self.nv)) if qd is None else np.asarray(qd, dtype=float)
+        return self.compiled.functions.many(name, q, qd, self.p, np.zeros(self.n_inputs))
 
     def drive_outputs(self, t: float, q: np.ndarray, qd: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(tau_drive, z_rates)``: the drive elements' generalised forces (nv) and the rates

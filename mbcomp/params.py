@@ -19,7 +19,7 @@ import numpy as np
 from .errors import ModelError
 
 __all__ = ["Check", "ParameterSpec", "ParameterError", "REQUIRED", "validate", "finite", "positive", "nonnegative",
-           "in_range", "unit_vector", "spd_inertia", "spec_of"]
+           "in_range", "unit_vector", "spd_inertia", "spec_of", "axis_name"]
 
 
 class _Required:
@@ -82,6 +82,18 @@ def _axis_name(value: Any) -> Any:
     return value
 
 
+def axis_name(axis: Any) -> Any:
+    """``"x"``, ``"-y"``, ... for a signed coordinate axis, else the vector as a list."""
+    values = tuple(float(c) for c in axis)
+    for i, letter in enumerate("xyz"):
+        unit = tuple(float(j == i) for j in range(3))
+        if values == unit:
+            return letter
+        if values == tuple(-c + 0.0 for c in unit):
+            return "-" + letter
+    return list(values)
+
+
 def _unit(arr: np.ndarray) -> tuple:
     """``arr`` scaled to unit length without overflow or underflow (exact axes stay exact)."""
     with np.errstate(all="ignore"):
@@ -108,18 +120,17 @@ def _inertia_problem(arr: np.ndarray) -> "str | None":
     if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
         return "matrix is not symmetric"
     try:
-        with np.errstate(all="ignore"):
-            moments = np.linalg.eigvalsh(0.5 * (unit + unit.T)) * scale
+        a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
     except np.linalg.LinAlgError:
         return "has no computable principal moments"
+    with np.errstate(all="ignore"):
+        moments = np.array([a, b, c]) * scale
     if not np.all(np.isfinite(moments)):
         return "is too large to handle (its principal moments overflow)"
-    tol = 1e-9 * scale
-    if moments[0] < -tol:
+    if a < -1e-9:
         return f"is not positive semi-definite (principal moments {_show(moments)})"
-    a, b, c = moments
-    if c > a + b + tol:
-        return f"violates the triangle inequality: principal moment {c:g} > {a:g} + {b:g}"
+    if c > a + b + 1e-9:
+        return f"violates the triangle inequality: principal moment {moments[2]:g} > {moments[0]:g} + {moments[1]:g}"
     return None
 
 

@@ -13,9 +13,6 @@ __all__ = ["plot_result", "animate_result", "render_frame", "work_precision_plot
 
 PLOT_KINDS = ("q", "qd", "energy", "drift", "reactions")
 
-# Joint types whose coordinates are lengths (m); every other coordinate is an angle (rad).
-_LENGTH_JOINTS = ("Prismatic",)
-
 # Floor for log-scale drift plots: exact zeros (an unconstrained sample) cannot be drawn.
 _DRIFT_FLOOR = 1e-17
 
@@ -73,13 +70,7 @@ def _reaction_unit(system, name: str) -> str:
     """Unit of the reaction of constraint ``name``: motor torque/force, slider force, loop forces."""
     topology = system.topology
     comp = topology.components.get(name)
-    kind = type(comp).__name__
-    if kind == "Motor":
-        joint = topology.resolve(comp.joint)
-        return "N" if type(joint).__name__ in _LENGTH_JOINTS else "N m"
-    if kind == "Slider":
-        return "N"
-    return "N, N m"
+    return comp.reaction_unit(topology.resolve) if comp is not None else "N, N m"
 
 
 def _parse_what(what: str | Sequence[str]) -> list[str]:
@@ -324,14 +315,14 @@ class _Scene:
             self.joint_marks.extend((a, b))
             self.links.append((a, b))
         for comp in getattr(topology, "forces", ()):
-            if hasattr(comp, "body_a") and hasattr(comp, "body_b"):
-                a = attach(comp.body_a, _local(system, comp, "point_a"))
-                b = attach(comp.body_b, _local(system, comp, "point_b"))
+            ends = [role for role, how in comp.refs.items() if how == "attachment"]
+            if len(ends) == 2:
+                a, b = (attach(getattr(comp, f"body_{role}"), _local(system, comp, f"point_{role}")) for role in ends)
                 self.springs.append((a, b))
         for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
             if hasattr(comp, "body") and hasattr(comp, "point"):
                 attach(comp.body, _local(system, comp, "point"))
-            if type(comp).__name__ == "Slider":
+            if comp.kind == "slider":
                 self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
         for k, body in enumerate(self.bodies):
             com = add(body, _local(system, body, "com"))

@@ -25,15 +25,14 @@ def energy(system: Any, result: Any) -> Energy:
     system = bound_system(system, result)
     if len(result.t) == 0:
         return Energy(np.zeros(0), np.zeros(0))
-    values = [system.energy(q, qd, t) for t, q, qd in zip(result.t, result.q, result.qd)]
-    return Energy(np.array([e.kinetic for e in values]), np.array([e.potential for e in values]))
+    return system.energy_series(result.q, result.qd)
 
 
 def constraint_violation(system: Any, result: Any) -> np.ndarray:
     """max |C(q, t)| per sample (zeros for a model without constraints); speed motors are
     measured from the run's own start values."""
     system = bound_system(system, result)
-    return np.array([system.constraint_violation(q, t, offsets=result.offsets) for t, q in zip(result.t, result.q)])
+    return system.constraint_violation_series(result.t, result.q, result.offsets)
 
 
 def reactions(system: Any, result: Any) -> dict[str, np.ndarray]:

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import csv
+import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from .errors import ModelError, UnknownNameError
 from .services import service
 
 
@@ -114,6 +116,9 @@ class Result:
         """The series of coordinate ``name``, of a speed that is not a coordinate's rate (a
         ball's ``NAME_wx``), or ``name_d`` / ``"d" + name`` for a coordinate's speed."""
         coords, speeds = list(self.coords), list(self.speeds)
+        if not isinstance(name, str):
+            raise UnknownNameError("Result", f"a series is named by a coordinate name (str), got {name!r}; "
+                                             f"coordinates are {coords}")
         if name in coords:
             return self.q[:, coords.index(name)]
         if name in speeds:
@@ -123,7 +128,7 @@ class Result:
         for speed in (name[:-2] if name.endswith("_d") else None, name[1:] if name.startswith("d") else None):
             if speed in speeds:
                 return self.qd[:, speeds.index(speed)]
-        raise KeyError(f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}"
+        raise UnknownNameError("Result", f"no coordinate or speed {name!r}; coordinates are {coords}, speeds {speeds}"
                        + (f", states {list(self.extra_states)}" if self.extra_states else ""))
 
     def energy(self) -> Energy:
@@ -149,6 +154,8 @@ class Result:
         header = (["t"] + list(self.coords) + [f"{c}_d" if c in self.coords else c for c in self.speeds]
                   + list(self.extra_states) + ["kinetic", "potential", "total"])
         z = self._z()
+        if not isinstance(path, (str, os.PathLike)):
+            raise ModelError("to_csv", f"path must be a file name (str or path), got {path!r}")
         with open(path, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)

@@ -9,11 +9,13 @@ import numpy as np
 from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.ivp import METHODS
 
+from . import checks
 from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
-from .integrators import RankLost, compiled_jacobian, run_compiled, why_not_compiled
+from .integrators import (CollapseWatch, RankLost, collapse_message, compiled_jacobian, poll_step_hooks, run_compiled,
+                          why_not_compiled)
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
@@ -53,20 +55,17 @@ def solver_class(method: Any) -> type[OdeSolver]:
     raise ModelError("simulate", f"method must be one of {sorted(METHODS)} or an OdeSolver subclass, got {method!r}")
 
 
-def check_settings(t_end, rtol, atol, t_eval):
-    try:
-        t_end = float(t_end)
-    except (TypeError, ValueError):
-        raise ModelError("simulate", f"t_end must be a number, got {t_end!r}") from None
-    if not np.isfinite(t_end) or t_end <= 0:
-        raise ModelError("simulate", f"t_end must be positive and finite, got {t_end}")
-    for name, value in (("rtol", rtol), ("atol", atol)):
-        if not (np.isfinite(value) and value > 0):
-            raise ModelError("simulate", f"{name} must be positive, got {value}")
+def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_speed=1e-4):
+    """The numeric settings of a run, checked (``ModelError`` naming the argument)."""
+    t_end = checks.number(t_end, "t_end", positive=True)
+    rtol = checks.number(rtol, "rtol", positive=True)
+    atol = checks.number(atol, "atol", positive=True)
+    checks.number(max_step, "max_step", positive=True, finite=False)
+    checks.number(rest_speed, "rest_speed", nonnegative=True)
+    if dt is not None:
+        dt = checks.number(dt, "dt", positive=True)
     if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float).reshape(-1)
-        if np.any(t_eval < 0) or np.any(t_eval > t_end) or np.any(np.diff(t_eval) <= 0):
-            raise ModelError("simulate", "t_eval must be increasing times within [0, t_end]")
+        t_eval = checks.time_grid(t_eval, t_end)
     return t_end, t_eval
 
 
@@ -135,14 +134,14 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds; ``z0`` the
     drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
     ``System.simulate``.  The Result carries no System (the caller binds one)."""
-    t_end, t_eval = check_settings(t_end, rtol, atol, t_eval)
+    t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     if tau is not None and not callable(tau):
         kernel.tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
         raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
-    if not (max_step > 0):
-        raise ModelError("simulate", f"max_step must be positive, got {max_step}")
+    if dt is not None:  # fixed steps: every step is stored
+        checks.output_size(t_end / dt + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
     reason = why_not_compiled(kernel, formulation, method, tau) if integrator != "scipy" else "integrator='scipy'"
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
@@ -210,6 +209,7 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
     gaps_old = watch.gaps(q0, qd0).g if watch else None
+    collapse = CollapseWatch(0.0, t_end)
     try:
         solver = make_solver(0.0, workspace.y0)
         retries = 0
@@ -242,6 +242,11 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
                 corrected = workspace.after_step(t, solver.y)
                 recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
             bar.update(t)
+            poll_step_hooks(t)
+            if collapse.collapsed(t):
+                q_now, qd_now = workspace.full_state(t, solver.y)
+                raise SimulationError(collapse_message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
+                                                       system.coords, collapse.window, collapse.projected))
             if restart is None and solver.status == "finished":
                 break
             if restart is None:

@@ -7,6 +7,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .components._values import name_of
+from . import checks
 from .constraint_set import cross
 from .errors import ModelError
 from .kernel import Kernel
@@ -188,6 +189,10 @@ class System:
         """``{"component.attribute": value}`` (a copy; use ``with_parameters`` to change)."""
         return dict(self._parameters)
 
+    def parameter(self, key: str, default: Any = None) -> Any:
+        """The value of one parameter ``"component.attribute"`` (no copy of the whole table)."""
+        return self._parameters.get(key, default)
+
     @property
     def backend(self) -> str:
         return self._compiled.functions.name
@@ -202,6 +207,8 @@ class System:
         Each value is checked by the same ``ParameterSpec`` validation as the component's
         constructor (``mbcomp.params.validate``); a ``ModelError`` names the component and
         the attribute."""
+        if values is not None and not isinstance(values, Mapping):
+            raise ModelError("parameters", f"must be a mapping {{'component.attribute': value}}, got {values!r}")
         if not values:
             return self
         derivation = getattr(self._compiled, "derivation", None)
@@ -319,6 +326,30 @@ class System:
         kinetic, potential = self._kernel.call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
 
+    def evaluate_series(self, name: str, q: Any, qd: Any = None, what: str = "evaluate_series") -> np.ndarray:
+        """The generated function ``name`` ("energy", "constraints", "kinematics", ...) at many
+        states (rows of ``q`` (m, nq), ``qd`` (m, nv); zero speeds when None) in one call: (m, size)."""
+        q = np.asarray(q, dtype=float)
+        qd = np.zeros((len(q), self.nv)) if qd is None else np.asarray(qd, dtype=float)
+        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq or qd.shape[1] != self.nv:
+            raise ModelError(what, f"q and qd must be (m, {self.nq}) and (m, {self.nv}) arrays of states, got "
+                             f"shapes {q.shape} and {qd.shape}")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            raise ModelError(what, "the states must be finite")
+        return self._kernel.evaluate_series(name, q, qd)
+
+    def energy_series(self, q: Any, qd: Any) -> Energy:
+        """Kinetic and potential energy (J) at many states (rows of ``q``, ``qd``): arrays of
+        shape (m,), from one call of the generated code."""
+        out = self.evaluate_series("energy", q, qd, what="energy_series")
+        return Energy(out[:, 0].copy(), out[:, 1].copy())
+
+    def constraint_violation_series(self, t: Any, q: Any, offsets: dict | None = None) -> np.ndarray:
+        """max |g(q, t)| at many samples (``t`` (m,), rows of ``q``): the geometric rows
+        from one call of the generated code."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        return self._formulation.constraint_violation_series(self._kernel, t, np.asarray(q, dtype=float), offsets)
+
     def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
                    tau: Any = None) -> BodyState:
         """Position, velocity, acceleration of the COM (or body ``point``, m, body frame),
@@ -328,7 +359,8 @@ class System:
             raise ModelError(f"body {name!r}", "is not a body of this model")
         q, qd = self.state_vector(q), self._velocity(qd)
         comp = self.topology.components[name]
-        local = np.asarray(comp.com if point is None else point, dtype=float)
+        local = np.asarray(comp.com, dtype=float) if point is None else checks.vector(
+            point, 3, "point", where=f"body_state of {name!r}")
         if point is None and name in (b.name for b in self.topology.bodies):
             local = np.asarray(self._parameters[f"{name}.com"], dtype=float)
         if comp is self.topology.ground:

@@ -78,7 +78,7 @@ def index(system, name):
 # One check per model
 # ----------------------------------------------------------------------------------------------
 def check_arm3d(model, system):
-    # arm3d.c.torques (shared/reference/seed_cases.json): holding torques at q = (110, -20, -20)
+    # arm3d.c.torques (tests/data/seed_cases.json): holding torques at q = (110, -20, -20)
     # deg, independent of rotational inertia; the library file starts there.
     q0, _ = initial_state(model, system)
     np.testing.assert_allclose(q0, np.radians([110, -20, -20]), rtol=0, atol=1e-15)

@@ -1,4 +1,4 @@
-"""The course's reference numbers (``shared/reference/seed_cases.json``), reproduced.
+"""The course's reference numbers (``tests/data/seed_cases.json``), reproduced.
 
 Every case is built with mbcomp's public API exactly as a user would (API.md's arm
 example; the planar double pendulum with relative joint angles) and compared with the
@@ -6,13 +6,15 @@ case's expected values at the case's own tolerance.  The same numbers are also c
 against the independent sympy oracle in ``independent.py``, which validates the oracle
 used by ``test_equations_independent.py``.
 
-The JSON file lives outside the package, in the ``shared`` folder beside the project
-root (or in ``$MBCOMP_REFERENCE_DIR``); without it these tests skip.
+The JSON file ships with the tests (``tests/data``), so every clone runs every case.  The
+models: the 3D arm of API.md's example (3 kg parts, shoulder Rx(alpha) Ry(beta), elbow about
+the upper arm's x at (0, 0, -0.3)) and a planar double pendulum of two uniform bars (L = 0.55 m,
+gravity along +x, absolute angles in the course, relative joint angles here), with a slider
+and a spring variant; each case states its own tolerance.
 """
 from __future__ import annotations
 
 import json
-import os
 import re
 from pathlib import Path
 
@@ -34,36 +36,26 @@ SLIDER_PREFIXES = ("dpend.A2e", "dpend.A2f")
 # ----------------------------------------------------------------------------------
 # Loading the cases
 # ----------------------------------------------------------------------------------
-def reference_path() -> Path | None:
-    """The reference JSON: beside the project root, else in $MBCOMP_REFERENCE_DIR."""
-    beside_root = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / REFERENCE_FILE
-    if beside_root.is_file():
-        return beside_root
-    env = os.environ.get("MBCOMP_REFERENCE_DIR")
-    if env and (Path(env) / REFERENCE_FILE).is_file():
-        return Path(env) / REFERENCE_FILE
-    return None
+def reference_path() -> Path:
+    """The reference JSON shipped with the tests."""
+    return Path(__file__).resolve().parent / "data" / REFERENCE_FILE
 
 
 def load_cases() -> dict[str, dict]:
-    """All cases by id ({} when the reference file is missing)."""
-    path = reference_path()
-    if path is None:
-        return {}
-    with open(path, encoding="utf-8") as fh:
+    """All cases by id."""
+    with open(reference_path(), encoding="utf-8") as fh:
         return {case["id"]: case for case in json.load(fh)["cases"]}
 
 
 CASES = load_cases()
-MISSING = ("reference numbers not found: expected shared/reference/seed_cases.json beside the "
-           "project root, or set MBCOMP_REFERENCE_DIR to the folder holding seed_cases.json")
+MISSING = "no reference case matches (tests/data/seed_cases.json changed?)"
 
 
 def case_ids(prefixes: tuple[str, ...]) -> list:
-    """Ids of the cases whose id starts with one of ``prefixes`` (a skipping placeholder
-    when the file is missing, so the tests report why they did not run)."""
+    """Ids of the cases whose id starts with one of ``prefixes`` (there must be some)."""
     ids = [cid for cid in CASES if cid.startswith(prefixes)]
-    return ids or [pytest.param(None, marks=pytest.mark.skip(reason=MISSING), id="no-reference-file")]
+    assert ids, f"{prefixes}: {MISSING}"
+    return ids
 
 
 def assert_case_close(actual, expected, case: dict, what: str) -> None:
@@ -75,8 +67,6 @@ def assert_case_close(actual, expected, case: dict, what: str) -> None:
 
 def test_every_case_is_covered():
     """New cases in the file must get a handler here rather than be silently ignored."""
-    if not CASES:
-        pytest.skip(MISSING)
     uncovered = [cid for cid in CASES if not cid.startswith(FREE_PREFIXES + SLIDER_PREFIXES)]
     assert not uncovered, f"reference cases without a test: {uncovered}"
 

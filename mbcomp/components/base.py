@@ -17,8 +17,9 @@ def component_class(kind: str) -> type | None:
 
 
 def kinds_in(section: str) -> dict[str, type]:
-    """``{kind: class}`` of the classes whose file form lives in ``section`` ("joints", ...)."""
-    return {k: c for k, c in KINDS.items() if c.section == section}
+    """``{kind: class}`` of the classes with a file form (``file_keys``) in model file
+    section ``section`` ("joints", ...), in registration order."""
+    return {k: c for k, c in KINDS.items() if c.section == section and c.file_keys}
 
 
 class FrozenComponentError(ModelError, AttributeError):
@@ -40,12 +41,31 @@ class Component:
 
     Class attributes: ``kind`` (registry key, the file's ``type``), ``section`` (the
     model file table holding this kind: ``"bodies"``, ``"joints"``, ``"forces"``,
-    ``"constraints"``, ``"contacts"``), ``params``.
+    ``"constraints"``, ``"contacts"``), ``params``, and the file form that the generic
+    reader and writer (``mbcomp.fileform``) follow:
+
+    - ``file_keys``: the keys of the component's file table (besides ``type``), in the
+      order they are written; each is a reference role (``refs``), a declared parameter
+      (read as the spec says: number, 3-vector, axis, inertia, time input) or an option
+      (``file_options``);
+    - ``file_required``: the keys a file must give;
+    - ``refs``: ``{role: "body" | "joint" | "attachment"}``; an attachment is a body
+      name or ``{body = "...", point = [...]}`` and its point is the parameter
+      ``point_<role>``;
+    - ``file_options``: ``{key: "names" | "string" | "time" | "rotation"}`` for values
+      that are not parameters (coordinate names, an Euler sequence, an expression of t,
+      a frame rotation);
+    - ``from_file(name, values)``: builds the component from the values read (by
+      default ``cls(name, **values)``).
     """
 
     kind: ClassVar[str] = ""
     section: ClassVar[str] = ""
     params: ClassVar[tuple[ParameterSpec, ...]] = ()
+    refs: ClassVar[dict[str, str]] = {}
+    file_keys: ClassVar[tuple[str, ...]] = ()
+    file_required: ClassVar[tuple[str, ...]] = ()
+    file_options: ClassVar[dict[str, str]] = {}
     parameters: ClassVar[tuple[str, ...]] = ()
     _specs: ClassVar[dict[str, ParameterSpec]] = {}
 
@@ -91,6 +111,17 @@ class Component:
                              "make a new component instead")
         object.__setattr__(self, attr, value)
 
+    @classmethod
+    def from_file(cls, name: str, values: dict[str, Any]) -> "Component":
+        """The component a model file describes (``values``: file key -> value read)."""
+        return cls(name, **values)
+
+    def file_value(self, key: str) -> Any:
+        """The value the writer stores under file key ``key`` (an attachment: ``(body, point)``)."""
+        if self.refs.get(key) == "attachment":
+            return getattr(self, f"body_{key}"), getattr(self, f"point_{key}")
+        return getattr(self, key, None)
+
     def freeze(self) -> None:
         """Make this component read-only (the compiler's copies; see ``mbcomp.flatten``)."""
         object.__setattr__(self, "_frozen", True)
@@ -118,6 +149,16 @@ class Component:
         """What, besides names and references, decides the generated code (axes, shapes)."""
         return ()
 
+    def is_conservative(self) -> bool:
+        """False when the component adds or removes energy (dampers, driven inputs, motors,
+        impacts): the energy of a model made only of conservative components is constant."""
+        return True
+
+    def summary(self) -> str:
+        """A short description for listings (``"revolute about x"``): the kind and what
+        distinguishes it."""
+        return self.kind or type(self).__name__.lower()
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
 
@@ -135,6 +176,9 @@ class ForceElement(Component):
     def _loads(self, kin) -> list:
         raise NotImplementedError
 
+    def is_conservative(self) -> bool:
+        return False
+
     def _potential(self, kin):
         return 0
 
@@ -146,3 +190,7 @@ class Constraint(Component):
     """
 
     n_equations: ClassVar[int] = 0
+
+    def reaction_unit(self, resolve) -> str:
+        """Unit of this constraint's reaction (``resolve(ref)`` gives referenced components)."""
+        return "N, N m"

@@ -33,6 +33,9 @@ class Body(Component):
                       doc="inertia about the COM in the body frame (principal values or 3x3; None: point mass)"),
     )
 
+    file_keys = ("mass", "com", "inertia")
+    file_required = ("mass",)
+
     def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None):
         super().__init__(name)
         self.mass = mass

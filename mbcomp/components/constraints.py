@@ -5,7 +5,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, describe
 from ..params import ParameterSpec, unit_vector
 from ..rotations import AXIS_NAMES
 from .base import Constraint
@@ -39,6 +39,9 @@ class Slider(Constraint):
               ParameterSpec("origin", (3,), "m", default=(0.0, 0.0, 0.0), doc="a point of the line, world frame"),
               ParameterSpec("axis", (3,), "", unit_vector, default="x", structural=True,
                             doc="direction of the line, world frame"))
+    refs = {"body": "body"}
+    file_keys = ("body", "point", "origin", "axis")
+    file_required = ("body", "axis")
 
     def __init__(self, name: str, body: Any, point: Any = None, origin: Any = (0.0, 0.0, 0.0), axis: Any = "x"):
         super().__init__(name)
@@ -49,6 +52,9 @@ class Slider(Constraint):
 
     def references(self):
         return {"body": self.body}
+
+    def reaction_unit(self, resolve) -> str:
+        return "N"
 
     def structure(self):
         return (self.axis,)
@@ -70,6 +76,10 @@ class Motor(Constraint):
     n_equations = 1
     params = (ParameterSpec("speed", (), "rad/s or m/s", default=None, optional=True,
                             doc="constant speed of the joint coordinate (None when position is given)"),)
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "speed", "position")
+    file_required = ("joint",)
+    file_options = {"position": "time"}
 
     def __init__(self, name: str, joint: Any, position: Callable[[float], float] | None = None,
                  speed: float | None = None):
@@ -84,6 +94,20 @@ class Motor(Constraint):
 
     def references(self):
         return {"joint": self.joint}
+
+    def check(self, resolved: dict) -> list[str]:
+        """Problems against the resolved references (``{"joint": Joint}``); sets nothing."""
+        joint = resolved["joint"]
+        if joint.n_coords != 1:
+            return [f"{describe(self)}: needs a 1-DOF joint, {describe(joint)} has {joint.n_coords} coordinates"]
+        return []
+
+    def is_conservative(self) -> bool:
+        return False  # it does work on the system
+
+    def reaction_unit(self, resolve) -> str:
+        """N m for a rotation, N for a translation (the driven coordinate's generalised force)."""
+        return "N" if resolve(self.joint).coord_units[0] == "m" else "N m"
 
     def structure(self):
         return ("position" if self.position is not None else "speed",)

@@ -22,6 +22,9 @@ class Contact(Component):
               ParameterSpec("origin", (3,), "m", default=(0.0, 0.0, 0.0), doc="a point of the plane, world frame"),
               ParameterSpec("restitution", (), "", in_range(0.0, 1.0), default=0.0,
                             doc="Newton's coefficient of restitution"))
+    refs = {"body": "body"}
+    file_keys = ("body", "point", "normal", "origin", "restitution")
+    file_required = ("body", "normal")
 
     def __init__(self, name: str, body: Any, point: Any = None, normal: Any = (0.0, 0.0, 1.0),
                  origin: Any = (0.0, 0.0, 0.0), restitution: float = 0.0):
@@ -34,6 +37,9 @@ class Contact(Component):
 
     def references(self):
         return {"body": self.body}
+
+    def is_conservative(self) -> bool:
+        return False  # impacts dissipate (restitution < 1) and resting contact is not tracked in the energy
 
     def structure(self):
         return (self.normal,)

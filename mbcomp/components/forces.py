@@ -41,6 +41,7 @@ class _TwoPointElement(ForceElement):
     """Shared geometry of elements acting along the line between two body points."""
 
     section = "forces"
+    refs = {"a": "attachment", "b": "attachment"}
 
     def __init__(self, name: str, a: Any, b: Any):
         super().__init__(name)
@@ -90,12 +91,17 @@ class Spring(_TwoPointElement):
               ParameterSpec("stiffness", (), "N/m", nonnegative),
               ParameterSpec("rest_length", (), "m", nonnegative, default=0.0),
               ParameterSpec("damping", (), "N s/m", nonnegative, default=0.0))
+    file_keys = ("a", "b", "stiffness", "rest_length", "damping")
+    file_required = ("a", "b", "stiffness")
 
     def __init__(self, name: str, a: Any, b: Any, stiffness: float, rest_length: float = 0.0, damping: float = 0.0):
         super().__init__(name, a, b)
         self.stiffness = stiffness
         self.rest_length = rest_length
         self.damping = damping
+
+    def is_conservative(self) -> bool:
+        return self.damping == 0
 
     def _loads(self, kin):
         pa, pb, d, dd, length = self._line(kin)
@@ -116,6 +122,8 @@ class Damper(_TwoPointElement):
 
     kind = "damper"
     params = (_POINT_A, _POINT_B, ParameterSpec("damping", (), "N s/m", nonnegative))
+    file_keys = ("a", "b", "damping")
+    file_required = ("a", "b", "damping")
 
     def __init__(self, name: str, a: Any, b: Any, damping: float):
         super().__init__(name, a, b)
@@ -141,6 +149,9 @@ class Force(ForceElement):
     params = (ParameterSpec("point", (3,), "m", default=(0.0, 0.0, 0.0), doc="point of application, body frame"),
               ParameterSpec("force", (3,), "N", default=(0.0, 0.0, 0.0), time_input=True,
                             doc="world-frame force, or a callable (t, q, qd) -> (3,)"))
+    refs = {"body": "body"}
+    file_keys = ("body", "point", "force")
+    file_required = ("body", "force")
 
     def __init__(self, name: str, body: Any, point: Any = None, force: Any = (0.0, 0.0, 0.0)):
         super().__init__(name)
@@ -185,6 +196,9 @@ class JointTorque(ForceElement):
     section = "forces"
     params = (ParameterSpec("value", (-1,), "N m or N (per joint coordinate)", default=0.0, time_input=True,
                             doc="one value per joint coordinate, or a callable (t, q, qd)"),)
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "value")
+    file_required = ("joint", "value")
 
     def __init__(self, name: str, joint: Any, value: Any = 0.0):
         super().__init__(name)
@@ -208,12 +222,15 @@ class JointTorque(ForceElement):
 
     @property
     def size(self) -> int | None:
-        """Number of values a constant ``value`` holds (None for a callable; 1 for a signal)."""
-        if self.is_callable:
-            return None
+        """Number of values ``value`` holds (None for a callable of unknown size; 1 for a signal)."""
         if self.signal is not None:
             return 1
-        return 1 if isinstance(self.value, float) else len(self.value)
+        if isinstance(self.value, float):
+            return 1
+        try:
+            return len(self.value)
+        except TypeError:
+            return None
 
     def parameter_values(self) -> dict[str, Any]:
         return {} if self.signal is not None else super().parameter_values()
@@ -287,6 +304,9 @@ class TorsionSpring(ForceElement):
     params = (ParameterSpec("stiffness", (), "N m/rad", nonnegative, doc="N/m on a prismatic joint"),
               ParameterSpec("rest", (), "rad", default=0.0, doc="m on a prismatic joint"),
               ParameterSpec("damping", (), "N m s/rad", nonnegative, default=0.0, doc="N s/m on a prismatic joint"))
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "stiffness", "rest", "damping")
+    file_required = ("joint", "stiffness")
 
     def __init__(self, name: str, joint: Any, stiffness: float, rest: float = 0.0, damping: float = 0.0):
         super().__init__(name)
@@ -304,6 +324,9 @@ class TorsionSpring(ForceElement):
         if joint.n_coords != 1:
             return [f"{describe(self)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}"]
         return []
+
+    def is_conservative(self) -> bool:
+        return self.damping == 0
 
     def _loads(self, kin):
         (q,), (qd,) = kin.q(self.joint), kin.qd(self.joint)

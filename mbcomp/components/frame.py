@@ -83,6 +83,13 @@ class Frame:
         """(3, 3) rotation of the frame relative to its body (identity when none)."""
         return np.eye(3) if self.rotation is None else np.array(self.rotation)
 
+    def offset(self, offset: Any) -> "Frame":
+        """This frame moved by ``offset`` (m, in the frame's own axes); sub-model parameter
+        expressions in the point stay linked."""
+        R = self.rotation_matrix
+        point = tuple(self.point[i] + sum(float(R[i][j]) * offset[j] for j in range(3)) for i in range(3))
+        return Frame(self.body, point, self.rotation)
+
     def __eq__(self, other: Any) -> bool:
         return (isinstance(other, Frame) and other.body is self.body
                 and tuple(float(v) for v in other.point) == tuple(float(v) for v in self.point)

@@ -24,11 +24,11 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from ..errors import ModelError
-from ..params import ParameterSpec, unit_vector
+from ..params import ParameterSpec, axis_name, unit_vector
 from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
 from .base import Component
-from .frame import split_frame
+from .frame import Frame, split_frame
 
 AXIS = ParameterSpec("axis", (3,), "", unit_vector, structural=True,
                      doc="'x', 'y', 'z' (optionally signed) or a 3-vector in the parent frame; stored as a unit vector")
@@ -65,6 +65,11 @@ class Joint(Component):
     params = (ParameterSpec("parent_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the parent body frame"),
               ParameterSpec("child_point", (3,), "m", default=(0.0, 0.0, 0.0), doc="joint location in the child body frame"))
 
+    refs = {"parent": "body", "child": "body"}
+    file_keys = ("parent", "child", "parent_point", "child_point", "parent_rotation", "child_rotation", "coords")
+    file_required = ("parent", "child")
+    file_options = {"coords": "names", "parent_rotation": "rotation", "child_rotation": "rotation"}
+
     def __init__(self, name: str, parent: Any, child: Any, *, parent_point: Any = None,
                  child_point: Any = None, coords: Any = None, speeds: Any = None):
         super().__init__(name)
@@ -84,6 +89,35 @@ class Joint(Component):
         """The names of the joint's speeds (``nv`` of them)."""
         return self._speed_names(self._speeds_given)
 
+    @classmethod
+    def from_file(cls, name: str, values: dict[str, Any]) -> "Joint":
+        """A joint from its file table.  An end that is a port (a ``Frame`` bound by the
+        user of a part file) takes the point as an offset in the port frame's axes; a
+        rotation turns the end's frame further (in the port's axes for a port)."""
+        values = dict(values)
+        for role in ("parent", "child"):
+            end = values[role]
+            point = values.pop(f"{role}_point", None)
+            rotation = values.pop(f"{role}_rotation", None)
+            if isinstance(end, Frame):
+                if point is not None:
+                    end = end.offset(point)
+                if rotation is not None:
+                    end = Frame(end.body, end.point, end.rotation_matrix @ np.asarray(rotation, dtype=float))
+                values[role] = end
+            elif rotation is not None:
+                values[role] = Frame(end, (0.0, 0.0, 0.0) if point is None else point, rotation)
+            elif point is not None:
+                values[f"{role}_point"] = point
+        return cls(name, **values)
+
+    def file_value(self, key: str) -> Any:
+        if key == "coords":
+            if not self.n_coords:
+                return None
+            return self.coords[0] if self.n_coords == 1 else list(self.coords)
+        return super().file_value(key)
+
     # -- contract -----------------------------------------------------------
     @property
     def coord_suffixes(self) -> tuple[str, ...]:
@@ -97,6 +131,20 @@ class Joint(Component):
         """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
+
+    def reaction_unit(self, resolve) -> str:
+        """Unit of the reactions of this joint when it closes a loop (forces, then torques)."""
+        return "N, N m"
+
+    def summary(self) -> str:
+        detail = getattr(self, "axis", None)
+        if detail is not None:
+            word = "along" if self.coord_unit == "m" else "about"
+            name = axis_name(detail)
+            return f"{self.kind} {word} {name if isinstance(name, str) else tuple(name)}"
+        if hasattr(self, "sequence"):
+            return f"{self.kind} {self.sequence!r}"
+        return self.kind
 
     @property
     def coord_units(self) -> tuple[str, ...]:
@@ -261,9 +309,14 @@ class Joint(Component):
     def _coord_names(self, coords: Any) -> tuple[str, ...]:
         if coords is None:
             return tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
-        names = (coords,) if isinstance(coords, str) else tuple(coords)
-        if len(names) != self.n_coords or not all(isinstance(n, str) and n.strip() for n in names):
-            raise ModelError(self, f"coords must be {self.n_coords} non-empty name(s), got {coords!r}")
+        try:
+            names = (coords,) if isinstance(coords, str) else tuple(coords)
+        except TypeError:
+            raise ModelError(self, f"coords must be a name or a sequence of names, got {coords!r}") from None
+        if len(names) != self.n_coords:
+            raise ModelError(self, f"coords must name {self.n_coords} coordinate(s), got {len(names)}")
+        if not all(isinstance(n, str) and n.strip() and n == n.strip() for n in names):
+            raise ModelError(self, f"coords must be non-empty names without edge spaces, got {coords!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"coords {names} repeat a name")
         return names
@@ -308,6 +361,8 @@ class Revolute(Joint):
     kind = "revolute"
     n_coords = 1
     params = Joint.params + (AXIS,)
+    file_keys = Joint.file_keys + ("axis",)
+    file_required = ("parent", "child", "axis")
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
         super().__init__(name, parent, child, **options)
@@ -324,6 +379,8 @@ class Prismatic(Joint):
     n_coords = 1
     coord_unit = "m"
     params = Joint.params + (AXIS,)
+    file_keys = Joint.file_keys + ("axis",)
+    file_required = ("parent", "child", "axis")
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "x", **options: Any):
         super().__init__(name, parent, child, **options)
@@ -342,6 +399,8 @@ class Spherical(Joint):
     """
 
     kind = "spherical"
+    file_keys = Joint.file_keys + ("sequence",)
+    file_options = {**Joint.file_options, "sequence": "string"}
 
     def __init__(self, name: str, parent: Any, child: Any, sequence: str = "xyz", **options: Any):
         self.sequence = parse_sequence(sequence, owner=f"Spherical {name!r}")
@@ -367,6 +426,7 @@ class Fixed(Joint):
 
     kind = "fixed"
     n_coords = 0
+    file_keys = tuple(k for k in Joint.file_keys if k != "coords")
 
     def _screws(self):
         return []
@@ -383,6 +443,8 @@ class Ball(Joint):
     kind = "ball"
     n_coords = 4
     coord_suffixes = ("qw", "qx", "qy", "qz")
+    file_keys = Joint.file_keys + ("speeds",)
+    file_options = {**Joint.file_options, "speeds": "names"}
 
     def _segments(self):
         return [("B", None)]
@@ -398,6 +460,8 @@ class Free(Joint):
     kind = "free"
     n_coords = 7
     coord_suffixes = ("x", "y", "z", "qw", "qx", "qy", "qz")
+    file_keys = Joint.file_keys + ("speeds",)
+    file_options = {**Joint.file_options, "speeds": "names"}
 
     def _segments(self):
         return [("P", AXIS_NAMES["x"]), ("P", AXIS_NAMES["y"]), ("P", AXIS_NAMES["z"]), ("B", None)]
@@ -446,6 +510,7 @@ class Cylindrical(Joint):
     n_coords = 2
     coord_suffixes = ("angle", "slide")
     params = Joint.params + (AXIS,)
+    file_keys = Joint.file_keys + ("axis",)
 
     def __init__(self, name: str, parent: Any, child: Any, axis: Any = "z", **options: Any):
         super().__init__(name, parent, child, **options)

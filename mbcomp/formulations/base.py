@@ -23,15 +23,28 @@ RANK_TOLERANCE = 1e-9
 ASSEMBLY_TOLERANCE = 1e-12
 
 
-def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 0.0) -> np.ndarray:
+def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 0.0,
+                     prefer: np.ndarray | None = None) -> np.ndarray:
     """Indices of a maximal set of independent rows of ``J`` (pivoted QR of ``J^T``).
 
     A pivot counts when it exceeds ``tol`` times the largest pivot or ``scale`` (the
     Jacobian's size where the mechanism is regular), so that a Jacobian which vanishes
-    as a whole (a folded mechanism) is not mistaken for a full-rank one.
+    as a whole (a folded mechanism) is not mistaken for a full-rank one.  With ``prefer``
+    (a mask), those rows are taken first and the others only where they add rank: a loop
+    closure is never the row dropped in favour of a driver.
     """
     if J.shape[0] == 0 or J.shape[1] == 0:
         return np.arange(0)
+    if prefer is not None and 0 < np.count_nonzero(prefer) < J.shape[0]:
+        first, second = np.flatnonzero(prefer), np.flatnonzero(~np.asarray(prefer, dtype=bool))
+        reference = max(float(np.max(np.linalg.norm(J, axis=1))), scale)
+        chosen = first[independent_rows(J[first], tol, reference)]
+        rest = J[second]
+        if chosen.size:
+            basis = scipy.linalg.qr(J[chosen].T, mode="economic")[0]
+            rest = rest - (rest @ basis) @ basis.T
+        extra = second[independent_rows(rest, tol, reference)] if rest.size and np.any(rest) else np.arange(0)
+        return np.sort(np.concatenate((chosen, extra)).astype(int))
     _, R, piv = scipy.linalg.qr(J.T, mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
     if diag.size == 0 or diag[0] == 0.0:
@@ -241,7 +254,16 @@ class Formulation:
 
     def rows_of(self, J: np.ndarray) -> np.ndarray:
         """Independent rows of a constraint Jacobian of this model (see ``independent_rows``)."""
-        return independent_rows(J, scale=self.jacobian_scale)
+        return independent_rows(J, scale=self.jacobian_scale, prefer=self.preferred_rows(J.shape[0]))
+
+    def preferred_rows(self, n: int) -> np.ndarray | None:
+        """Rows kept first when some must go: all but the drivers (motor rows); None without drivers."""
+        drivers = [] if self.constraints is None else self.constraints.coordinate_rows
+        if not drivers:
+            return None
+        mask = np.ones(n, dtype=bool)
+        mask[[r for r in drivers if r < n]] = False
+        return mask
 
     # -- the public operations ---------------------------------------------------------------------
     def accelerations(self, kernel, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
@@ -329,6 +351,13 @@ class Formulation:
         g = self.constraint_values(kernel, t, q, np.zeros(kernel.nv), offsets).g
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
+    def constraint_violation_series(self, kernel, t: np.ndarray, q: np.ndarray, offsets=None) -> np.ndarray:
+        """``constraint_violation`` at every sample (rows of ``q``), vectorised."""
+        if self.constraints is None:
+            return np.zeros(len(q))
+        G = self.constraints.residual_series(kernel, t, q, offsets)
+        return np.max(np.where(np.isfinite(G), np.abs(G), 0.0), axis=1, initial=0.0)
+
     # -- hooks for the compiled code ------------------------------------------------------------------
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:
@@ -351,6 +380,34 @@ class Formulation:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
         cls = Workspace if self.constraints is None and not contacts else self.workspace_class
         return cls(self, kernel, t0, q0, qd0, tau, contacts)
+
+
+def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray) -> None:
+    """A driver (motor row) that the other constraints already determine must prescribe
+    what they imply (two motors of equal speed on one joint); otherwise the constraints
+    conflict: ``ModelError`` naming them."""
+    constraints = formulation.constraints
+    kept = set(rows.tolist())
+    for r in constraints.coordinate_rows:
+        if r in kept or not rows.size:
+            continue
+        c = np.linalg.lstsq(J[rows].T, J[r], rcond=None)[0]
+        implied = float(c @ g_t[rows])
+        scale = max(1.0, float(np.max(np.abs(g_t), initial=0.0)))
+        if abs(g_t[r] - implied) <= 1e-8 * scale:
+            continue
+        involved = [rows[i] for i in np.flatnonzero(np.abs(c) > 1e-9 * np.max(np.abs(c)))]
+        names = []
+        for i in involved:
+            comp = constraints.groups_by_row(i)
+            kind = "loop closure" if type(comp).__name__ == "LoopClosure" else type(comp).__name__
+            label = f"{kind} {constraints.owner[i]!r}"
+            if label not in names:
+                names.append(label)
+        own = type(constraints.groups_by_row(r)).__name__
+        raise ModelError(None, f"the constraints conflict: {own} {constraints.owner[r]!r} prescribes a rate of "
+                               f"{-g_t[r]:.6g} for its coordinate, but it is "
+                               f"already fixed by {' and '.join(names)} (at {-implied:.6g}); remove one of them")
 
 
 def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationInfo:
@@ -380,8 +437,10 @@ def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationIn
                 closest, last_error = residual, exc
             continue
         consistent += 1
-        J = formulation.constraint_values(kernel, 0.0, q, np.zeros(nv)).J
-        rows = independent_rows(J)
+        values = formulation.constraint_values(kernel, 0.0, q, np.zeros(nv))
+        J = values.J
+        rows = independent_rows(J, prefer=formulation.preferred_rows(J.shape[0]))
+        _check_drivers(formulation, J, values.g_t, rows)
         # The generic rank is the largest found: a configuration may be singular (a
         # parallelogram built collinear), never more regular than the mechanism.
         if best is None or rows.size > best[0].size:

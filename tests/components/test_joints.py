@@ -168,7 +168,7 @@ class TestSpherical:
         assert joint.coords == ("alpha", "beta")
 
     def test_wrong_number_of_coordinate_names_is_rejected(self, parts):
-        with pytest.raises(mb.ModelError, match="Spherical 'shoulder': coords must be 2"):
+        with pytest.raises(mb.ModelError, match="Spherical 'shoulder': coords must name 2 coordinate"):
             mb.Spherical("shoulder", *parts, sequence="xy", coords="alpha")
 
     def test_repeated_coordinate_names_are_rejected(self, parts):

@@ -1,0 +1,114 @@
+"""Fuzz the public API's arguments: whatever a user passes, a call either works (finite
+numbers) or raises one of the project's errors (ModelError, SimulationError); never a raw
+numpy/Python exception, a hang or NaN returned as an answer."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+
+import mbcomp as mb  # noqa: E402
+from conftest import pendulum_chain  # noqa: E402
+
+PROJECT_ERRORS = (mb.ModelError, mb.SimulationError)
+FUZZ = settings(max_examples=100, deadline=None, derandomize=True,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return pendulum_chain(2).compile()
+
+
+# -- values a user might pass by mistake -------------------------------------------------------------
+scalars = st.one_of(
+    st.none(), st.booleans(), st.text(max_size=5), st.binary(max_size=3),
+    st.integers(min_value=-10 ** 30, max_value=10 ** 30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.complex_numbers(max_magnitude=10), st.just(object()), st.just(print),
+)
+junk = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4), st.tuples(inner, inner),
+                                                     st.dictionaries(st.text(max_size=3), inner, max_size=3)),
+                    max_leaves=8)
+
+
+def bad_or(good):
+    """Either a sensible value or anything at all (sensible values keep runs short)."""
+    return st.one_of(good, junk)
+
+
+small_time = st.floats(min_value=1e-3, max_value=0.05)
+vector2 = st.lists(st.floats(min_value=-3, max_value=3), min_size=2, max_size=2)
+tolerance = st.floats(min_value=1e-10, max_value=1e-3)
+
+
+def bounded(value, limit: float = 0.05):
+    """Numbers that would make a valid but long run are clipped (the fuzz is about types)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > limit:
+        return limit
+    return value
+
+
+def _finite(*arrays) -> bool:
+    return all(np.all(np.isfinite(np.asarray(a, dtype=float))) for a in arrays)
+
+
+@FUZZ
+@given(t_end=bad_or(small_time), q0=bad_or(vector2), qd0=bad_or(vector2), rtol=bad_or(tolerance),
+       atol=bad_or(tolerance), t_eval=bad_or(st.lists(small_time, min_size=1, max_size=3).map(sorted)),
+       max_step=bad_or(st.floats(min_value=1e-3, max_value=1.0)), tau=bad_or(vector2),
+       method=bad_or(st.sampled_from(["DOP853", "RK45", "RK4", "Radau", "nope"])),
+       integrator=bad_or(st.sampled_from(["auto", "scipy", "compiled"])),
+       dt=bad_or(st.sampled_from([None, 1e-3, 1e-2])), rest_speed=bad_or(st.floats(min_value=0, max_value=1)))
+def test_simulate_arguments(chain, t_end, q0, qd0, rtol, atol, t_eval, max_step, tau, method, integrator, dt,
+                            rest_speed):
+    t_end = bounded(t_end)
+    if isinstance(dt, (int, float)) and not isinstance(dt, bool) and 0 < dt < 1e-3:
+        dt = 1e-3  # valid, merely slow
+    if isinstance(rtol, float) and 0 < rtol < 1e-12 or isinstance(atol, float) and 0 < atol < 1e-14:
+        rtol, atol = 1e-8, 1e-10  # valid, merely slow
+    try:
+        res = chain.simulate(t_end, q0, qd0, rtol=rtol, atol=atol, t_eval=t_eval, max_step=max_step, tau=tau,
+                             method=method, integrator=integrator, dt=dt, rest_speed=rest_speed)
+    except PROJECT_ERRORS:
+        return
+    assert res.stats["success"] and _finite(res.t, res.q, res.qd)
+
+
+@FUZZ
+@given(body=bad_or(st.sampled_from(["link0", "link1", "ground"])), q=bad_or(vector2), qd=bad_or(vector2),
+       t=bad_or(st.floats(min_value=0, max_value=1)), point=bad_or(st.lists(st.floats(-1, 1), min_size=3, max_size=3)))
+def test_body_state_arguments(chain, body, q, qd, t, point):
+    try:
+        state = chain.body_state(body, q, qd, t=t, point=point)
+        values = [state.position, state.velocity, state.rotation, state.angular_velocity]
+    except PROJECT_ERRORS:
+        return
+    assert _finite(*values)
+
+
+@FUZZ
+@given(q=bad_or(vector2), qd=bad_or(vector2), t=bad_or(st.floats(min_value=0, max_value=1)), tau=bad_or(vector2))
+def test_evaluation_arguments(chain, q, qd, t, tau):
+    for call in (lambda: chain.accelerations(q, qd, t, tau), lambda: chain.energy(q, qd).total,
+                 lambda: chain.holding_forces(q, t), lambda: chain.reactions(q, qd, t, tau)):
+        try:
+            value = call()
+        except PROJECT_ERRORS:
+            continue
+        assert isinstance(value, dict) or _finite(value)
+
+
+@FUZZ
+@given(values=st.dictionaries(st.sampled_from(["link0.mass", "link1.com", "joint1.parent_point", "link0.inertia",
+                                               "nothing.here"]), junk, max_size=2))
+def test_with_parameters_arguments(chain, values):
+    try:
+        changed = chain.with_parameters(values)
+    except PROJECT_ERRORS:
+        return
+    assert _finite(changed.accelerations([0.3, 0.2], [0.0, 0.0]))
