@@ -471,6 +471,14 @@ def _axis_letter(spec: Any) -> str | None:
     """``"x"`` for an axis given as ``"x"`` (or ``"+x"``), else None."""
     if isinstance(spec, str) and spec.strip().lower().lstrip("+") in AXIS_NAMES:
         return spec.strip().lower().lstrip("+")
+    if not isinstance(spec, str):  # a 3-vector along a coordinate axis (as a file gives it back)
+        try:
+            values = np.asarray(spec, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            return None
+        for letter in "xyz":
+            if np.array_equal(values, np.asarray(AXIS_NAMES[letter], dtype=float)):
+                return letter
     return None
 
 
@@ -482,6 +490,8 @@ class Universal(Joint):
 
     kind = "universal"
     n_coords = 2
+    file_keys = Joint.file_keys + ("axes",)
+    file_options = {**Joint.file_options, "axes": "axes"}
 
     def __init__(self, name: str, parent: Any, child: Any, axes: Any = ("x", "y"), **options: Any):
         owner = f"Universal {name!r}"
@@ -529,6 +539,8 @@ class Planar(Joint):
 
     kind = "planar"
     n_coords = 3
+    file_keys = Joint.file_keys + ("normal",)
+    file_options = {**Joint.file_options, "normal": "axis"}
     _IN_PLANE = {"x": ("y", "z"), "y": ("z", "x"), "z": ("x", "y")}
 
     def __init__(self, name: str, parent: Any, child: Any, normal: Any = "z", **options: Any):
