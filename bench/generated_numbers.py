@@ -43,10 +43,10 @@ def numbers() -> dict[str, np.ndarray]:
             for s in range(STATES):
                 q = rng.uniform(-1.0, 1.0, nq)
                 qd = rng.uniform(-2.0, 2.0, nv)
-                for fn in FUNCTIONS:
+                for fn in (f for f in FUNCTIONS if f not in ("drives",)):  # drives take their own inputs
                     out[f"{name}/{backend}/{fn}/{s}"] = np.asarray(compiled.functions(fn, q, qd, p, u), dtype=float)
         prog = compiled.program
-        for lang, text in (("c", codegen.c_source(prog, FUNCTIONS)), ("python", codegen.python_source(prog, FUNCTIONS))):
+        for lang, text in (("c", codegen.c_source(prog, FUNCTIONS)), ("python", codegen.python_source(prog, FUNCTIONS))):  # noqa: E501
             digest = hashlib.sha256(text.encode()).hexdigest()
             out[f"{name}/source/{lang}"] = np.frombuffer(bytes.fromhex(digest), dtype=np.uint8)
     return out

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Any, Iterable, Mapping
 
 from .errors import ModelError
 from .integrators import step_hook
+from .progress import ProgressBar
 from .result import Result
 
 _CASE_KEYS = {"q0", "qd0", "t_end", "parameters", "tau", "t_eval", "method", "rtol", "atol", "max_step", "dt",
@@ -47,7 +48,7 @@ def _run_many(system, cases: list) -> list:
 
 
 def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, threads: int | None = None,
-          **defaults: Any) -> list[Result]:
+          progress: bool = False, **defaults: Any) -> list[Result]:
     """Simulate ``system`` once per case and return the Results in case order.
 
     Each case is a mapping of ``System.simulate`` arguments (``q0``, ``qd0``, ``t_end``,
@@ -57,21 +58,39 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
     System travels by pickling and is recompiled there, from the shared code cache
     when there is one).  Results are identical to running the cases one by one, derived
     series included (reactions of resting contacts and motors: each Result records what
-    they need).
+    they need).  ``progress=True`` shows a bar of the finished cases (it only counts them;
+    every case runs as without it).
     """
     if isinstance(cases, (str, bytes, Mapping)) or not isinstance(cases, Iterable):
         raise ModelError("sweep", f"cases must be a sequence of mappings of simulate() arguments, got {cases!r}")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ModelError("sweep", f"threads must be a positive whole number or None, got {threads!r}")
     cases = [_check_case(case, i, defaults) for i, case in enumerate(cases)]
+    bar = ProgressBar(len(cases), bool(progress), desc="sweep", unit="cases")
+    try:
+        outputs = _sweep(system, cases, client, threads, bar)
+    finally:
+        bar.close()
+    return [result.with_system(system.with_parameters(case.get("parameters"))) for case, result in zip(cases, outputs)]
+
+
+def _sweep(system, cases: list, client: Any, threads: int | None, bar: ProgressBar) -> list:
     if client is None:
         if threads == 1 or len(cases) <= 1:
-            outputs = [_run(system, case) for case in cases]
+            outputs = []
+            for case in cases:
+                outputs.append(_run(system, case))
+                bar.update_to(len(outputs))
         else:
             stop = threading.Event()
             with ThreadPoolExecutor(max_workers=threads) as pool:
+                futures = [pool.submit(_run_stoppable, system, case, stop) for case in cases]
                 try:
-                    outputs = list(pool.map(lambda case: _run_stoppable(system, case, stop), cases))
+                    for done, future in enumerate(as_completed(futures), start=1):
+                        if future.exception() is not None:
+                            future.result()   # a failed case: stop the others now
+                        bar.update_to(done)
+                    outputs = [future.result() for future in futures]
                 except BaseException:
                     stop.set()  # Ctrl-C or a failed case: running cases stop at their next check
                     pool.shutdown(wait=True, cancel_futures=True)
@@ -84,5 +103,11 @@ def sweep(system, cases: Iterable[Mapping[str, Any]], client: Any = None, *, thr
         chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
         remote = client.scatter(system, broadcast=True, hash=False)
         futures = [client.submit(_run_many, remote, chunk, pure=False) for chunk in chunks]
+        if bar.enabled:
+            from distributed import as_completed as finished
+            done = 0
+            for future in finished(futures):
+                done += len(chunks[futures.index(future)])
+                bar.update_to(done)
         outputs = [output for chunk in client.gather(futures) for output in chunk]
-    return [result.with_system(system.with_parameters(case.get("parameters"))) for case, result in zip(cases, outputs)]
+    return outputs

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
 from pathlib import Path
@@ -50,8 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="CSV", help="write t, coordinates, speeds and energies as CSV")
     run.add_argument("--plot", metavar="PNG", help="save a plot of the coordinates and energy")
     run.add_argument("--animate", metavar="GIF", help="save an animation (GIF, or MP4 with ffmpeg)")
+    run.add_argument("--html", metavar="HTML", help="save a 3D viewer of the motion: one self-contained "
+                                                   "HTML page (opens offline in any browser)")
     run.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                     help="show a progress bar on stderr (default: on when stderr is a terminal)")
+                     help="show a progress bar on stderr (default: on a terminal, for runs longer than 2 s)")
     run.set_defaults(handler=cmd_run)
 
     info = commands.add_parser("info", help="describe a model and print its equations of motion",
@@ -89,15 +90,13 @@ def _version() -> str:
 # ----------------------------------------------------------------------------------------------
 def resolve_model_file(spec: str) -> Path:
     """A path that exists, else a library model of that name; ``CommandError`` otherwise."""
-    from .io import find_library_model, library_models
-    path = Path(spec)
+    from .io import library_models
+    from .library import resolve_model_path
+    path = resolve_model_path(spec)
     if path.is_file():
         return path
     if path.exists():
         raise CommandError(f"{spec}: not a file", EXIT_BAD_INPUT)
-    found = find_library_model(spec) if "/" not in spec and os.sep not in spec else None
-    if found is not None:
-        return found
     names = ", ".join(library_models()) or "none found"
     raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
                        EXIT_BAD_INPUT)
@@ -108,6 +107,8 @@ def load_model(spec: str):
     from .errors import ModelError
     from .io import load
     path = resolve_model_file(spec)
+    if path.suffix.lower() == ".urdf":
+        from .urdf import load_urdf as load
     try:
         return load(path), path
     except ModelError as exc:
@@ -168,7 +169,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     for option, value in (("--rtol", rtol), ("--atol", atol)):
         if not (value > 0 and np.isfinite(value)):
             raise CommandError(f"{option} must be a positive number, got {value}", EXIT_BAD_INPUT)
-    progress = args.progress if args.progress is not None else sys.stderr.isatty()
+    # Default: on a terminal, a bar for runs that take longer than a couple of seconds.
+    progress = args.progress if args.progress is not None else (2.0 if sys.stderr.isatty() else False)
 
     if args.plot or args.animate:
         import matplotlib
@@ -195,6 +197,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.animate:
         _write(lambda: result.animate(args.animate), args.animate)
         outputs.append(f"wrote {args.animate}")
+    if args.html:
+        _write(lambda: result.view(args.html), args.html)
+        outputs.append(f"wrote {args.html} (open it in a browser)")
     for line in outputs:
         print(line)
     return EXIT_OK
@@ -366,6 +371,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     if tuple(system.speeds) != tuple(system.coords):
         print(f"speeds       {', '.join(system.speeds)} ({system.nv}; a ball's: its angular velocity in the child frame)")
     print(f"degrees of freedom  {system.ndof}")
+    if getattr(system, "extra_states", ()):  # states of drive elements (motor currents, PID integrals)
+        print(f"extra states  {', '.join(system.extra_states)} ({system.integration_path()})")
     if system.constraint_names:
         print(f"constraint equations  {', '.join(system.constraint_names)}"
               + (f" (loop closures: {', '.join(cut)})" if cut else ""))
@@ -414,7 +421,9 @@ def cmd_library(args: argparse.Namespace) -> int:
     from .io import library_dirs, library_models, read_description
     models = library_models()
     if args.name:
+        from .library import library_robots
         path = models.get(args.name[:-5] if args.name.endswith(".toml") else args.name)
+        path = path if path is not None else library_robots().get(args.name)
         if path is None:
             raise CommandError(f"no library model {args.name!r}; available: {', '.join(models) or 'none'}",
                                EXIT_BAD_INPUT)
@@ -426,7 +435,17 @@ def cmd_library(args: argparse.Namespace) -> int:
     width = max(len(name) for name in models)
     for name, path in models.items():
         print(f"{name.ljust(width)}  {read_description(path) or '(no description)'}")
-    print(f"\n{len(models)} models in {', '.join(str(d) for d in library_dirs())}; "
+    from .library import library_parts, library_robots
+    robots = library_robots()
+    for name, path in robots.items():
+        print(f"{name.ljust(width)}  robot arm from URDF ({path.name}, example-robot-data package)")
+    parts = library_parts()
+    if parts:
+        print("\nparts (for [submodels] in model files, see docs/composition.md):")
+        for name, path in parts.items():
+            print(f"  {name.ljust(width - 2)}  {read_description(path) or '(no description)'}")
+    print(f"\n{len(models)} models in {', '.join(str(d) for d in library_dirs())}"
+          f"{f' and {len(robots)} URDF robots' if robots else ''}; "
           "run one with 'mbcomp run NAME', copy one with 'mbcomp library NAME > my.toml'")
     return EXIT_OK
 

@@ -119,7 +119,7 @@ class CompiledModel:
         return (self.output_layout.c_defines() + codegen.c_accelerations(nv)
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
-                + c_integrators(self.topology.state_map))
+                + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()

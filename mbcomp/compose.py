@@ -322,6 +322,8 @@ class FileSubmodel(Submodel):
 def copy_component(comp: Any, name: str, references: dict) -> Any:
     """A shallow copy of ``comp`` named ``name`` whose reference attributes are replaced
     by ``references`` (role -> new reference)."""
+    if hasattr(comp, "copy_with_references"):  # references inside signals (drivetrain, signals)
+        return comp.copy_with_references(name, references)
     new = copy.copy(comp)
     roles = comp.references()
     state = vars(comp)

@@ -107,6 +107,13 @@ class DriveContext:
     def param(self, comp, attr: str):
         return self.kin.param(comp, attr)
 
+    def component(self, name: str):
+        """A component of the model by its (flattened) name (a ``ControllerRef``'s PID)."""
+        comp = self.kin.topology.components.get(name)
+        if comp is None or not hasattr(comp, "state_names"):
+            raise CompileError(problems=[f"signal PID({name}): {name!r} is not a controller of the model"])
+        return comp
+
     def states(self, comp) -> list:
         return self._states[comp.name]
 

@@ -18,7 +18,7 @@ class DriveTorque:
     """Callable ``(t, q, qd) -> tau``: user tau + drive forces at the states ``z`` last set."""
 
     def __init__(self, system, tau: Any, z0: np.ndarray):
-        """``tau``: None, an array (nq) or a callable ``(t, q, qd)``."""
+        """``tau``: None, an array (nv) or a callable ``(t, q, qd)``."""
         self.system, self.tau = system, tau
         self.z = np.array(z0, dtype=float)
         self.rates = np.zeros_like(self.z)

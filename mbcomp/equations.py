@@ -325,7 +325,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             row = _combine(nv, (axis, Jwb), ([-c for c in axis], Jwa))
             rate = [x + y for x, y in zip(cross(cross(wb, ub), ua), cross(ub, cross(wa, ua)))]
             bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
-        elif isinstance(eq, CoordinateGap):
+        elif isinstance(eq, CoordinateGap):  # on a 1-DOF screw joint: its speed is its rate
             k = kin.topology.q_slice[name_of(eq.joint)].start
             kv = kin.topology.v_slice[name_of(eq.joint)].start  # a 1-DOF screw joint: its speed
             g = eq.sign * (prog.q[k] - kin.layout.symbols(eq.bound))

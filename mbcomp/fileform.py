@@ -388,6 +388,11 @@ def read_component(r: Reader, section: str, name: str, label: str, table: dict, 
 def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: str, bodies: dict,
                 joints: dict) -> Any:
     """One key of a component table: a reference, a declared parameter or an option."""
+    if cls.file_options.get(key) == "signal":  # drive inputs (components/signals.py)
+        if isinstance(value, dict):
+            return read_signal(r, label, key, value, joints)
+        if cls.spec(key) is None:
+            return r.number(label, key, value, time=True, owner=owner)
     role = cls.refs.get(key)
     if role == "body":
         body = r.reference(label, key, value, bodies, "body")
@@ -422,6 +427,21 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         axes = [r.axis(label, f"{key}[{i}]", v) for i, v in enumerate(value)]
         return BAD if any(a is BAD for a in axes) else tuple(axes)
     raise TypeError(f"{cls.__name__}.file_keys names {key!r}, which is not a reference, parameter or option")
+
+
+def read_signal(r: Reader, label: str, key: str, value: dict, joints: dict) -> Any:
+    """A signal table (``{type = "step", time = 0.2, after = 1.0}``, ``{type = "angle", joint =
+    "elbow"}``, ``{type = "pid", name = "pid"}``, ...): its joints must be declared above."""
+    from .components.signals import signal_from_table
+    try:
+        signal = signal_from_table(value, f"[{label}] {key}")
+    except ModelError as exc:
+        return r.problem(label, key, str(exc).split(": ", 1)[-1])
+    for s in signal.walk():
+        for joint in s.joints():
+            if r.reference(label, f"{key}.joint", joint, joints, "joint") is BAD:
+                return BAD
+    return signal
 
 
 def read_parameter(r: Reader, spec: ParameterSpec, label: str, key: str, value: Any, owner: str = "") -> Any:
@@ -491,6 +511,9 @@ def component_table(comp: Component) -> tuple[str, dict]:
     for key in cls.file_keys:
         value = comp.file_value(key)
         if value is None:
+            continue
+        if isinstance(value, dict) and cls.file_options.get(key) == "signal":
+            table[key] = value  # a signal's table (components/signals.py)
             continue
         role = cls.refs.get(key)
         spec = cls.spec(key)

@@ -196,14 +196,18 @@ class Derivation:
 
     def apply(self, current: dict, changes: dict) -> dict:
         """New values of the sub-model parameters and of every component value derived
-        from them, for ``changes`` (``{parameter path: value}``) applied to ``current``."""
+        from them, for ``changes`` (``{parameter path: value}``) applied to ``current``.
+
+        A parameter bound to an expression of outer ones follows them, unless it was set
+        on its own before (its current value is not its binding's): then it keeps it, as
+        a modifier in a fresh build would."""
         from .components.expr import Expr, substitute
         from .errors import ModelError
         env: dict[str, float] = {}
         for path, entry in self.parameters.items():
             if path in changes:
                 env[path] = entry.spec.check(changes[path], f"parameter {path!r}")
-            elif isinstance(entry.binding, Expr):
+            elif isinstance(entry.binding, Expr) and current[path] == entry.binding.evaluate(current):
                 env[path] = entry.spec.check(entry.binding.evaluate(env), f"parameter {path!r} "
                                              f"(= {entry.binding!r})")
             else:

@@ -23,10 +23,12 @@ def _array(name: str, values) -> str:
     return f"static const double {name}{shape} = {{{flat}}};"
 
 
-def c_integrators(state_map) -> str:
+def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
     """C source of ``dop853_run`` and ``rk4_run`` for a tree with the given coordinates and
-    speeds (``statemap.StateMap``): the state is ``y = [q, v]``, its rate
-    ``[q'(q, v), v']``; quaternions are normalised after every accepted step."""
+    speeds (``statemap.StateMap``): the state is ``y = [q, v, z]``, its rate
+    ``[q'(q, v), v', z']``; quaternions are normalised after every accepted step.  With
+    ``drives``, the ``nz`` states of drive elements follow the mechanical ones
+    (``drive_equations``: their forces join ``tau``, their rates come from ``drives``)."""
     nq, nv = state_map.nq, state_map.nv
     A = dop.A[:16, :16]
     lines = [
@@ -36,8 +38,12 @@ def c_integrators(state_map) -> str:
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
-        f"#define NY {nq + nv}",
         f"#define NCOORD {nq}",
+        f"#define NV {nv}",
+        f"#define NMECH {nq + nv}",
+        f"#define NZ {nz}",
+        f"#define HAS_DRIVES {int(bool(drives))}",
+        "#define NY (NMECH + NZ)",
         f"#define NQUAT {state_map.quat_q.size}",
         "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
@@ -57,7 +63,7 @@ static double dummy_input[1];
 
 /* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
-static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
     const double *v = y + NCOORD;
 #if NQUAT > 0
@@ -95,6 +101,21 @@ static void normalize_state(double *y) {
 #endif
 }
 
+#if HAS_DRIVES
+/* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
+   f[NMECH..] gets the states' rates. */
+static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+    double u[1 + NZ], out[NV + NZ], tau_all[NV];
+    u[0] = t;
+    for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
+    drives(y, y + NCOORD, p, u, out);
+    for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
+    for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
+    return mech_rhs(t, y, f, p, tau_all, work);
+}
+#else
+#define rhs mech_rhs
+#endif
 /* The step hook: called with the simulated time about every `hook_interval` s of processor
    time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
    around each run to react to Ctrl-C, to stop requests and to show progress. */
@@ -275,6 +296,12 @@ int dop853_run(const double *p, const double *tau, double *state, double *y, dou
         normalize_state(y_new);
         memcpy(y, y_new, sizeof(double) * NY);
         memcpy(f, K + 12 * NY, sizeof(double) * NY);
+#if NG > 0 && NQUAT == 0  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
+            RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
+            counts[0] += 1;
+        }
+#endif
         if (n_out == 0) {
             t_steps[*n_steps] = t;
             memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
@@ -379,8 +406,6 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return "the model has callable forces or torques"
     if kernel.compiled.drives.callables:
         return "the model's drives or signals use Python callables"
-    if kernel.compiled.drives.elements:
-        return "drive elements step in Python"
     if callable(tau):
         return "tau is a callable"
     return None
@@ -511,7 +536,7 @@ def compiled_jacobian(kernel, tau):
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = kernel.nq + kernel.nv
+    n2 = kernel.nq + kernel.nv + kernel.compiled.drives.nz
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     p = kernel.p
@@ -565,7 +590,7 @@ def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
 class CollapseWatch:
     """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
     that window's pace the rest of the interval would need more than ``limit`` steps, or more
-    than ``limit / 10`` while the pace has fallen a thousandfold below the run's best (a state
+    than ``limit / 30`` while the pace has fallen a hundredfold below the run's best (a state
     running away, not a model that needs small steps throughout)."""
 
     def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
@@ -581,7 +606,7 @@ class CollapseWatch:
         self.best = max(self.best, pace)
         rest = self.t_end - t
         self.projected = rest / pace if pace > 0 else float("inf")
-        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 10 * pace and pace < 1e-3 * self.best))
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 30 * pace and pace < 1e-2 * self.best))
 
 
 def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
@@ -602,30 +627,31 @@ class RankLost(Exception):
 
 
 def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None):
+                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None):
     """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
     entirely in compiled code; returns ``(t, y, stats, wall)``."""
     lib = kernel.compiled.functions.lib
     with formulation.compiled_setup(lib):  # e.g. the dae rows and gains, for this thread only
-        return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
 
 
-def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     hook = _Hook()
     hook.install(lib)
     try:
-        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt)
+        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     finally:
         hook.remove(lib)
 
 
-def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt):
+def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     run, rk4 = _bind(lib)
-    ny = kernel.nq + kernel.nv
     p = kernel.p
     tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    y = np.ascontiguousarray(np.concatenate((q0, qd0)), dtype=float)
+    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else np.asarray(z0, dtype=float)
+    y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
+    ny = y.size
     started = time.perf_counter()
     if method == "RK4":
         if dt is None:
@@ -694,12 +720,20 @@ def _hermite(kernel, t, y, t_eval, tau):
     """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
     the steps that bracket a requested time)."""
     n = kernel.nq
-    state_map = kernel.topology.state_map
+    state_map, nv = kernel.topology.state_map, kernel.nv
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
-    f = {i: np.concatenate((state_map.qdot(y[i, :n], y[i, n:]), kernel.tree_accelerations(0.0, y[i, :n], y[i, n:], tau)))
-         for i in needed}
+
+    def rate(i):
+        q, qd, z = y[i, :n], y[i, n:n + nv], y[i, n + nv:]
+        tau_i, rates = tau, z[:0]
+        if kernel.compiled.drives.elements:
+            drive, rates = kernel.drive_outputs(t[i], q, qd, z)
+            tau_i = drive if tau is None else tau + drive
+        return np.concatenate((state_map.qdot(q, qd), kernel.tree_accelerations(t[i], q, qd, tau_i), rates))
+
+    f = {i: rate(i) for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
     h = (t[idx + 1] - t[idx])[:, None]
     s = (t_eval - t[idx])[:, None] / h

@@ -24,7 +24,8 @@ from .errors import ModelError
 from .expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression  # noqa: F401 - re-exported
 from .fileform import (BAD, ZERO3, Reader, close_match, component_table, floats, is_valid_name, read_component,
                        read_rotation, short, toml_key, toml_value, type_name)
-from .library import find_library_model, find_library_part, library_dirs, library_models, library_parts, read_description
+from .library import (find_library_model, find_library_part, library_dirs, library_models, library_parts,
+                      read_description, resolve_model_path)
 from .model import Model
 from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame
@@ -84,6 +85,9 @@ def _parse_toml(path: Path, label: str) -> dict:
 def load(path: str | os.PathLike) -> Model:
     """Read a TOML model file into a ``Model`` (schema: docs/files.md and docs/composition.md).
 
+    ``path`` is a file, or the name of a library model (``"double_pendulum"``, also
+    ``"library:double_pendulum"``; see ``mbcomp library``); an existing file wins.
+
     Every problem (unknown or missing key, wrong type, wrong vector length, non-finite
     number, reference to an undeclared body or joint, disallowed expression, TOML syntax)
     is collected and reported in one ``ModelError``, each with the file, table and key:
@@ -98,8 +102,12 @@ def load(path: str | os.PathLike) -> Model:
     "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
     ``path`` (the file read).
     """
-    path = Path(path)
+    path = resolve_model_path(path)
     label = str(path)
+    if not path.exists() and "/" not in label and os.sep not in label and not label.endswith(".toml"):
+        names = ", ".join(library_models()) or "none found"
+        raise ModelError(problems=[f"{label}: cannot read the file (no such file), and no library model "
+                                   f"of that name (library: {names})"])
     data = _parse_toml(path, label)
     reader = Reader(label)
     try:
@@ -214,6 +222,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
     own = {p: s for p, s in exposed.items() if _port_body(s) in bodies}
     expose(own)
     coords_seen: dict[str, str] = {}
+    speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
     all_joints_read = True
     for comp_name, label, table in named_tables("submodels"):
         instance = _read_submodel(r, comp_name, label, table, bodies, context)
@@ -250,10 +259,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
             if coord in coords_seen:
                 r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
             coords_seen[coord] = f"[{label}]"
-        speeds = getattr(r, "speeds_seen", None)
-        if speeds is None:
-            speeds = r.speeds_seen = {}  # speeds that are not a coordinate's rate (a ball's)
-        speeds.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
+        speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
         _add_component(r, target, joint, label)
 
     for comp_name, label, table in named_tables("forces"):
@@ -264,6 +270,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
         _add_component(r, target, read_component(r, "contacts", comp_name, label, table, bodies, joints), label)
 
     expose({p: s for p, s in exposed.items() if p not in own})
+    r.speeds_seen = speeds_seen  # a ball's speeds, which [initial.qd] may name
     return coords_seen if all_joints_read else None
 
 

@@ -203,7 +203,7 @@ class Kernel:
         if not np.all(np.isfinite(values)):
             springs = []
             for comp in self.topology.forces:
-                if hasattr(comp, "body_a"):
+                if comp.refs.get("a") == "attachment":  # two-point elements (springs, dampers)
                     pa = self.point_position(comp.body_a, self.parameters[f"{comp.name}.point_a"], q)
                     pb = self.point_position(comp.body_b, self.parameters[f"{comp.name}.point_b"], q)
                     if np.linalg.norm(pb - pa) < 1e-12:

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import os
+import site
 import sys
+import sysconfig
 from pathlib import Path
 
 try:
@@ -17,8 +19,14 @@ def library_dirs() -> list[Path]:
     install), and ``<prefix>/share/mbcomp/library`` (an installed data-files copy)."""
     dirs = [Path(p) for p in os.environ.get("MBCOMP_LIBRARY", "").split(os.pathsep) if p]
     dirs.append(Path(__file__).resolve().parent.parent / "library")
-    dirs.append(Path(sys.prefix) / "share" / "mbcomp" / "library")
-    return [d for d in dirs if d.is_dir()]
+    # Where pip puts the data files: the environment's prefix, and the user base for --user.
+    for base in (sys.prefix, sysconfig.get_paths().get("data", sys.prefix), site.getuserbase()):
+        dirs.append(Path(base) / "share" / "mbcomp" / "library")
+    unique: list[Path] = []
+    for d in dirs:
+        if d.is_dir() and d.resolve() not in [u.resolve() for u in unique]:
+            unique.append(d)
+    return unique
 
 
 def library_models() -> dict[str, Path]:
@@ -30,10 +38,55 @@ def library_models() -> dict[str, Path]:
     return dict(sorted(found.items()))
 
 
+#: Robot descriptions found in the optional ``example-robot-data`` package (URDF), by name.
+ROBOTS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf"}
+
+
+def robots_dir() -> Path | None:
+    """The ``robots`` folder of the installed ``example-robot-data`` package, or None."""
+    try:
+        from importlib.metadata import PackageNotFoundError, distribution
+        folder = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    except (ImportError, PackageNotFoundError):
+        return None
+    return folder if folder.is_dir() else None
+
+
+def library_robots() -> dict[str, Path]:
+    """``{name: URDF path}`` of the robots available (``example-robot-data`` installed)."""
+    folder = robots_dir()
+    if folder is None:
+        return {}
+    return {name: folder / rel for name, rel in ROBOTS.items() if (folder / rel).is_file()}
+
+
 def find_library_model(name: str) -> Path | None:
-    """The path of library model ``name`` (with or without ``.toml``), or None."""
+    """The path of library model ``name`` (with or without ``.toml``), or of a library robot
+    (``"ur5"``, ``"panda"``: URDF files of the optional ``example-robot-data``), or None."""
     stem = name[:-5] if name.endswith(".toml") else name
-    return library_models().get(stem)
+    found = library_models().get(stem)
+    return found if found is not None else library_robots().get(name)
+
+
+LIBRARY_PREFIX = "library:"
+
+
+def resolve_model_path(spec: str | os.PathLike) -> Path:
+    """The model file that ``spec`` names: a path that exists wins; else a library model's name
+    (``"double_pendulum"``, ``"double_pendulum.toml"`` or ``"library:double_pendulum"``).
+
+    A spec that names neither is returned unchanged as a ``Path``, so that the caller's own
+    "no such file" report (with the file's name) applies to it.
+    """
+    text = os.fspath(spec)
+    if text.startswith(LIBRARY_PREFIX):
+        found = find_library_model(text[len(LIBRARY_PREFIX):])
+        return found if found is not None else Path(text[len(LIBRARY_PREFIX):])
+    path = Path(text)
+    if path.exists() or "/" in text or os.sep in text:
+        return path
+    found = find_library_model(text)
+    return found if found is not None else path
 
 
 def find_library_part(name: str) -> Path | None:

@@ -73,11 +73,15 @@ def _reaction_unit(system, name: str) -> str:
     return comp.reaction_unit(topology.resolve) if comp is not None else "N, N m"
 
 
-def _parse_what(what: str | Sequence[str]) -> list[str]:
+def _parse_what(what: str | Sequence[str], states: Sequence[str] = ()) -> list[str]:
     kinds = [what] if isinstance(what, str) else list(what)
-    unknown = [k for k in kinds if k not in PLOT_KINDS]
+    if "states" in kinds:  # every state of the drive elements, one panel each
+        at = kinds.index("states")
+        kinds[at:at + 1] = list(states)
+    unknown = [k for k in kinds if k not in PLOT_KINDS and k not in states]
     if unknown:
-        raise ValueError(f"plot_result: unknown quantity {unknown}; choose from {list(PLOT_KINDS)}")
+        raise ValueError(f"plot_result: unknown quantity {unknown}; choose from {list(PLOT_KINDS)}"
+                         + (f", 'states' or a state name {list(states)}" if states else ""))
     return list(dict.fromkeys(kinds))       # keep the order, drop repeats
 
 
@@ -138,7 +142,9 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
         Quantities to plot, in order, from ``"q"`` (coordinates; angles in rad and lengths in m
         on separate subplots, each line labelled by coordinate name), ``"qd"`` (speeds, rad/s and
         m/s), ``"energy"`` (kinetic, potential, total, J), ``"drift"`` (constraint violation
-        max |C(q)|, m or rad, log scale) and ``"reactions"`` (constraint reactions: N, N m).
+        max |C(q)|, m or rad, log scale), ``"reactions"`` (constraint reactions: N, N m),
+        ``"states"`` (every state of the drive elements, one panel each) or a state's name
+        (``"motor.current"``, A; ``"pid.integral"``).
         The drift subplot is added whenever the system has constraints or loop-closing joints,
         because drift is what tells whether those results can be trusted.
     path : str or Path, optional
@@ -161,8 +167,9 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
     --------
     >>> fig = res.plot(("q", "energy"), path="pendulum.png")     # doctest: +SKIP
     """
-    kinds = _parse_what(what)
     system = result.system
+    extra = tuple(getattr(result, "extra_states", ()))
+    kinds = _parse_what(what, extra)
     if "drift" not in kinds and _has_constraints(system):
         kinds.append("drift")
     t = np.asarray(result.t, dtype=float)
@@ -211,6 +218,9 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
             ax.plot(t_line, potential, label="potential")
             ax.plot(t_line, kinetic + potential, label="total", color="black", linewidth=1.2)
             ax.set_ylabel("energy (J)")
+        elif kind in extra:  # a drive element's state (a motor current, a PID integral)
+            ax.plot(t, np.asarray(result[kind], dtype=float), label=kind)
+            ax.set_ylabel("current (A)" if kind.endswith(".current") else kind)
         elif kind == "drift":
             drift = np.asarray(result.constraint_violation(), dtype=float).reshape(-1)
             ax.semilogy(t, np.maximum(np.abs(drift), _DRIFT_FLOOR), label="max |C(q)|", color="tab:red")
@@ -320,7 +330,7 @@ class _Scene:
                 a, b = (attach(getattr(comp, f"body_{role}"), _local(system, comp, f"point_{role}")) for role in ends)
                 self.springs.append((a, b))
         for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
-            if hasattr(comp, "body") and hasattr(comp, "point"):
+            if comp.refs.get("body") == "body" and comp.spec("point") is not None:
                 attach(comp.body, _local(system, comp, "point"))
             if comp.kind == "slider":
                 self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))

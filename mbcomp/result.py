@@ -90,7 +90,7 @@ class Result:
             if not self.extra_states:
                 self.extra_states = tuple(getattr(self.system, "extra_states", ()))
         self.coords = tuple(self.coords)
-        self.speeds = tuple(self.speeds or self.coords)
+        self.speeds = tuple(self.speeds) or self.coords
         self.extra_states = tuple(self.extra_states)
 
     def __getstate__(self) -> dict:
@@ -178,6 +178,11 @@ class Result:
     def plot(self, *args: Any, **kwargs: Any):
         """Coordinates, speeds and energy against time (a matplotlib Figure)."""
         return service("plot")(self, *args, **kwargs)
+
+    def view(self, path=None, **kwargs: Any):
+        """The motion in 3D as one self-contained HTML page (see ``mbcomp.viewer.view``): written
+        to ``path`` (returns the Path), or without a path a ``Viewer`` a notebook shows inline."""
+        return service("view")(self, path, **kwargs)
 
     def animate(self, path, **kwargs: Any):
         """Save a 3D stick-and-ball animation (GIF with Pillow, MP4 with ffmpeg)."""

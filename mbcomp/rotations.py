@@ -172,3 +172,14 @@ def quat_normalize(q: Sequence[float], owner: Any = None) -> np.ndarray:
     if not (n > 1e-300 and np.isfinite(n)):
         raise ModelError(owner, f"quaternion {tuple(q.tolist())} must be non-zero and finite")
     return q / n
+
+
+def normals(axis) -> tuple[tuple, tuple]:
+    """Two unit vectors perpendicular to ``axis`` and to each other (exact for x, y, z)."""
+    a = np.asarray(axis, dtype=float)
+    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+    n1 = np.cross(a, helper)
+    n1 /= np.linalg.norm(n1)
+    n2 = np.cross(a, n1)
+    clean = lambda v: tuple(float(round(x, 15)) + 0.0 for x in v)
+    return clean(n1), clean(n2)

@@ -1,7 +1,6 @@
 """Solver backend: step scipy's integrators, with restarts for projections and partitions."""
 from __future__ import annotations
 
-import sys
 import time
 from typing import Any
 
@@ -15,34 +14,24 @@ from .events import ContactWatch
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
 from .integrators import (CollapseWatch, RankLost, collapse_message, compiled_jacobian, poll_step_hooks, run_compiled,
-                          why_not_compiled)
+                          step_hook, why_not_compiled)
+from .progress import ProgressBar
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
 IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
 from .result import Result
 
 
-class _Progress:
-    """A one-line text progress bar on stderr (``progress=True``)."""
+#: Processor seconds between progress updates from a compiled loop.
+PROGRESS_INTERVAL = 0.1
 
-    def __init__(self, t_end: float, enabled: bool, width: int = 30):
-        self.t_end, self.enabled, self.width = t_end, enabled, width
-        self.shown = -1
 
-    def update(self, t: float) -> None:
-        if not self.enabled:
-            return
-        fraction = min(max(t / self.t_end, 0.0), 1.0) if self.t_end > 0 else 1.0
-        percent = int(100 * fraction)
-        if percent != self.shown:
-            self.shown = percent
-            filled = int(self.width * fraction)
-            sys.stderr.write(f"\rsimulating [{'#' * filled}{'.' * (self.width - filled)}] {percent:3d}% t={t:.4g} s")
-            sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
+def _delay(progress: Any) -> float:
+    """``progress=True`` shows the bar at once; a number (s) shows it once the run has taken
+    that long (the command line's choice, so short runs stay quiet)."""
+    if isinstance(progress, bool) or not isinstance(progress, (int, float)):
+        return 0.0
+    return max(float(progress), 0.0)
 
 
 def solver_class(method: Any) -> type[OdeSolver]:
@@ -146,11 +135,25 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
     compiled = None
-    if reason is None and not progress:
+    if reason is None:
         q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0)
+
+        def run():
+            return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
+                                atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
         try:
-            compiled = run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol, atol=atol,
-                                    t_eval=t_eval, tau=tau, max_step=max_step, dt=dt)
+            if progress:
+                # The compiled loop's step hook reports the time reached; the bar only reads it
+                # (the callback never asks to stop), so the run and its result are unchanged.
+                bar = ProgressBar(t_end, desc="simulating", unit="s", delay=_delay(progress))
+                try:
+                    with step_hook(lambda t: bar.update_to(t) and False, interval=PROGRESS_INTERVAL):
+                        compiled = run()
+                    bar.update_to(t_end)
+                finally:
+                    bar.close()
+            else:
+                compiled = run()
         except RankLost:
             if method == "RK4" or integrator == "compiled":
                 raise SimulationError(f"compiled {method} met a singular position of the constraints; "
@@ -161,10 +164,11 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
+        nv = kernel.nv
         return _result(kernel, formulation, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                       qd=values[:, n:].copy(), stats=stats, tau=tau)
-    if integrator == "compiled" and reason is not None or integrator == "compiled" and progress:
-        raise ModelError("simulate", f"integrator='compiled' is not possible: {reason or 'progress=True'}")
+                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
+    if integrator == "compiled" and reason is not None:
+        raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)
     drive = None
     if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
@@ -179,7 +183,7 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         workspace = DriveWorkspace(workspace, drive)
     if watch is not None and workspace.y0.size == 0:
         max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
-    bar = _Progress(t_end, progress)
+    bar = ProgressBar(t_end, bool(progress), desc="simulating", unit="s", delay=_delay(progress))
     recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()),
                          (lambda: drive.z) if drive is not None else (lambda: ()))
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
@@ -241,12 +245,12 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
                 recorder.record_interior(workspace, solver, t)
                 corrected = workspace.after_step(t, solver.y)
                 recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
-            bar.update(t)
+            bar.update_to(t)
             poll_step_hooks(t)
             if collapse.collapsed(t):
                 q_now, qd_now = workspace.full_state(t, solver.y)
                 raise SimulationError(collapse_message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
-                                                       system.coords, collapse.window, collapse.projected))
+                                                       kernel.topology.speeds, collapse.window, collapse.projected))
             if restart is None and solver.status == "finished":
                 break
             if restart is None:

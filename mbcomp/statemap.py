@@ -105,6 +105,23 @@ class StateMap:
         out[..., self._quat_index()] = product / np.linalg.norm(product, axis=-1, keepdims=True)
         return out
 
+    def difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        """The step ``dv`` (speed space) with ``integrate(q0, dv) = q1``: ``q1 - q0`` on screw
+        coordinates, the rotation vector of ``q0^-1 q1`` (the shorter way) on quaternions."""
+        q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+        if self.identity:
+            return q1 - q0
+        out = np.zeros(q0.shape[:-1] + (self.nv,))
+        out[..., self.screw_v] = q1[..., self.screw_q] - q0[..., self.screw_q]
+        a, b = self.normalize(q0)[..., self._quat_index()], self.normalize(q1)[..., self._quat_index()]
+        relative = _multiply(a * np.array([1.0, -1.0, -1.0, -1.0]), b)
+        relative = np.where(relative[..., :1] < 0, -relative, relative)
+        n = np.linalg.norm(relative[..., 1:], axis=-1, keepdims=True)
+        angle = 2 * np.arctan2(n, relative[..., :1])
+        scale = np.where(n < 1e-12, 2.0 / np.maximum(relative[..., :1], 1e-300), angle / np.where(n < 1e-12, 1.0, n))
+        out[..., self._omega_index()] = scale * relative[..., 1:]
+        return out
+
     def neutral(self) -> np.ndarray:
         """Zero coordinates with identity quaternions."""
         q = np.zeros(self.nq)

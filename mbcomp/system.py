@@ -90,6 +90,22 @@ class System:
     def nv(self) -> int:
         return self._compiled.topology.nv
 
+    def integrate(self, q: Any, dv: Any) -> np.ndarray:
+        """The coordinates reached from ``q`` by the step ``dv`` in speed space: ``q + dv`` on
+        screw coordinates, a rotation by the vector ``dv`` (rad, child frame) on a ball's
+        quaternion (the result normalised)."""
+        return self.topology.state_map.integrate(self.state_vector(q), self.speed_vector(dv, "dv"))
+
+    def difference(self, q0: Any, q1: Any) -> np.ndarray:
+        """The step ``dv`` (speed space) with ``integrate(q0, dv) = q1`` (the shorter rotation
+        for a ball)."""
+        return self.topology.state_map.difference(self.state_vector(q0, "q0"), self.state_vector(q1, "q1"))
+
+    def coordinate_rates(self, q: Any, qd: Any) -> np.ndarray:
+        """``q' = G(q) qd``: the coordinates' rates for the speeds ``qd`` (``qd`` itself without
+        ball joints; a ball's quaternion rate ``q (0, w) / 2``)."""
+        return self.topology.state_map.qdot(self.state_vector(q), self._velocity(qd))
+
     @property
     def extra_states(self) -> tuple[str, ...]:
         """States of drive elements (motor currents, PID integrals): ``"component.state"``."""
@@ -97,8 +113,8 @@ class System:
 
     @property
     def states(self) -> tuple[str, ...]:
-        """Every state of a simulation: coordinates, their speeds (``NAME_d``), then the
-        states of drive elements (``extra_states``)."""
+        """Every state of a simulation: coordinates, the speeds (``NAME_d`` for a coordinate's
+        rate, a ball's by their own names), then the states of drive elements (``extra_states``)."""
         return (tuple(self.coords) + tuple(f"{c}_d" if c in self.coords else c for c in self.speeds)
                 + self.extra_states)
 
@@ -183,6 +199,11 @@ class System:
         """The numeric core under this System (raw arrays in, no checks): generated-function
         calls, tree solve, diagnosis; for analyses and extensions built on the System."""
         return self._kernel
+
+    @property
+    def name(self) -> str:
+        """The name of the model this System was compiled from."""
+        return self._compiled.model_name
 
     @property
     def parameters(self) -> dict[str, Any]:

@@ -274,6 +274,20 @@ def test_equilibrium_with_tau_and_of_the_four_bar(fourbars):
         assert np.max(np.abs(fb.accelerations(q, np.zeros(3)))) < 1e-7
 
 
+def test_equilibrium_and_inverse_dynamics_count_drive_torques():
+    """A geared drive with a constant torque T: it balances gravity at sin(theta) = n T / (m g L)
+    and adds n^2 J_r to the inertia."""
+    model = point_pendulum(length=1.0, name="driven")
+    model.add(mb.Drive("drive", "pivot", ratio=5.0, rotor_inertia=0.01, torque=0.1 * G))
+    system = model.compile()
+    q = system.equilibrium([0.0])
+    assert_close(np.sin(q), [0.5], rtol=1e-10, name="sin(theta)")
+    assert system.modes(q).stable
+    tau = system.inverse_dynamics([0.2], [0.3], [1.5])
+    assert_close(system.accelerations([0.2], [0.3], tau=tau), [1.5], rtol=1e-10, name="round trip")
+    assert_close(tau, [(1.0 + 25 * 0.01) * 1.5 + G * np.sin(0.2) - 0.5 * G], rtol=1e-10, name="tau")
+
+
 def test_equilibrium_reports_when_there_is_none():
     system = point_pendulum(length=1.0).compile()
     with pytest.raises(mb.SimulationError, match="no equilibrium found near"):
@@ -378,3 +392,74 @@ def test_cli_analyse_prints_equilibrium_modes_and_stability(capsys, monkeypatch)
     assert main(["analyse", "library/double_pendulum.toml", "--at", "nope=1"]) == 2
     assert "not a coordinate" in capsys.readouterr().err
     assert main(["analyse", "library/double_pendulum.toml", "--at", "phi1=abc"]) == 2
+
+
+# -- quaternion joints (speeds distinct from coordinates) ------------------------------------------
+def ball_pendulum(joint="ball"):
+    """A body hanging 0.6 m below a ball joint (or the Euler-angle Spherical 'xyz' for comparison)."""
+    m = mb.Model(f"{joint}_pendulum", gravity=(0, 0, -G))
+    body = m.add(mb.Body("body", mass=2.0, com=(0, 0, -0.6), inertia=(0.05, 0.07, 0.02)))
+    if joint == "ball":
+        m.add(mb.Ball("pivot", m.ground, body))
+    else:
+        m.add(mb.Spherical("pivot", m.ground, body, sequence="xyz"))
+    return m
+
+
+needs_ball = pytest.mark.skipif(not hasattr(mb, "Ball"), reason="the quaternion Ball joint is not available")
+
+
+@needs_ball
+def test_ball_joint_modes_and_linearisation_in_tangent_coordinates():
+    ball = ball_pendulum("ball").compile()
+    assert len(ball.speeds) == 3 and len(ball.coords) == 4
+    identity = [1.0, 0.0, 0.0, 0.0]
+    lin = ball.linearize(identity)
+    assert lin.A.shape == (6, 6) and lin.states[:3] == tuple(ball.speeds)
+    # at the hanging pose a small rotation vector and small xyz Euler angles agree to first order
+    euler = ball_pendulum("euler").compile().linearize([0.0, 0.0, 0.0])
+    assert_close(lin.A, euler.A, rtol=1e-7, atol=1e-7, name="A ball vs Euler angles")
+    modes = ball.modes(identity)
+    # swinging about x and y: omega^2 = m g l / (I + m l^2); spinning about z: free (zero)
+    expected = sorted([0.0] + [np.sqrt(2.0 * G * 0.6 / (inertia + 2.0 * 0.36)) / (2 * np.pi) for inertia in (0.05, 0.07)])
+    assert_close(modes.frequencies, expected, rtol=1e-7, atol=1e-6, name="ball frequencies")
+    assert modes.stable
+
+
+@needs_ball
+def test_ball_joint_equilibrium_jacobian_and_inverse_dynamics():
+    ball = ball_pendulum("ball").compile()
+    tilted = np.array([np.cos(0.6), np.sin(0.6) * 0.6, np.sin(0.6) * 0.8, 0.0])   # 1.2 rad about (0.6, 0.8, 0)
+    q = ball.equilibrium(tilted)
+    assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+    assert_close(ball.body_state("body", q).position, [0.0, 0.0, -0.6], atol=1e-9, name="hanging COM")
+    v = np.array([0.3, -0.5, 0.8])
+    J = ball.jacobian("body", tilted)
+    state = ball.body_state("body", tilted, v)
+    assert J.shape == (6, 3)
+    assert_close(J[:3] @ v, state.angular_velocity, atol=1e-12, name="angular velocity")
+    assert_close(J[3:] @ v, state.velocity, atol=1e-12, name="COM velocity")
+    a = np.array([1.0, -2.0, 0.5])
+    tau = ball.inverse_dynamics(tilted, v, a)
+    assert_close(ball.accelerations(tilted, v, tau=tau), a, rtol=1e-9, atol=1e-10, name="round trip")
+
+
+@needs_ball
+def test_ball_joint_linearisation_while_moving():
+    """Acceleration rows against central differences through ``integrate``; the kinematic
+    rows of the rotation vector: dx/dt = v + x x v / 2 + ..., so d(dx/dt)/dx = -[v]x / 2."""
+    ball = ball_pendulum("ball").compile()
+    q = np.array([np.cos(0.6), np.sin(0.6) * 0.6, np.sin(0.6) * 0.8, 0.0])
+    v = np.array([0.3, -0.5, 0.8])
+    lin = ball.linearize(q, v)
+    h = 1e-5
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        dq = (ball.accelerations(ball.integrate(q, e), v) - ball.accelerations(ball.integrate(q, -e), v)) / (2 * h)
+        dv = (ball.accelerations(q, v + e) - ball.accelerations(q, v - e)) / (2 * h)
+        assert_close(lin.A[3:, j], dq, rtol=1e-6, atol=1e-7, name=f"dvdot/dx{j}")
+        assert_close(lin.A[3:, 3 + j], dv, rtol=1e-6, atol=1e-7, name=f"dvdot/dv{j}")
+    skew = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    assert_close(lin.A[:3, :3], -skew / 2, atol=1e-8, name="kinematic rows")
+    assert_close(lin.A[:3, 3:], np.eye(3), atol=1e-8, name="dx/dv")

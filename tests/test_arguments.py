@@ -60,7 +60,7 @@ class TestSettings:
         ({"method": "RK4", "dt": 0}, "dt must be positive, got 0"),
         ({"method": "RK4", "dt": "x"}, "dt must be a number"),
         ({"method": "RK4", "dt": True}, "dt must be a number"),
-        ({"tau": "ab"}, "tau: must be 2 finite numbers, got 'ab'"),
+        ({"tau": "ab"}, r"tau: must be 2 finite numbers \(one per speed\), got 'ab'"),
         ({"tau": [1.0]}, "tau: must be 2 finite numbers"),
         ({"tau": [np.nan, 0.0]}, "tau: must be 2 finite numbers"),
         ({"integrator": "fast"}, "integrator must be"),
@@ -115,6 +115,13 @@ class TestRunaway:
     def test_an_absurd_initial_speed_is_a_step_size_collapse(self, chain, integrator):
         with pytest.raises(mb.SimulationError, match=r"step size collapsed at t = .* largest speed .*e\+1[12] \(joint0\)"):
             chain.simulate(1.0, Q0, [1e12, 0.0], integrator=integrator)
+
+    def test_a_torque_growing_as_exp_exp_t_stops_with_where(self, chain):
+        def tau(t, q, qd):
+            with np.errstate(over="ignore"):
+                return np.array([np.exp(np.exp(10 * t)), 0.0])
+        with pytest.raises(mb.SimulationError, match=r"(step size collapsed|not finite|non-finite).* t = 0\.\d+"):
+            chain.simulate(1.0, Q0, tau=tau)
 
     def test_an_overflowing_torque_says_non_finite_and_when(self, chain):
         # exp(exp(10 t)) overflows at t = ln(709.78)/10 = 0.6565 s; a torque that jumps to

@@ -266,3 +266,16 @@ def test_results_and_plots_use_nested_names(tmp_path):
     assert (tmp_path / "r.csv").read_text().splitlines()[0].startswith("t,upper.angle,lower.angle,")
     labels = [line.get_label() for ax in res.plot().axes for line in ax.lines]
     assert "upper.angle" in labels and "lower.angle" in labels
+
+
+def test_a_bound_parameter_set_on_its_own_stays_set():
+    def build(**modifiers):
+        m = mb.Model("m")
+        m.add(Leg("left", hip=m.ground.frame(), **modifiers))
+        return m.compile(backend="python")
+    s = build()
+    pinned = s.with_parameters({"left.shank.length": 0.3})
+    assert pinned.parameters == build(shank={"length": 0.3}).parameters
+    later = pinned.with_parameters({"left.thigh_length": 0.5})
+    assert later.parameters == build(shank={"length": 0.3}, thigh_length=0.5).parameters
+    assert later.parameters["left.shank.length"] == 0.3 and later.parameters["left.thigh.length"] == 0.5

@@ -243,3 +243,153 @@ def test_states_in_csv_and_errors(tmp_path):
     m.add(mb.Drive("drive", sph, torque=1.0))
     with pytest.raises(mb.ModelError, match="1-DOF"):
         m.compile()
+
+
+def servo_pendulum(name, controller=None):
+    """A pendulum on a DC motor whose voltage a PID (or a Python callable) sets."""
+    m, j = pendulum(name)
+    if controller is None:
+        controller = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.105, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
+    m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=controller))
+    return m
+
+
+def test_drive_states_run_in_the_compiled_integrators():
+    sys = servo_pendulum("servo_c").compile()
+    assert sys.integration_path() == "compiled"
+    t = np.linspace(0, 2.0, 21)
+    compiled = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01})
+    assert compiled.stats["integrator"] == "compiled"
+    stepped = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01}, integrator="scipy")
+    assert stepped.stats["integrator"] == "scipy"
+    for name in ("th", "motor.current", "pid.integral"):
+        assert np.max(np.abs(compiled[name] - stepped[name])) < 1e-6, name  # rtol 1e-8: steps differ at the kinks
+    radau = sys.simulate(2.0, [0.0], t_eval=t, x0={"pid.integral": 0.01}, method="Radau")  # compiled Jacobian
+    assert radau.stats["njev"] > 0 and np.max(np.abs(radau["th"] - compiled["th"])) < 1e-5
+    rk4 = sys.simulate(2.0, [0.0], method="RK4", dt=1e-3, t_eval=t, x0={"pid.integral": 0.01})
+    # fixed steps across the setpoint step and the anti-windup switch: first-order errors
+    assert np.max(np.abs(rk4["th"] - compiled["th"])) < 1e-3
+    assert np.max(np.abs(rk4["motor.current"] - compiled["motor.current"])) < 1e-2
+    # the same controller as a Python callable: same motion, slower path
+    gains = sys.parameters
+
+    def callable_model():
+        m, j = pendulum("servo_py")
+        m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=lambda t, q, qd: 0.0))
+        return m
+
+    python = callable_model().compile()
+    assert python.integration_path().startswith("python")
+    assert gains["pid.kp"] == 60.0
+
+
+def test_sweeping_pid_gains_does_not_recompile():
+    sys = servo_pendulum("servo_sweep").compile()
+    t = np.linspace(0, 1.5, 16)
+    tuned = sys.with_parameters({"pid.kp": 20.0, "pid.limit": 6.0})
+    assert tuned.integration_path() == "compiled" and tuned.compile_time == sys.compile_time
+    m = mb.Model("fresh")
+    rod = m.add(mb.Body("rod", mass=1.0, com=(0, 0, -0.5)))
+    j = m.add(mb.Revolute("hinge", m.ground, rod, axis="x", coords="th"))
+    pid = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.105, 0.6), kp=20.0, ki=80.0, kd=6.0, limit=6.0))
+    m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=pid))
+    fresh = m.compile().simulate(1.5, [0.0], t_eval=t)
+    res = tuned.simulate(1.5, [0.0], t_eval=t)
+    assert np.max(np.abs(res["th"] - fresh["th"])) < 1e-12
+    assert np.max(np.abs(res["th"] - sys.simulate(1.5, [0.0], t_eval=t)["th"])) > 1e-3
+
+
+def test_servo_part_and_drives_inside_submodels():
+    m, j = pendulum("servo_part")
+    servo = m.add(mb.Servo("servo", joint=j, setpoint=0.5, kp=60.0, ki=80.0, kd=6.0, ratio=20.0, resistance=2.0,
+                           inductance=0.05, k=0.03, rotor_inertia=0.0))
+    sys = m.compile()
+    assert sys.extra_states == ("servo.pid.integral", "servo.motor.current")
+    assert sys.integration_path() == "compiled"
+    assert m["servo.pid"].kp == 60.0 and servo.path == "servo"
+    t = np.linspace(0, 2.0, 21)
+    res = sys.simulate(2.0, [0.0], t_eval=t, rtol=1e-10, atol=1e-12)
+
+    def f(t, y):
+        th, w, i, z = y
+        e = 0.5 - th
+        v = 60 * e + 80 * z - 6 * w
+        return [w, (0.6 * i - G * 0.5 * np.sin(th)) / 0.25, (v - 2 * i - 0.6 * w) / 0.05, e]
+
+    ref = reference(f, [0, 0, 0, 0], t)
+    assert np.max(np.abs(res["th"] - ref[0])) < 1e-6
+    assert np.max(np.abs(res["servo.motor.current"] - ref[2])) < 1e-5
+    # a sub-model parameter reaches the PID without recompiling
+    slower = sys.with_parameters({"servo.kp": 30.0}).simulate(2.0, [0.0], t_eval=t)
+    assert abs(slower["th"][5] - res["th"][5]) > 1e-3
+
+
+SERVO_FILE = """
+name = "servo_file"
+[bodies.rod]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+[joints.hinge]
+type = "revolute"
+parent = "ground"
+child = "rod"
+axis = "x"
+coords = "th"
+[forces.pid]
+type = "pid"
+measured = { type = "angle", joint = "hinge" }
+setpoint = { type = "step", time = 0.105, after = 0.6 }
+kp = 60.0
+ki = 80.0
+kd = 6.0
+limit = 12.0
+[forces.motor]
+type = "dc_motor"
+joint = "hinge"
+ratio = 20.0
+resistance = 2.0
+inductance = 0.05
+k = 0.03
+voltage = { type = "pid", name = "pid" }
+[forces.friction]
+type = "joint_friction"
+joint = "hinge"
+viscous = 0.01
+[constraints.stop]
+type = "joint_limit"
+joint = "hinge"
+upper = 1.5
+"""
+
+
+def test_drives_in_model_files(tmp_path):
+    path = tmp_path / "servo.toml"
+    path.write_text(SERVO_FILE)
+    sys = mb.load(path).compile()
+    m, j = pendulum("servo_py")
+    pid = m.add(mb.PID("pid", mb.Angle(j), mb.Step(0.105, 0.6), kp=60.0, ki=80.0, kd=6.0, limit=12.0))
+    m.add(mb.DCMotor("motor", j, ratio=20.0, resistance=2.0, inductance=0.05, k=0.03, voltage=pid))
+    m.add(mb.JointFriction("friction", j, viscous=0.01), mb.JointLimit("stop", j, upper=1.5))
+    python = m.compile()
+    assert sys.extra_states == python.extra_states and sys.parameters == {**python.parameters}
+    a = sys.simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    b = python.simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    assert np.allclose(a["th"], b["th"], atol=1e-12) and np.allclose(a["motor.current"], b["motor.current"], atol=1e-10)
+    mb.load(path).save(tmp_path / "again.toml")  # written back: the same model
+    again = mb.load(tmp_path / "again.toml").compile().simulate(1.0, [0.0], t_eval=[0.5, 1.0])
+    assert np.allclose(again["th"], a["th"], atol=1e-12)
+    path.write_text(SERVO_FILE.replace('joint = "hinge" }', 'joint = "hing" }'))
+    with pytest.raises(mb.ModelError, match=r"forces.pid\] measured.joint: unknown joint 'hing'"):
+        mb.load(path)
+    path.write_text(SERVO_FILE.replace('type = "step"', 'type = "ramp"'))
+    with pytest.raises(mb.ModelError, match=r"forces.pid\] setpoint: signal type must be one of"):
+        mb.load(path)
+
+
+def test_cli_info_lists_the_extra_states(capsys):
+    from mbcomp.cli import main
+    from pathlib import Path
+    library = Path(__file__).resolve().parents[1] / "library" / "servo_arm.toml"
+    assert main(["info", str(library)]) == 0
+    out = capsys.readouterr().out
+    assert "extra states  shoulder.pid.integral, shoulder.motor.current, elbow.pid.integral, elbow.motor.current" in out

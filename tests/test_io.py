@@ -298,7 +298,7 @@ BROKEN = {
                     ["[joints.j] axis: must be 'x', 'y', 'z' or a 3-vector, got 2 components"]),
     "missing_axis": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('axis = "x"\n', ""), ["[joints.j] axis: missing (required)"]),
     "joint_type": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('"revolute"', '"hinge"'),
-                   ["[joints.j] type: must be one of 'revolute', 'prismatic', 'spherical', 'ball', 'free', 'universal', 'cylindrical', 'planar', 'fixed', got 'hinge'"]),
+                   ["[joints.j] type: must be one of 'revolute', 'prismatic', 'spherical', 'fixed', 'ball', 'free', 'universal', 'cylindrical', 'planar', got 'hinge'"]),
     "key_of_other_joint_type": ("[bodies.b]\nmass = 1.0\n" + JOINT + 'sequence = "xy"\n', ["[joints.j] sequence: unknown key"]),
     "bad_sequence": ("[bodies.b]\nmass = 1.0\n" + JOINT.replace('"revolute"', '"spherical"').replace('axis = "x"', 'sequence = "xxa"'),
                      ["[joints.j] sequence: 'xxa' has invalid axis 'a'"]),
@@ -439,3 +439,9 @@ class TestExpressions:
     def test_parameters_may_not_use_later_ones(self, tmp_path):
         message = load_error(write(tmp_path, '[parameters]\nb = "a + 1"\na = 2.0\n'))
         assert "[parameters] b: 'a + 1': unknown name 'a'" in message
+
+
+@pytest.mark.parametrize("bad", [5, None, 2.5, ["a.toml"]])
+def test_load_of_a_non_path_is_a_model_error(bad):
+    with pytest.raises(mb.ModelError, match="path must be a file path"):
+        mb.load(bad)

@@ -299,6 +299,18 @@ def check_wheel_pendulum(model, system):
     np.testing.assert_allclose(result.qd[:, index(system, "wheel.angle")], 5.0, rtol=1e-8)
 
 
+def check_servo_arm(model, system):
+    # Two `servo` parts (DC motor + gear + PID per joint): the PIDs' integral action holds
+    # each joint at its target against gravity, in the compiled integrator.
+    assert system.extra_states == ("shoulder.pid.integral", "shoulder.motor.current",
+                                   "elbow.pid.integral", "elbow.motor.current")
+    assert system.integration_path() == "compiled"
+    res = system.simulate(6.0, [0.0, 0.0], t_eval=[6.0])
+    assert abs(res["shoulder.angle"][-1] - 0.6) < 2e-3 and abs(res["elbow.angle"][-1] + 0.4) < 2e-3
+    moved = system.simulate(6.0, [0.0, 0.0], t_eval=[6.0], parameters={"shoulder.target": 0.3})
+    assert abs(moved["shoulder.angle"][-1] - 0.3) < 2e-3
+
+
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
 
 

@@ -8,7 +8,7 @@ import scipy.optimize
 
 from ..errors import SimulationError, format_state
 from ..formulations.base import independent_rows
-from .space import Chart, difference, force_vector, integrate, speed_names
+from .space import Chart, difference, force_vector, integrate, model_forces, speed_names
 
 #: Accept an equilibrium when the reduced generalised force is below this fraction of the
 #: loads (the largest generalised force at the guess, or 1), and the constraints hold to
@@ -37,7 +37,7 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
         q0, _ = system.assemble(q0)  # onto the constraints first (raises when impossible)
 
     def forces(q):
-        _, f = system.tree_dynamics(q, None, t)
+        _, f = model_forces(system, q, zero, t)
         extra = force_vector(system, tau, t, q, zero)
         return f if extra is None else f + extra
 
@@ -160,7 +160,7 @@ def reduced_forces(system, q: np.ndarray, t: float = 0.0, tau: Any = None) -> np
     """``N^T (f + tau)`` at rest: the generalised forces along the independent speeds, zero at
     an equilibrium (N from ``Chart.basis``; without constraints simply ``f + tau``)."""
     n = len(speed_names(system))
-    _, f = system.tree_dynamics(q, None, t)
+    _, f = model_forces(system, q, np.zeros(n), t)
     extra = force_vector(system, tau, t, q, np.zeros(n))
     if extra is not None:
         f = f + extra

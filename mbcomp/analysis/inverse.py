@@ -6,7 +6,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import ModelError, SimulationError, format_state
-from .space import joint_speed_indices, speed_names
+from .space import joint_speed_indices, model_forces, speed_names
 
 
 class GeneralisedForces(np.ndarray):
@@ -40,7 +40,8 @@ def inverse_dynamics(system, q: Any, qd: Any, qdd: Any, t: Any = 0.0, actuated: 
     """Generalised forces ``tau`` that produce the accelerations ``qdd`` at ``(q, qd)``.
 
     One sample (``q`` (nq,), ``qd`` and ``qdd`` (n,)) or a trajectory of m samples ((m, nq),
-    (m, n), (m, n); ``t`` a number or m times).  Without constraints ``tau = M qdd - f``.
+    (m, n), (m, n); ``t`` a number or m times).  Without constraints ``tau = M qdd - f`` (f: the
+    model's own forces, drive elements included with their states at zero).
     With constraints ``M qdd = f + tau + J^T lam`` leaves a choice: by default ``tau`` is the
     smallest (Euclidean norm) generalised force, orthogonal to the constraint forces, and a
     fully driven mechanism (motors on every degree of freedom) needs ``tau = 0``: its motor
@@ -66,7 +67,7 @@ def inverse_dynamics(system, q: Any, qd: Any, qdd: Any, t: Any = 0.0, actuated: 
     lams = np.zeros((m, len(rows_owner)))
     for i in range(m):
         qi, vi, ai = Q[i % len(Q)], V[i % len(V)], A[i % len(A)]
-        M, f = system.tree_dynamics(qi, vi, times[i])
+        M, f = model_forces(system, qi, vi, times[i])
         r = M @ ai - f
         if not names:
             if cols is not None:

@@ -49,6 +49,8 @@ def speed_vector(system, values: Any, what: str = "qd") -> np.ndarray:
     names = speed_names(system)
     if values is None:
         return np.zeros(len(names))
+    if hasattr(system, "speed_vector"):
+        return system.speed_vector(values, what)
     if len(names) == len(system.coords):
         return system.state_vector(values, what)
     if isinstance(values, dict):
@@ -103,6 +105,15 @@ def force_vector(system, tau: Any, t: float, q: np.ndarray, v: np.ndarray) -> np
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise ModelError("tau", f"must be {n} finite numbers, got {value!r}")
     return arr
+
+
+def model_forces(system, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, f)``: the tree's mass matrix and generalised forces, with the forces of drive
+    elements (constant drive torques, friction, motor currents at zero) included in ``f``."""
+    M, f = system.tree_dynamics(q, v, t)
+    if getattr(system, "has_drives", False):
+        f = f + system.drive_outputs(t, q, v, np.zeros(len(system.extra_states)))[0]
+    return M, f
 
 
 class Chart:
@@ -186,11 +197,11 @@ class Chart:
 
     def rate(self, q: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``dx/dt`` of the tangent coordinates for speeds ``v`` at ``q = q(x)``: ``v`` itself
-        unless a speed is not a coordinate rate (a ``Ball``), then by a central difference of
-        ``difference(q0, integrate(q, s v))`` in s."""
+        unless a speed is not a coordinate rate (a ``Ball``), then by a fourth-order central
+        difference of ``difference(q0, integrate(q, s v))`` in s."""
         if len(speed_names(self.system)) == len(self.system.coords):
             return v.copy()
-        h = 1e-6
-        plus = difference(self.system, self.q0, integrate(self.system, q, h * v))
-        minus = difference(self.system, self.q0, integrate(self.system, q, -h * v))
-        return (plus - minus) / (2 * h)
+        h = 1e-3 / max(1.0, float(np.max(np.abs(v), initial=0.0)))
+        fm2, fm1, fp1, fp2 = (difference(self.system, self.q0, integrate(self.system, q, s * h * v))
+                              for s in (-2, -1, 1, 2))
+        return (fm2 - 8 * fm1 + 8 * fp1 - fp2) / (12 * h)

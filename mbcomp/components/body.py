@@ -22,6 +22,9 @@ class Body(Component):
         generated for it.  The matrix must be symmetric positive semi-definite and its
         principal moments must satisfy the triangle inequality.  Stored as ``None``, the
         3 principal values, or the 6 entries ``xx yy zz xy xz yz``.
+    shape : None, a shape (``mb.Box``, ``mb.Cylinder``, ``mb.Sphere``, ``mb.Mesh``) or a list of
+        them, in the body frame: what the 3D viewer draws.  Display data only: neither a
+        parameter nor structure (changing it never recompiles).
     """
 
     kind = "body"
@@ -32,15 +35,19 @@ class Body(Component):
         ParameterSpec("inertia", (3,), "kg m^2", spd_inertia, default=None, optional=True,
                       doc="inertia about the COM in the body frame (principal values or 3x3; None: point mass)"),
     )
+    display = ("shape",)   #: structure-free display data (not parameters, not in structure())
 
     file_keys = ("mass", "com", "inertia")
     file_required = ("mass",)
 
-    def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None):
+    def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None,
+                 shape: Any = None):
         super().__init__(name)
         self.mass = mass
         self.com = com
         self.inertia = inertia
+        from ..shapes import as_shapes
+        self.shape = as_shapes(shape, self)
 
     def frame(self, point: Any = (0.0, 0.0, 0.0), rotation: Any = None) -> "Frame":
         """A ``Frame`` fixed on this body at ``point`` (m, body frame), optionally rotated
@@ -82,6 +89,7 @@ class Ground(Body):
         self.mass = 0.0
         self.com = (0.0, 0.0, 0.0)
         self.inertia = None
+        self.shape = ()
 
     def parameter_values(self) -> dict[str, Any]:
         return {}

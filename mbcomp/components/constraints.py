@@ -7,23 +7,12 @@ import numpy as np
 
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, unit_vector
-from ..rotations import AXIS_NAMES
+from ..rotations import AXIS_NAMES, normals
 from .base import Constraint
 from .primitives import CoordinateEquation, DotEquation, PointEquation
 from .frame import split_frame
 
 WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-
-
-def normals(axis) -> tuple[tuple, tuple]:
-    """Two unit vectors perpendicular to ``axis`` and to each other (exact for x, y, z)."""
-    a = np.asarray(axis, dtype=float)
-    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
-    n1 = np.cross(a, helper)
-    n1 /= np.linalg.norm(n1)
-    n2 = np.cross(a, n1)
-    clean = lambda v: tuple(float(round(x, 15)) + 0.0 for x in v)
-    return clean(n1), clean(n2)
 
 
 class Slider(Constraint):

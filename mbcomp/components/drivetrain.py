@@ -19,6 +19,7 @@ import sympy as sp
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, in_range, nonnegative, positive
 from .base import Component, ForceElement
+from .signals import SignalOwner
 
 
 class _OnJoint(ForceElement):
@@ -54,7 +55,7 @@ class _OnJoint(ForceElement):
         return {k: v for k, v in super().parameter_values().items() if not _is_signal(v)}
 
 
-class Drive(_OnJoint):
+class Drive(SignalOwner, _OnJoint):
     """A motor rotor on a 1-DOF joint through a gear.
 
     ``ratio`` (rotor turns per joint turn), ``rotor_inertia`` (kg m^2, reflected as
@@ -64,7 +65,12 @@ class Drive(_OnJoint):
     """
 
     drive_element = True
+    signal_attrs = ("torque",)
     kind = "drive"
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "ratio", "rotor_inertia", "torque")
+    file_required = ("joint",)
+    file_options = {"torque": "signal"}
     params = (ParameterSpec("ratio", (), "1", default=1.0, doc="rotor turns per joint turn"),
               ParameterSpec("rotor_inertia", (), "kg m^2", nonnegative, default=0.0, doc="rotor inertia"),
               ParameterSpec("torque", (), "N m", default=0.0, time_input=True,
@@ -107,7 +113,7 @@ class Drive(_OnJoint):
         return []
 
 
-class DCMotor(_OnJoint):
+class DCMotor(SignalOwner, _OnJoint):
     """A permanent-magnet DC motor driving a 1-DOF joint through a gear of ``ratio``.
 
     The armature current ``i`` (A) is a state (``"NAME.current"``)::
@@ -122,7 +128,12 @@ class DCMotor(_OnJoint):
     """
 
     drive_element = True
+    signal_attrs = ("voltage",)
     kind = "dc_motor"
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "ratio", "resistance", "inductance", "k", "voltage", "rotor_inertia")
+    file_required = ("joint", "ratio", "resistance", "inductance", "k", "voltage")
+    file_options = {"voltage": "signal"}
     params = (ParameterSpec("ratio", (), "1", doc="rotor turns per joint turn"),
               ParameterSpec("resistance", (), "ohm", nonnegative, doc="armature resistance"),
               ParameterSpec("inductance", (), "H", positive, doc="armature inductance"),
@@ -191,6 +202,9 @@ class JointFriction(_OnJoint):
     """
 
     kind = "joint_friction"
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "coulomb", "viscous", "speed_scale")
+    file_required = ("joint",)
     params = (ParameterSpec("coulomb", (), "N m or N", nonnegative, default=0.0, doc="Coulomb friction level"),
               ParameterSpec("viscous", (), "N m s/rad or N s/m", nonnegative, default=0.0, doc="viscous coefficient"),
               ParameterSpec("speed_scale", (), "rad/s or m/s", positive, default=1e-3,
@@ -221,7 +235,10 @@ class JointLimit(Component):
     """
 
     kind = "joint_limit"
-    section = "contacts"
+    section = "constraints"
+    refs = {"joint": "joint"}
+    file_keys = ("joint", "lower", "upper", "restitution")
+    file_required = ("joint",)
     params = (ParameterSpec("lower", (), "q", optional=True, default=None, doc="lower bound of the coordinate"),
               ParameterSpec("upper", (), "q", optional=True, default=None, doc="upper bound of the coordinate"),
               ParameterSpec("restitution", (), "1", in_range(0.0, 1.0), default=0.0, doc="Newton's coefficient"))

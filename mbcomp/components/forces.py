@@ -15,6 +15,7 @@ import sympy as sp
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, nonnegative
 from .base import ForceElement
+from .signals import SignalOwner
 from .frame import Frame, split_frame
 
 
@@ -184,7 +185,7 @@ class Force(ForceElement):
         return [("point", self.body, point, list(force))]
 
 
-class JointTorque(ForceElement):
+class JointTorque(SignalOwner, ForceElement):
     """Generalised force(s) on a joint's speeds (N m for angles, N for slides; for a ball
     the torque on the child in the child frame).
 
@@ -194,6 +195,8 @@ class JointTorque(ForceElement):
 
     kind = "joint_torque"
     section = "forces"
+    signal_attrs = ("value",)
+    file_options = {"value": "signal"}
     params = (ParameterSpec("value", (-1,), "N m or N (per joint coordinate)", default=0.0, time_input=True,
                             doc="one value per joint coordinate, or a callable (t, q, qd)"),)
     refs = {"joint": "joint"}

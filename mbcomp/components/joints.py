@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..params import ParameterSpec, axis_name, unit_vector
-from ..rotations import (AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
+from ..rotations import (normals, AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
 from .base import Component
 from .frame import Frame, split_frame
@@ -116,6 +116,8 @@ class Joint(Component):
             if not self.n_coords:
                 return None
             return self.coords[0] if self.n_coords == 1 else list(self.coords)
+        if key == "speeds":
+            return None if self.speeds == self.default_speeds else list(self.speeds)
         return super().file_value(key)
 
     # -- contract -----------------------------------------------------------
@@ -490,8 +492,18 @@ class Universal(Joint):
 
     kind = "universal"
     n_coords = 2
-    file_keys = Joint.file_keys + ("axes",)
-    file_options = {**Joint.file_options, "axes": "axes"}
+    params = Joint.params + (
+        ParameterSpec("axis1", (3,), "", unit_vector, structural=True, default=(1.0, 0.0, 0.0),
+                      doc="first axis, in the parent frame (the file form of axes[0])"),
+        ParameterSpec("axis2", (3,), "", unit_vector, structural=True, default=(0.0, 1.0, 0.0),
+                      doc="second axis, as carried by the first rotation (the file form of axes[1])"))
+    file_keys = Joint.file_keys + ("axis1", "axis2")
+
+    @classmethod
+    def from_file(cls, name: str, values: dict[str, Any]) -> "Joint":
+        values = dict(values)
+        axes = (values.pop("axis1", "x"), values.pop("axis2", "y"))
+        return super().from_file(name, {**values, "axes": axes})
 
     def __init__(self, name: str, parent: Any, child: Any, axes: Any = ("x", "y"), **options: Any):
         owner = f"Universal {name!r}"
@@ -503,6 +515,12 @@ class Universal(Joint):
         letters = tuple(_axis_letter(a) for a in axes)
         self._suffixes = letters if None not in letters and letters[0] != letters[1] else ("1", "2")
         super().__init__(name, parent, child, **options)
+        self.axis1, self.axis2 = self.axes
+
+    def summary(self) -> str:
+        first, second = (axis_name(a) for a in self.axes)
+        show = lambda n: n if isinstance(n, str) else tuple(n)  # noqa: E731
+        return f"{self.kind} about {show(first)} then {show(second)}"
 
     @property
     def coord_suffixes(self) -> tuple[str, ...]:
@@ -539,8 +557,9 @@ class Planar(Joint):
 
     kind = "planar"
     n_coords = 3
+    params = Joint.params + (ParameterSpec("normal", (3,), "", unit_vector, structural=True, default=(0.0, 0.0, 1.0),
+                                           doc="the plane's normal in the parent frame"),)
     file_keys = Joint.file_keys + ("normal",)
-    file_options = {**Joint.file_options, "normal": "axis"}
     _IN_PLANE = {"x": ("y", "z"), "y": ("z", "x"), "z": ("x", "y")}
 
     def __init__(self, name: str, parent: Any, child: Any, normal: Any = "z", **options: Any):
@@ -551,7 +570,6 @@ class Planar(Joint):
             self.plane_axes = (AXIS_NAMES[pair[0]], AXIS_NAMES[pair[1]])
             self._suffixes = (*pair, "angle")
         else:
-            from .constraints import normals
             self.plane_axes = normals(self.normal)
             self._suffixes = ("u", "v", "angle")
         super().__init__(name, parent, child, **options)
@@ -559,6 +577,10 @@ class Planar(Joint):
     @property
     def coord_suffixes(self) -> tuple[str, ...]:
         return self._suffixes
+
+    def summary(self) -> str:
+        name = axis_name(self.normal)
+        return f"{self.kind} normal {name if isinstance(name, str) else tuple(name)}"
 
     def _screws(self):
         return [("P", self.plane_axes[0]), ("P", self.plane_axes[1]), ("R", self.normal)]

@@ -14,6 +14,12 @@ from .dae_c import c_dae_accelerations
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
 DEFAULT_BAUMGARTE = (5.0, 5.0)
 
+#: Relative pivot (square root of the Gram matrix's, against its largest) below which a
+#: constraint direction is dropped from the compiled acceleration solve and projections: a
+#: transient singular position.  1e-4 passes the two-four-bar linkage through its singular
+#: crossings at rtol 1e-8 .. 1e-12 (smaller values stall the step size near the crossings).
+SINGULAR_TOLERANCE = 1e-4
+
 
 class DaeWorkspace(Workspace):
     """State ``[q, qd]`` over all tree coordinates; optional projection after each step."""
@@ -55,6 +61,7 @@ class DaeFormulation(Formulation):
             raise ModelError("formulation 'dae'", f"baumgarte gains must be finite and >= 0, got {gains!r}")
         self.baumgarte = (alpha, beta)
         self.projection = bool(options.get("projection", False))
+        self.singular_tolerance = SINGULAR_TOLERANCE
 
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:
@@ -79,14 +86,15 @@ class DaeFormulation(Formulation):
             yield
             return
         configure = lib.dae_configure
-        configure.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+        configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
         rows = np.ascontiguousarray(self.nominal_rows, dtype=np.int64)
         alpha, beta = self.baumgarte
-        configure(len(rows), rows.ctypes.data, alpha, beta, self.schur_scale)
+        configure(len(rows), rows.ctypes.data, alpha, beta, self.schur_scale,
+                  self.singular_tolerance)
         try:
             yield
         finally:
-            configure(-1, None, 0.0, 0.0, 0.0)
+            configure(-1, None, 0.0, 0.0, 0.0, 0.0)
 
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         if self.constraints is None and not contacts:
