@@ -343,19 +343,30 @@ done:
     return status;
 }
 
-/* Classical RK4 with fixed step dt for n steps from t0; y_out gets n + 1 rows (y0 first). */
-int rk4_run(const double *p, const double *tau, double t0, const double *y0, double dt, long n,
-            double *y_out, long *counts) {
+/* Classical RK4 with fixed step dt for n steps from t0.  y: the start state in, the state
+   reached out (on failure: the state at step counts[1]).  Output only where asked: with
+   keep == NULL every step's state goes to y_out (n + 1 rows, y0 first); else only the states
+   at the n_keep steps keep[] (ascending) go to y_out, and, when f_out is not NULL, their
+   rates to f_out (for the caller's interpolation between steps; not counted in nfev). */
+int rk4_run(const double *p, const double *tau, double t0, double *y, double dt, long n,
+            const long *keep, long n_keep, double *y_out, double *f_out, long *counts) {
     double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
-    double *work = malloc(sizeof(double) * NWORK);
+    double *next = malloc(sizeof(double) * NY), *work = malloc(sizeof(double) * NWORK);
+    double *const y_start = y;
     int status = 0;
-    if (!k || !stage || !work) { status = -4; goto done; }
-    memcpy(y_out, y0, sizeof(double) * NY);
+    long j = 0;  /* the next entry of keep */
+    if (!k || !stage || !next || !work) { status = -4; goto done; }
     for (long s = 0; s < n; ++s) {
-        const double *y = y_out + s * NY;
-        double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        const double t = t0 + s * dt;
         if (hook_says_stop(t)) { status = -6; goto done; }
         RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
+        if (!keep) {
+            memcpy(y_out + s * NY, y, sizeof(double) * NY);
+        } else if (j < n_keep && keep[j] == s) {
+            memcpy(y_out + j * NY, y, sizeof(double) * NY);
+            if (f_out) memcpy(f_out + j * NY, k, sizeof(double) * NY);
+            ++j;
+        }
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
@@ -367,10 +378,21 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
         normalize_state(next);
         counts[0] += 4;
         counts[1] += 1;
-        if (!all_finite(next, NY)) { status = -3; goto done; }
+        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1 */
+        if (!all_finite(y, NY)) { status = -3; goto done; }
+    }
+    if (!keep) {
+        memcpy(y_out + n * NY, y, sizeof(double) * NY);
+    } else if (j < n_keep && keep[j] == n) {
+        memcpy(y_out + j * NY, y, sizeof(double) * NY);
+        if (f_out) RHS_OR_FAIL(rhs(t0 + n * dt, y, f_out + j * NY, p, tau, work));
     }
 done:
-    free(k); free(stage); free(work);
+    if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
+        memcpy(y_start, y, sizeof(double) * NY);
+        next = y;
+    }
+    free(k); free(stage); free(next); free(work);
     return status;
 }
 """.replace("FINISHED_CODE", "0")
@@ -524,7 +546,7 @@ def _bind(lib):
                     void, void]
     run.restype = ctypes.c_int
     rk4 = lib.rk4_run
-    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, void]
+    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, lng, void, void, void]
     rk4.restype = ctypes.c_int
     return run, rk4
 
@@ -659,17 +681,26 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         steps = int(round(t_end / dt))
         if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
             raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
-        out = np.empty((steps + 1, ny))
         counts = np.zeros(3, dtype=np.int64)
-        status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
-                     counts.ctypes.data)
+        if t_eval is None:  # every step
+            out = np.empty((steps + 1, ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
+                         None, counts.ctypes.data)
+        else:  # only the steps that bracket a requested time, with their rates (Hermite)
+            t_eval = np.asarray(t_eval, dtype=float)
+            idx = _bracketing_steps(t_eval, float(dt), steps)
+            keep = np.unique(np.concatenate((idx, idx + 1)))
+            y_keep, f_keep = np.empty((len(keep), ny)), np.empty((len(keep), ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, keep.ctypes.data, len(keep),
+                         y_keep.ctypes.data, f_keep.ctypes.data, counts.ctypes.data)
         if status == STOPPED:
             hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(kernel, status, counts[1] * dt, out[counts[1]], method)
-        t = np.arange(steps + 1) * dt
-        if t_eval is not None:
-            out, t = _hermite(kernel, t, out, t_eval, tau_arr), np.asarray(t_eval)
+            _fail(kernel, status, counts[1] * dt, y, method)
+        if t_eval is None:
+            t = np.arange(steps + 1) * dt
+        else:
+            out, t = _hermite(kernel, t_eval, float(dt), idx, keep, y_keep, f_keep), t_eval
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
@@ -716,29 +747,26 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
     return times, values, stats, time.perf_counter() - started
 
 
-def _hermite(kernel, t, y, t_eval, tau):
-    """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
-    the steps that bracket a requested time)."""
+def _bracketing_steps(t_eval: np.ndarray, dt: float, steps: int) -> np.ndarray:
+    """For each requested time, the step i (0 <= i < steps) with ``i dt <= t < (i + 1) dt``
+    (the last step for t_end): where the grid ``arange(steps + 1) * dt`` is searched."""
+    i = np.floor(t_eval / dt).astype(np.int64)
+    i = np.where((i + 1) * dt <= t_eval, i + 1, i)  # the grid's own rounding decides
+    i = np.where(i * dt > t_eval, i - 1, i)
+    return np.clip(i, 0, steps - 1)
+
+
+def _hermite(kernel, t_eval, dt, idx, keep, y_keep, f_keep):
+    """Cubic Hermite interpolation of fixed-step output at ``t_eval`` between the steps
+    ``idx`` and ``idx + 1`` (rows of ``y_keep``/``f_keep``: states and rates at the steps ``keep``)."""
     n = kernel.nq
-    state_map, nv = kernel.topology.state_map, kernel.nv
-    t_eval = np.asarray(t_eval, dtype=float)
-    idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
-    needed = np.unique(np.concatenate((idx, idx + 1)))
-
-    def rate(i):
-        q, qd, z = y[i, :n], y[i, n:n + nv], y[i, n + nv:]
-        tau_i, rates = tau, z[:0]
-        if kernel.compiled.drives.elements:
-            drive, rates = kernel.drive_outputs(t[i], q, qd, z)
-            tau_i = drive if tau is None else tau + drive
-        return np.concatenate((state_map.qdot(q, qd), kernel.tree_accelerations(t[i], q, qd, tau_i), rates))
-
-    f = {i: rate(i) for i in needed}
-    f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
-    h = (t[idx + 1] - t[idx])[:, None]
-    s = (t_eval - t[idx])[:, None] / h
+    state_map = kernel.topology.state_map
+    lo, hi = np.searchsorted(keep, idx), np.searchsorted(keep, idx + 1)
+    t_lo, t_hi = idx * dt, (idx + 1) * dt
+    h = (t_hi - t_lo)[:, None]
+    s = (t_eval - t_lo)[:, None] / h
     h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    out = h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
+    out = h00 * y_keep[lo] + h10 * h * f_keep[lo] + h01 * y_keep[hi] + h11 * h * f_keep[hi]
     if not state_map.identity:
         out[:, :n] = state_map.normalize(out[:, :n])
     return out
