@@ -222,26 +222,46 @@ class TestWhereItApplies:
         assert fastcall.extension() is None
 
 
-def test_concurrent_calls_from_threads_give_the_serial_numbers(chain):
-    rng = np.random.default_rng(11)
-    states = [(rng.uniform(-1, 1, N), rng.uniform(-1, 1, N)) for _ in range(40)]
-    chain.body_state("link1", states[0][0])
-    expected = [(chain.accelerations(q, qd), chain.mass_matrix(q), chain.body_state("link1", q, qd).velocity)
-                for q, qd in states]
+def _hammer(calls: dict, states: list, threads: int = 4, repeats: int = 25) -> list:
+    """Call every ``calls[name](q, qd)`` at every state from several threads at once; the
+    indices of the states whose results differed from a serial pass."""
+    expected = [{name: fn(q, qd) for name, fn in calls.items()} for q, qd in states]
     failures = []
 
     def worker(seed):
         order = np.random.default_rng(seed).permutation(len(states))
-        for _ in range(25):
+        for _ in range(repeats):
             for i in order:
                 q, qd = states[i]
-                got = (chain.accelerations(q, qd), chain.mass_matrix(q), chain.body_state("link1", q, qd).velocity)
-                if not all(np.array_equal(a, b) for a, b in zip(got, expected[i])):
+                if not all(np.array_equal(fn(q, qd), expected[i][name]) for name, fn in calls.items()):
                     failures.append(i)
 
-    threads = [threading.Thread(target=worker, args=(seed,)) for seed in range(4)]
-    for thread in threads:
+    pool = [threading.Thread(target=worker, args=(seed,)) for seed in range(threads)]
+    for thread in pool:
         thread.start()
-    for thread in threads:
+    for thread in pool:
         thread.join()
-    assert failures == []
+    return failures
+
+
+@pytest.fixture(scope="module")
+def states():
+    rng = np.random.default_rng(11)
+    return [(rng.uniform(-1, 1, N), rng.uniform(-1, 1, N)) for _ in range(40)]
+
+
+def test_concurrent_calls_from_threads_give_the_serial_numbers(chain, states):
+    chain.body_state("link1", states[0][0])
+    calls = {"qdd": chain.accelerations, "M": lambda q, qd: chain.mass_matrix(q),
+             "v": lambda q, qd: chain.body_state("link1", q, qd).velocity}
+    assert _hammer(calls, states) == []
+
+
+def test_concurrent_calls_through_ctypes_give_the_serial_numbers(chain, states):
+    kernel = chain.kernel
+    slow = fastcall.calls(kernel.compiled.functions, kernel.layout, kernel.p, kernel.nq, kernel.nv,
+                          use_extension=False)
+    local = np.array([0.0, 0.0, -0.25])
+    calls = {"qdd": slow.accelerations, "M": lambda q, qd: slow.mass_matrix(q),
+             "v": lambda q, qd: slow.body(q, qd, 1, local)[1]}
+    assert _hammer(calls, states) == []
