@@ -343,30 +343,42 @@ done:
     return status;
 }
 
+/* Rows of y_out for the output times t_out[*j ..] before t_b (all of them when last), by
+   cubic Hermite interpolation between the steps (t_a, ya, fa) and (t_b, yb, fb). */
+static void hermite_rows(double t_a, double t_b, const double *ya, const double *fa, const double *yb,
+                         const double *fb, const double *t_out, long n_out, long *j, int last, double *y_out) {
+    const double h = t_b - t_a;
+    for (; *j < n_out && (last || t_out[*j] < t_b); ++*j) {
+        const double s = (t_out[*j] - t_a) / h, s2 = s * s, s3 = s2 * s;
+        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
+        double *out = y_out + *j * NY;
+        for (int i = 0; i < NY; ++i) out[i] = h00 * ya[i] + h10 * h * fa[i] + h01 * yb[i] + h11 * h * fb[i];
+        normalize_state(out);
+    }
+}
+
 /* Classical RK4 with fixed step dt for n steps from t0.  y: the start state in, the state
    reached out (on failure: the state at step counts[1]).  Output only where asked: with
-   keep == NULL every step's state goes to y_out (n + 1 rows, y0 first); else only the states
-   at the n_keep steps keep[] (ascending) go to y_out, and, when f_out is not NULL, their
-   rates to f_out (for the caller's interpolation between steps; not counted in nfev). */
+   t_out == NULL every step's state goes to y_out (n + 1 rows, y0 first); else y_out gets one
+   row per output time t_out[0 .. n_out) (increasing, within [t0, t0 + n dt]) by cubic
+   Hermite interpolation between the two steps around it, whose rates the steps compute
+   anyway (one more evaluation, not counted in nfev, for the rate at the last step). */
 int rk4_run(const double *p, const double *tau, double t0, double *y, double dt, long n,
-            const long *keep, long n_keep, double *y_out, double *f_out, long *counts) {
+            const double *t_out, long n_out, double *y_out, long *counts) {
     double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
-    double *next = malloc(sizeof(double) * NY), *work = malloc(sizeof(double) * NWORK);
+    double *next = malloc(sizeof(double) * NY), *f_next = malloc(sizeof(double) * NY);
+    double *work = malloc(sizeof(double) * NWORK);
     double *const y_start = y;
-    int status = 0;
-    long j = 0;  /* the next entry of keep */
-    if (!k || !stage || !next || !work) { status = -4; goto done; }
+    int status = 0, have_f = 0;  /* have_f: f_next holds the rate at y (computed for output) */
+    long j = 0;  /* the next output time */
+    if (!k || !stage || !next || !f_next || !work) { status = -4; goto done; }
     for (long s = 0; s < n; ++s) {
-        const double t = t0 + s * dt;
+        const double t = t0 + s * dt, t_new = t0 + (s + 1) * dt;
         if (hook_says_stop(t)) { status = -6; goto done; }
-        RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
-        if (!keep) {
-            memcpy(y_out + s * NY, y, sizeof(double) * NY);
-        } else if (j < n_keep && keep[j] == s) {
-            memcpy(y_out + j * NY, y, sizeof(double) * NY);
-            if (f_out) memcpy(f_out + j * NY, k, sizeof(double) * NY);
-            ++j;
-        }
+        if (have_f) memcpy(k, f_next, sizeof(double) * NY);
+        else RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
+        have_f = 0;
+        if (!t_out) memcpy(y_out + s * NY, y, sizeof(double) * NY);
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
@@ -378,21 +390,22 @@ int rk4_run(const double *p, const double *tau, double t0, double *y, double dt,
         normalize_state(next);
         counts[0] += 4;
         counts[1] += 1;
-        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1 */
+        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1; next: at step s */
         if (!all_finite(y, NY)) { status = -3; goto done; }
+        const int last = s == n - 1;
+        if (t_out && j < n_out && (last || t_out[j] < t_new)) {  /* outputs between the two steps */
+            RHS_OR_FAIL(rhs(t_new, y, f_next, p, tau, work));
+            have_f = 1;
+            hermite_rows(t, t_new, next, k, y, f_next, t_out, n_out, &j, last, y_out);
+        }
     }
-    if (!keep) {
-        memcpy(y_out + n * NY, y, sizeof(double) * NY);
-    } else if (j < n_keep && keep[j] == n) {
-        memcpy(y_out + j * NY, y, sizeof(double) * NY);
-        if (f_out) RHS_OR_FAIL(rhs(t0 + n * dt, y, f_out + j * NY, p, tau, work));
-    }
+    if (!t_out) memcpy(y_out + n * NY, y, sizeof(double) * NY);
 done:
     if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
         memcpy(y_start, y, sizeof(double) * NY);
         next = y;
     }
-    free(k); free(stage); free(next); free(work);
+    free(k); free(stage); free(next); free(f_next); free(work);
     return status;
 }
 """.replace("FINISHED_CODE", "0")
@@ -546,7 +559,7 @@ def _bind(lib):
                     void, void]
     run.restype = ctypes.c_int
     rk4 = lib.rk4_run
-    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, lng, void, void, void]
+    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, lng, void, void]
     rk4.restype = ctypes.c_int
     return run, rk4
 
@@ -685,22 +698,17 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if t_eval is None:  # every step
             out = np.empty((steps + 1, ny))
             status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
-                         None, counts.ctypes.data)
-        else:  # only the steps that bracket a requested time, with their rates (Hermite)
-            t_eval = np.asarray(t_eval, dtype=float)
-            idx = _bracketing_steps(t_eval, float(dt), steps)
-            keep = np.unique(np.concatenate((idx, idx + 1)))
-            y_keep, f_keep = np.empty((len(keep), ny)), np.empty((len(keep), ny))
-            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, keep.ctypes.data, len(keep),
-                         y_keep.ctypes.data, f_keep.ctypes.data, counts.ctypes.data)
+                         counts.ctypes.data)
+            t = np.arange(steps + 1) * dt
+        else:  # only at the requested times (Hermite between the steps around each)
+            t = np.ascontiguousarray(t_eval, dtype=float)
+            out = np.empty((len(t), ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, t.ctypes.data, len(t),
+                         out.ctypes.data, counts.ctypes.data)
         if status == STOPPED:
             hook.stopped(counts[1] * dt, method)
         if status:
             _fail(kernel, status, counts[1] * dt, y, method)
-        if t_eval is None:
-            t = np.arange(steps + 1) * dt
-        else:
-            out, t = _hermite(kernel, t_eval, float(dt), idx, keep, y_keep, f_keep), t_eval
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
@@ -745,28 +753,3 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     return times, values, stats, time.perf_counter() - started
-
-
-def _bracketing_steps(t_eval: np.ndarray, dt: float, steps: int) -> np.ndarray:
-    """For each requested time, the step i (0 <= i < steps) with ``i dt <= t < (i + 1) dt``
-    (the last step for t_end): where the grid ``arange(steps + 1) * dt`` is searched."""
-    i = np.floor(t_eval / dt).astype(np.int64)
-    i = np.where((i + 1) * dt <= t_eval, i + 1, i)  # the grid's own rounding decides
-    i = np.where(i * dt > t_eval, i - 1, i)
-    return np.clip(i, 0, steps - 1)
-
-
-def _hermite(kernel, t_eval, dt, idx, keep, y_keep, f_keep):
-    """Cubic Hermite interpolation of fixed-step output at ``t_eval`` between the steps
-    ``idx`` and ``idx + 1`` (rows of ``y_keep``/``f_keep``: states and rates at the steps ``keep``)."""
-    n = kernel.nq
-    state_map = kernel.topology.state_map
-    lo, hi = np.searchsorted(keep, idx), np.searchsorted(keep, idx + 1)
-    t_lo, t_hi = idx * dt, (idx + 1) * dt
-    h = (t_hi - t_lo)[:, None]
-    s = (t_eval - t_lo)[:, None] / h
-    h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    out = h00 * y_keep[lo] + h10 * h * f_keep[lo] + h01 * y_keep[hi] + h11 * h * f_keep[hi]
-    if not state_map.identity:
-        out[:, :n] = state_map.normalize(out[:, :n])
-    return out
