@@ -1,4 +1,4 @@
-"""Cost of one public evaluation call of the N-link pendulum chain against ``pin.aba``.
+"""Cost of each public evaluation call of the N-link pendulum chain against ``pin.aba``.
 
 Per call from Python (microseconds; best of interleaved rounds, each the best of timeit
 repeats), the state a float64 ndarray:
@@ -17,8 +17,8 @@ repeats), the state a float64 ndarray:
 Both this thread's CPU time (the primary figure: the machine may be shared, and wall time
 then includes waiting for a core) and wall time.  Ratios are to pin.aba in the same run.
 
-Usage: python bench/call_cost.py [N ...] [--rounds 5]     (default 5 20 50)
-Writes bench/results/call_cost.csv.
+Usage: python bench/public_calls.py [N ...] [--rounds 5]     (default 5 20 50)
+Writes bench/results/public_calls.csv.
 """
 from __future__ import annotations
 
@@ -116,7 +116,7 @@ def run(sizes=(5, 20, 50), rounds: int = 5, log=print) -> list[dict]:
                              f"{value:8.2f}" + (f" ({ratio:5.2f})" if ratio is not None else " " * 8))
             log(f"{row['N']:>4} | " + " | ".join(cells))
     write_csv([{k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows],
-              "call_cost.csv")
+              "public_calls.csv")
     return rows
 
 
