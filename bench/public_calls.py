@@ -101,7 +101,7 @@ def measure(n: int, rounds: int) -> dict:
 
 
 def run(sizes=(5, 20, 50), rounds: int = 5, log=print) -> list[dict]:
-    """Measure every size; print the tables; write bench/results/call_cost.csv."""
+    """Measure every size; print the tables; write bench/results/public_calls.csv."""
     log(time.strftime("%Y-%m-%d %H:%M") + " | one public evaluation call of the N-link chain")
     rows = [measure(n, rounds) for n in sizes]
     for wall in (False, True):
