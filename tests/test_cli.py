@@ -42,9 +42,10 @@ HAS_PLOTTING = importlib.util.find_spec("mbcomp.plotting") is not None
 
 @pytest.fixture(scope="module")
 def env(tmp_path_factory):
-    """The environment of every call: a private code cache, no terminal tricks."""
+    """The environment of every call: the test run's private code cache (shared with the
+    other tests: the library models are compiled once per run), no terminal tricks."""
     values = dict(os.environ)
-    values["MBCOMP_CACHE_DIR"] = str(tmp_path_factory.mktemp("cli-cache"))
+    values["MBCOMP_CACHE_DIR"] = os.environ.get("MBCOMP_CACHE_DIR") or str(tmp_path_factory.mktemp("cli-cache"))
     values["MPLBACKEND"] = "Agg"
     values.pop("MBCOMP_LIBRARY", None)
     return values

@@ -1,6 +1,8 @@
 """Plots and animations: they render real pictures, with units, from the public API."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -21,8 +23,8 @@ from mbcomp.plotting import animate_result, plot_result, render_frame, work_prec
 # ----------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def cache_dir(tmp_path_factory):
-    """Generated code goes to a private cache for this module."""
-    path = tmp_path_factory.mktemp("plot-cache")
+    """Generated code goes to the test run's private cache (a fresh one when run alone)."""
+    path = os.environ.get("MBCOMP_CACHE_DIR") or tmp_path_factory.mktemp("plot-cache")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("MBCOMP_CACHE_DIR", str(path))
         yield path
