@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+from dataclasses import dataclass
 from typing import Callable
 
 import sympy as sp
@@ -115,55 +116,109 @@ def python_source(prog, functions: dict) -> str:
 
 def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
     """C source: ``void name(const double *q, const double *qd, const double *p,
-    const double *u, double *out)`` per function.
+    const double *u, double *out)`` per function, as one translation unit.
 
     Long programs are split into static functions of about ``chunk`` statements that
     pass only the values crossing a chunk boundary through a workspace array: a
     compiler's register allocation grows faster than linearly with function size,
     so this keeps compile time proportional to the program.  Functions named in
     ``cold`` (called per sample, not per step) are compiled without optimisation,
-    which saves compile time where run time does not matter.
+    which saves compile time where run time does not matter.  (``c_units`` gives the
+    same functions as several units that compile in parallel.)
     """
     lines = ["#include <math.h>", ""]
     for fname, outputs in functions.items():
-        needed = prog.needed(outputs)
-        results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
-        blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
-        block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
-        shared = {}
-        for b, block in enumerate(blocks):
-            for _, expr in block:
-                for s in expr.free_symbols:
-                    if block_of.get(s, b) != b and s not in shared:
-                        shared[s] = len(shared)
-        for e in results:
-            for s in e.free_symbols:
-                if s in block_of and s not in shared:
-                    shared[s] = len(shared)
-        names = _names(prog, "c")
-        names.update({s: f"w[{i}]" for s, i in shared.items()})
-        printer = Printer(names, "c")
-        args = "const double *q, const double *qd, const double *p, const double *u"
         attribute = '__attribute__((optimize("O0"))) ' if fname in cold else ""
-        for b, block in enumerate(blocks):
-            lines.append(f"{attribute}static void {fname}_part{b}({args}, double *w) {{")
-            for symbol, expr in block:
-                if symbol in shared:
-                    lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
-                else:
-                    lines.append(f"    const double {symbol.name} = {printer(expr)};")
-            lines.append("}")
-            lines.append("")
-        lines.append(f"{attribute}void {fname}({args}, double *out) {{")
-        lines.append(f"    double w[{max(len(shared), 1)}];")
-        for b in range(len(blocks)):
-            lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")
-        for k, e in enumerate(results):
-            lines.append(f"    out[{k}] = {printer(e)};")
+        parts, main = _c_function(prog, fname, outputs, chunk, f"{attribute}static ", attribute)
+        lines.extend(text for text, _ in parts)
+        lines.append(main)
+    return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class CUnit:
+    """One C translation unit of a model's library: its file stem, text, and whether it is
+    hot (run per right-hand side: optimised) or cold (per output sample: unoptimised)."""
+
+    name: str
+    text: str
+    hot: bool
+    statements: int = 0  # its size, to start the longest compilations first
+
+
+#: Part functions shared between units: linked into one library, never exported from it.
+_HIDDEN = '__attribute__((visibility("hidden"))) '
+_ARGS = "const double *q, const double *qd, const double *p, const double *u"
+
+
+def c_prototypes(functions) -> str:
+    """Declarations of the generated functions, for hand-written C compiled in its own unit."""
+    return "#include <math.h>\n" + "".join(f"void {name}({_ARGS}, double *out);\n" for name in functions)
+
+
+def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int = 1500):
+    """The functions of ``c_source`` as translation units of at most about ``unit``
+    statements, yielded as they are printed (the caller compiles each while the next is
+    printed): the chunks of a long function spread over several units so that a
+    compiler per core shares it, and each unit is hot or cold as a whole.  The same
+    statements in the same order: the numbers are those of ``c_source``."""
+    for fname, outputs in functions.items():
+        parts, main = _c_function(prog, fname, outputs, chunk, _HIDDEN, "")
+        declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in range(len(parts)))
+        groups, sizes = [[]], [0]
+        for text, count in parts:
+            if groups[-1] and sizes[-1] + count > unit:
+                groups.append([])
+                sizes.append(0)
+            groups[-1].append(text)
+            sizes[-1] += count
+        for g, (group, size) in enumerate(zip(groups, sizes)):
+            last = g == len(groups) - 1
+            body = "\n".join(group) + ("\n" + declarations + "\n" + main if last else "")
+            yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, fname not in cold, size)
+
+
+def _c_function(prog, fname: str, outputs, chunk: int, part_prefix: str, main_prefix: str):
+    """``([(part text, statements)], main text)`` of one generated function: its chunks
+    (``part_prefix void name_partB(..., double *w)``) and the function that calls them in
+    order and writes the outputs, followed by its ``name_many``."""
+    needed = prog.needed(outputs)
+    results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
+    blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
+    block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
+    shared = {}
+    for b, block in enumerate(blocks):
+        for _, expr in block:
+            for s in expr.free_symbols:
+                if block_of.get(s, b) != b and s not in shared:
+                    shared[s] = len(shared)
+    for e in results:
+        for s in e.free_symbols:
+            if s in block_of and s not in shared:
+                shared[s] = len(shared)
+    names = _names(prog, "c")
+    names.update({s: f"w[{i}]" for s, i in shared.items()})
+    printer = Printer(names, "c")
+    parts = []
+    for b, block in enumerate(blocks):
+        lines = [f"{part_prefix}void {fname}_part{b}({_ARGS}, double *w) {{"]
+        for symbol, expr in block:
+            if symbol in shared:
+                lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
+            else:
+                lines.append(f"    const double {symbol.name} = {printer(expr)};")
         lines.append("}")
         lines.append("")
-        lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
-    return "\n".join(lines)
+        parts.append(("\n".join(lines), len(block)))
+    lines = [f"{main_prefix}void {fname}({_ARGS}, double *out) {{", f"    double w[{max(len(shared), 1)}];"]
+    for b in range(len(blocks)):
+        lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")
+    for k, e in enumerate(results):
+        lines.append(f"    out[{k}] = {printer(e)};")
+    lines.append("}")
+    lines.append("")
+    lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
+    return parts, "\n".join(lines)
 
 
 #: ``name_many``: the function at ``m`` states in one call (rows of q, qd, u with the given
@@ -420,7 +475,8 @@ def generator_text() -> str:
     """The code generator's own text (version, printer, source templates): part of the cache
     key, so that a changed generator never reuses code it did not write."""
     try:
-        parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source)]
+        parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source, c_prototypes,
+                                                   c_units, _c_function)]
     except (OSError, TypeError):
         parts = []
     return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])

@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from . import cache, codegen
-from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
+from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
+                      c_compiler, c_library)
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
@@ -111,7 +112,8 @@ class CompiledModel:
             return None
         templates = self._c_templates()
         tools = cache.toolchain(compiler, C_FLAGS)
-        self.key = cache.entry_key(self.description, templates + codegen.generator_text(), tools)
+        plan = f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit"  # how the C is built
+        self.key = cache.entry_key(self.description, templates + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
             if path is not None:
@@ -121,9 +123,20 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
-        source = codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS) + templates
-        inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
-        return c_functions(source, self.sizes, key=self.key if use_cache else None, inputs=inputs)
+        build = CBuild(compiler)
+        try:
+            # The templates compile on another core while sympy generates the program; each
+            # generated unit starts compiling as soon as it is printed.
+            build.add("templates", codegen.c_prototypes(FUNCTIONS) + templates, C_FLAGS)
+            digest = hashlib.sha256(templates.encode())
+            for unit in codegen.c_units(self.program, FUNCTIONS, cold=COLD_FUNCTIONS, unit=UNIT_STATEMENTS):
+                build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
+                digest.update(unit.text.encode())
+        except BaseException:
+            build.cancel()
+            raise
+        inputs = {**tools, "cold_flags": list(COLD_FLAGS), "source_sha256": digest.hexdigest()}
+        return c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
 
     def _load_python(self, use_cache: bool):
         tools = cache.toolchain()
