@@ -29,7 +29,8 @@ def _states(compiled, seed):
 
 def _split_library(compiled, chunk, unit, jobs=None):
     build = CBuild(c_compiler(), jobs=jobs)
-    build.add("templates", codegen.c_prototypes(FUNCTIONS) + codegen.c_accelerations(compiled.topology.nv), C_FLAGS)
+    build.add("templates", codegen.c_prototypes(FUNCTIONS) + compiled.output_layout.c_defines()
+              + codegen.c_accelerations(compiled.topology.nv), C_FLAGS)
     units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS, chunk=chunk, unit=unit))
     for u in units:
         build.add(u.name, u.text, C_FLAGS if u.hot else COLD_FLAGS, u.statements)
@@ -59,7 +60,8 @@ class TestUnits:
     def test_split_units_give_the_numbers_of_one_unit(self, chain, chunk, unit, jobs):
         compiled, p = chain
         single = c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
-                             + codegen.c_accelerations(compiled.topology.nv), compiled.sizes)
+                             + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
+                             compiled.sizes)
         units, split = _split_library(compiled, chunk, unit, jobs)
         assert len(units) >= len(FUNCTIONS)
         u = np.zeros(0)
