@@ -4,9 +4,8 @@ from __future__ import annotations
 import functools
 import inspect
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
-
-import sympy as sp
 
 CODEGEN_VERSION = "10"
 
@@ -28,6 +27,7 @@ class Printer:
         return f"({text})" if text.startswith("-") else text
 
     def __call__(self, e) -> str:
+        import sympy as sp  # never at ``import mbcomp``: only code generation needs it
         if e.is_Symbol:
             return self.names[e]
         if e.is_Number:
@@ -101,6 +101,7 @@ def _names(prog, language: str) -> dict:
 def python_source(prog, functions: dict) -> str:
     """Python module source: one function per entry of ``functions``
     (``{name: [output names]}``), each ``f(q, qd, p, u) -> list of floats``."""
+    import sympy as sp
     names = _names(prog, "python")
     printer = Printer(names, "python")
     lines = ["from math import sin, cos, sqrt, tanh", ""]
@@ -182,6 +183,7 @@ def _c_function(prog, fname: str, outputs, chunk: int, part_prefix: str, main_pr
     """``([(part text, statements)], main text)`` of one generated function: its chunks
     (``part_prefix void name_partB(..., double *w)``) and the function that calls them in
     order and writes the outputs, followed by its ``name_many``."""
+    import sympy as sp
     needed = prog.needed(outputs)
     results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
     blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
@@ -296,12 +298,17 @@ int accelerations(const double *q, const double *qd, const double *p, const doub
 @functools.lru_cache(maxsize=1)
 def generator_text() -> str:
     """The code generator's own text (version, printer, source templates): part of the cache
-    key, so that a changed generator never reuses code it did not write."""
+    key, so that a changed generator never reuses code it did not write.  This module's whole
+    file (reading it costs a tenth of a millisecond; ``inspect.getsource`` of its functions
+    tokenizes it, ten milliseconds of every process that loads a model)."""
     try:
-        parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source, c_prototypes,
-                                                   c_units, _c_function)]
-    except (OSError, TypeError):
-        parts = []
+        parts = [Path(__file__).read_text(encoding="utf-8")]
+    except OSError:
+        try:
+            parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source, c_prototypes,
+                                                       c_units, _c_function)]
+        except (OSError, TypeError):
+            parts = []
     return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])
 
 

@@ -11,7 +11,7 @@ from . import cache, codegen
 from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
                       c_compiler, c_library)
 from .components._values import name_of
-from .equations import build_program, input_layout, parameter_layout, parameter_values
+from .param_layout import input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
 from .errors import ModelError
 from .layout import OutputLayout
@@ -87,6 +87,7 @@ class CompiledModel:
     def program(self):
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
+            from .equations import build_program  # sympy: only when code is generated
             equations = [] if self.constraint_set is None else self.constraint_set.equations
             self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
             self._check_layout(self._program)

@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 import sympy as sp
 
 from .components import Body
@@ -41,64 +40,8 @@ def matvec(R, v):
     return [dot(row, v) for row in R]
 
 
-# -- parameters ------------------------------------------------------------------
-@dataclass(frozen=True)
-class ParameterLayout:
-    """Where each parameter lives in the flat parameter vector ``p``.
-
-    ``entries[key] = (start, shape)`` with key ``"component.attribute"`` (``"gravity"``
-    for the model's gravity); ``shape`` is ``()`` for a scalar or ``(k,)``.
-    """
-
-    entries: dict
-    size: int
-
-    def pack(self, values: dict) -> np.ndarray:
-        """Flat ``p`` from ``{key: value}`` (every key of the layout)."""
-        p = np.empty(self.size)
-        for key, (start, shape) in self.entries.items():
-            width = shape[0] if shape else 1
-            p[start:start + width] = np.asarray(values[key], dtype=float).reshape(-1)
-        return p
-
-    def symbols(self, key: str):
-        start, shape = self.entries[key]
-        if not shape:
-            return sp.Symbol(_symbol_name(key))
-        return [sp.Symbol(_symbol_name(f"{key}[{i}]")) for i in range(shape[0])]
-
-
-def _symbol_name(key: str) -> str:
-    return key
-
-
-def parameter_values(model) -> dict[str, Any]:
-    """``{"component.attribute": value}`` for every numeric parameter of the model."""
-    values: dict[str, Any] = {"gravity": tuple(model.gravity)}
-    for comp in model.components.values():
-        for attr, value in comp.parameter_values().items():
-            values[f"{comp.name}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
-    return values
-
-
-def parameter_layout(values: dict[str, Any]) -> ParameterLayout:
-    entries, size = {}, 0
-    for key, value in values.items():
-        shape = () if np.ndim(value) == 0 else (len(value),)
-        entries[key] = (size, shape)
-        size += shape[0] if shape else 1
-    return ParameterLayout(entries=entries, size=size)
-
-
-def input_layout(topology) -> dict[str, tuple[int, int]]:
-    """Run-time inputs (callable forces and torques): ``{component name: (start, size)}``."""
-    layout, size = {}, 0
-    for comp in topology.forces:
-        width = topology.input_sizes.get(comp.name, 0)
-        if width:
-            layout[comp.name] = (size, width)
-            size += width
-    return layout
+# -- parameters: in param_layout.py (no sympy there: a cached model loads without it) --
+from .param_layout import ParameterLayout, input_layout, parameter_layout, parameter_values  # noqa: E402,F401
 
 
 # -- the straight-line program --------------------------------------------------------
