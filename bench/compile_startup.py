@@ -1,8 +1,10 @@
 """Cold compile, warm-process start-up and compile memory of the N-link chain, each in a fresh process.
 
-Usage: python bench/compile_startup.py [N ...] [--rounds R] [--trees DIR ...]
+Usage: python bench/compile_startup.py [N ...] [--rounds R] [--bytecode] [--trees DIR ...]
 (default N = 5 10 20 50, R = 3; ``--trees`` compares source trees of mbcomp, e.g. before and
-after a change, interleaved in the same run; default: the mbcomp this script imports)
+after a change, interleaved in the same run; default: the mbcomp this script imports;
+``--bytecode``: the children keep Python's bytecode cache (in a temporary directory) even
+where ``PYTHONDONTWRITEBYTECODE`` is set, as an installed package has it)
 
 For every N, R times, interleaved (a noisy spell hits all sizes alike):
 
@@ -46,7 +48,7 @@ built = time.perf_counter()
 system = model.compile(backend="c")
 compiled = time.perf_counter()
 out = {{"import_s": imported - started, "build_s": built - imported, "compile_s": compiled - built,
-        "cache_hit": bool(system._compiled.cache_hit)}}
+        "cache_hit": bool(system._compiled.cache_hit), "mbcomp": mbcomp.__file__}}
 if mode == "warm":
     q, qd = chain_initial_state(n)
     result = system.simulate(1.0, q, qd)
@@ -60,15 +62,23 @@ print("RESULT " + json.dumps(out))
 """
 
 
+#: Where the children keep Python's bytecode with ``--bytecode`` (None: as the environment says).
+BYTECODE: str | None = None
+
+
 def run_child(n: int, mode: str, cache: str, tree: str | None) -> dict:
     """One fresh interpreter (``mode`` "cold" or "warm") with ``cache`` as its code cache
     and mbcomp imported from ``tree`` (None: as this process would)."""
     env = {**os.environ, "MBCOMP_CACHE_DIR": cache, "MPLBACKEND": "Agg"}
     if tree is not None:
         env["PYTHONPATH"] = tree
+    if BYTECODE is not None:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = os.path.join(BYTECODE, Path(tree or "default").name)
     started = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", CHILD.format(here=str(HERE), n=n, mode=mode)],
-                          capture_output=True, text=True, env=env, check=False)
+                          capture_output=True, text=True, env=env, check=False,
+                          cwd=tree or tempfile.gettempdir())  # "-c" puts the working directory first on the path
     wall = time.perf_counter() - started
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     if done.returncode or not lines:
@@ -128,6 +138,9 @@ if __name__ == "__main__":
         i = args.index("--rounds")
         rounds = int(args[i + 1])
         del args[i:i + 2]
+    if "--bytecode" in args:
+        args.remove("--bytecode")
+        BYTECODE = tempfile.mkdtemp(prefix="mbcomp-bench-pyc-")
     trees: list[str | None] = [None]
     if "--trees" in args:
         i = args.index("--trees")

@@ -178,6 +178,8 @@ class CBuild:
     bytes, or None (with a warning) when a compiler fails.
     """
 
+    TIMEOUT = 600
+
     def __init__(self, compiler: str, jobs: int | None = None):
         self.compiler = compiler
         self.jobs = jobs or compile_jobs()
@@ -185,10 +187,13 @@ class CBuild:
         self._waiting: list = []   # (statements, name, flags)
         self._running: list = []   # (process, name)
         self._objects: list[str] = []
+        self._linked_last: list[str] = []
         self._failure: str | None = None
 
-    def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0) -> None:
-        """Queue ``text`` as unit ``name`` (a file stem, unique in this build), compiled with ``flags``."""
+    def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False) -> None:
+        """Queue ``text`` as unit ``name`` (a file stem, unique in this build), compiled with
+        ``flags``; ``last``: linked after the units without it (the library's layout)."""
+        (self._linked_last if last else self._objects).append(str(self._tmp / f"{name}.o"))  # link order
         (self._tmp / f"{name}.c").write_text(text)
         self._waiting.append((statements, name, tuple(flags)))
         self._waiting.sort(key=lambda item: item[0])
@@ -196,7 +201,8 @@ class CBuild:
 
     def _pump(self, block: bool = False) -> None:
         """Reap finished compilers and start waiting units while slots are free; with
-        ``block``, until every unit is compiled (or one failed)."""
+        ``block``, until every unit is compiled (or one failed, or ``TIMEOUT`` s passed)."""
+        deadline = time.monotonic() + self.TIMEOUT
         while True:
             still = []
             for process, name in self._running:
@@ -218,8 +224,10 @@ class CBuild:
                     self._failure = str(exc)
                     break
                 self._running.append((process, name))
-                self._objects.append(str(obj))
             if not block or not self._running:
+                return
+            if time.monotonic() > deadline:
+                self._failure = f"a compiler ran for more than {self.TIMEOUT} s"
                 return
             time.sleep(0.002)
 
@@ -229,7 +237,8 @@ class CBuild:
             self._pump(block=True)
             if self._failure is None:
                 out = self._tmp / "model.so"
-                done = subprocess.run([self.compiler, "-shared", *self._objects, "-o", str(out), "-lm"],
+                done = subprocess.run([self.compiler, "-shared", *self._objects, *self._linked_last, "-o", str(out),
+                                       "-lm"],
                                       capture_output=True, timeout=600, check=False)
                 if done.returncode == 0:
                     return out.read_bytes()

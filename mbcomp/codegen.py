@@ -129,9 +129,9 @@ def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
     """
     lines = ["#include <math.h>", ""]
     for fname, outputs in functions.items():
-        attribute = '__attribute__((optimize("O0"))) ' if fname in cold else ""
-        parts, main = _c_function(prog, fname, outputs, chunk, f"{attribute}static ", attribute)
-        lines.extend(text for text, _ in parts)
+        attribute = _COLD_ATTRIBUTE if fname in cold else ""
+        parts, main = _c_function(prog, fname, outputs, chunk, attribute)
+        lines.extend(f"{attribute}static {text}" for text, _ in parts)
         lines.append(main)
     return "\n".join(lines)
 
@@ -147,7 +147,9 @@ class CUnit:
     statements: int = 0  # its size, to start the longest compilations first
 
 
-#: Part functions shared between units: linked into one library, never exported from it.
+#: A cold function in an optimised unit.
+_COLD_ATTRIBUTE = '__attribute__((optimize("O0"))) '
+#: Part functions called from another unit: linked into one library, never exported from it.
 _HIDDEN = '__attribute__((visibility("hidden"))) '
 _ARGS = "const double *q, const double *qd, const double *p, const double *u"
 
@@ -158,31 +160,54 @@ def c_prototypes(functions) -> str:
 
 
 def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int = 1500):
-    """The functions of ``c_source`` as translation units of at most about ``unit``
-    statements, yielded as they are printed (the caller compiles each while the next is
-    printed): the chunks of a long function spread over several units so that a
-    compiler per core shares it, and each unit is hot or cold as a whole.  The same
-    statements in the same order: the numbers are those of ``c_source``."""
+    """The functions of ``c_source`` as translation units of about ``unit`` statements,
+    yielded as they are printed (the caller compiles each while the next is printed).
+
+    A function longer than ``unit`` gets units of its own, hot or cold as a whole, so that
+    a compiler per core shares it; shorter ones are packed together (one compiler start
+    for a small model), the cold ones marked unoptimised as in ``c_source``.  The chunks in
+    the unit of their function stay ``static`` (the compiler inlines them and keeps the
+    workspace in registers).  The same statements in the same order: the numbers are
+    those of ``c_source``."""
+    packed, packed_size, packed_hot, count = [], 0, False, 0
     for fname, outputs in functions.items():
-        parts, main = _c_function(prog, fname, outputs, chunk, _HIDDEN, "")
-        declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in range(len(parts)))
+        hot = fname not in cold
+        attribute = "" if hot else _COLD_ATTRIBUTE
+        parts, main = _c_function(prog, fname, outputs, chunk, attribute)
+        total = sum(size for _, size in parts)
+        if total <= unit:
+            if packed and packed_size + total > unit:
+                yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(packed), packed_hot, packed_size)
+                packed, packed_size, packed_hot, count = [], 0, False, count + 1
+            packed.append("".join(f"{attribute}static {text}\n" for text, _ in parts) + main)
+            packed_size += total
+            packed_hot = packed_hot or hot
+            continue
         groups, sizes = [[]], [0]
-        for text, count in parts:
-            if groups[-1] and sizes[-1] + count > unit:
+        for b, (text, size) in enumerate(parts):
+            if groups[-1] and sizes[-1] + size > unit:
                 groups.append([])
                 sizes.append(0)
-            groups[-1].append(text)
-            sizes[-1] += count
+            groups[-1].append((b, text))
+            sizes[-1] += size
+        elsewhere = [b for group in groups[:-1] for b, _ in group]
+        declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in elsewhere)
         for g, (group, size) in enumerate(zip(groups, sizes)):
             last = g == len(groups) - 1
-            body = "\n".join(group) + ("\n" + declarations + "\n" + main if last else "")
-            yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, fname not in cold, size)
+            prefix = "static " if last else _HIDDEN
+            body = "\n".join(prefix + text for _, text in group)
+            if last:
+                body = declarations + "\n" + body + "\n" + main
+            yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, hot, size)
+    if packed:
+        yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(packed), packed_hot, packed_size)
 
 
-def _c_function(prog, fname: str, outputs, chunk: int, part_prefix: str, main_prefix: str):
+def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str):
     """``([(part text, statements)], main text)`` of one generated function: its chunks
-    (``part_prefix void name_partB(..., double *w)``) and the function that calls them in
-    order and writes the outputs, followed by its ``name_many``."""
+    (``void name_partB(..., double *w) {...}``, for the caller to prefix with their linkage)
+    and the function that calls them in order and writes the outputs, followed by its
+    ``name_many``."""
     import sympy as sp
     needed = prog.needed(outputs)
     results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
@@ -203,7 +228,7 @@ def _c_function(prog, fname: str, outputs, chunk: int, part_prefix: str, main_pr
     printer = Printer(names, "c")
     parts = []
     for b, block in enumerate(blocks):
-        lines = [f"{part_prefix}void {fname}_part{b}({_ARGS}, double *w) {{"]
+        lines = [f"void {fname}_part{b}({_ARGS}, double *w) {{"]
         for symbol, expr in block:
             if symbol in shared:
                 lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")

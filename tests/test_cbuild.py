@@ -43,16 +43,24 @@ class TestUnits:
         units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS, chunk=10, unit=40))
         names = [u.name for u in units]
         assert len(names) == len(set(names))
-        for fname in FUNCTIONS:  # every function defined exactly once, in the last unit of its family
-            defining = [u for u in units if f"void {fname}(const double" in u.text and "{" in
-                        u.text.split(f"void {fname}(const double", 1)[1].split("\n", 1)[0]]
+        for fname in FUNCTIONS:  # every function defined exactly once
+            head = f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
+            defining = [u for u in units if head in u.text]
             assert len(defining) == 1, fname
-            assert defining[0].hot == (fname not in COLD_FUNCTIONS)
+            unoptimised = f'optimize("O0"))) {head}' in defining[0].text
+            assert (defining[0].hot and not unoptimised) == (fname not in COLD_FUNCTIONS), fname
         dynamics = [u for u in units if u.name.startswith("dynamics")]
         needed = len(compiled.program.needed(FUNCTIONS["dynamics"]))
         assert len(dynamics) == -(-needed // 40)  # chunks of 10 statements, 4 to a unit
         assert sum(u.statements for u in dynamics) == needed
-        assert all(u.statements <= 40 for u in dynamics)
+        assert all(u.statements <= 40 for u in dynamics) and all(u.hot for u in dynamics)
+
+    def test_a_small_model_is_one_unit(self, chain):
+        """Short functions are packed: one compiler start for the whole generated program."""
+        compiled, _ = chain
+        units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS))
+        assert [u.name for u in units] == ["functions0"] and units[0].hot
+        assert units[0].statements == sum(len(compiled.program.needed(outs)) for outs in FUNCTIONS.values())
 
     @needs_cc
     @pytest.mark.parametrize("chunk, unit, jobs", [(300, 1500, None), (7, 30, None), (7, 30, 1)],
@@ -63,7 +71,7 @@ class TestUnits:
                              + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
                              compiled.sizes)
         units, split = _split_library(compiled, chunk, unit, jobs)
-        assert len(units) >= len(FUNCTIONS)
+        assert len(units) == 1 if unit == 1500 else len(units) > len(FUNCTIONS)
         u = np.zeros(0)
         for seed in range(3):
             q, qd = _states(compiled, seed)
