@@ -147,7 +147,7 @@ class CUnit:
     statements: int = 0  # its size, to start the longest compilations first
 
 
-#: A cold function in an optimised unit.
+#: A cold function in ``c_source``'s one unit.
 _COLD_ATTRIBUTE = '__attribute__((optimize("O0"))) '
 #: Part functions called from another unit: linked into one library, never exported from it.
 _HIDDEN = '__attribute__((visibility("hidden"))) '
@@ -161,27 +161,30 @@ def c_prototypes(functions) -> str:
 
 def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int = 1500):
     """The functions of ``c_source`` as translation units of about ``unit`` statements,
-    yielded as they are printed (the caller compiles each while the next is printed).
+    each hot or cold as a whole, yielded as they are printed (the caller compiles each
+    while the next is printed).
 
-    A function longer than ``unit`` gets units of its own, hot or cold as a whole, so that
-    a compiler per core shares it; shorter ones are packed together (one compiler start
-    for a small model), the cold ones marked unoptimised as in ``c_source``.  The chunks in
-    the unit of their function stay ``static`` (the compiler inlines them and keeps the
-    workspace in registers).  The same statements in the same order: the numbers are
-    those of ``c_source``."""
-    packed, packed_size, packed_hot, count = [], 0, False, 0
+    A function longer than ``unit`` gets units of its own, so that a compiler per core
+    shares it; shorter ones are packed together, the hot ones apart from the cold ones
+    (a small model: two units that compile side by side).  The chunks in the unit of their
+    function stay ``static`` (the compiler inlines them and keeps the workspace in
+    registers).  The same statements in the same order: the numbers are those of
+    ``c_source``."""
+    packed = {True: ([], [0]), False: ([], [0])}  # hot / cold: texts, statements
+    count = 0
     for fname, outputs in functions.items():
         hot = fname not in cold
-        attribute = "" if hot else _COLD_ATTRIBUTE
-        parts, main = _c_function(prog, fname, outputs, chunk, attribute)
+        parts, main = _c_function(prog, fname, outputs, chunk, "")
         total = sum(size for _, size in parts)
         if total <= unit:
-            if packed and packed_size + total > unit:
-                yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(packed), packed_hot, packed_size)
-                packed, packed_size, packed_hot, count = [], 0, False, count + 1
-            packed.append("".join(f"{attribute}static {text}\n" for text, _ in parts) + main)
-            packed_size += total
-            packed_hot = packed_hot or hot
+            texts, size = packed[hot]
+            if texts and size[0] + total > unit:
+                yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
+                count += 1
+                texts.clear()
+                size[0] = 0
+            texts.append("".join(f"static {text}\n" for text, _ in parts) + main)
+            size[0] += total
             continue
         groups, sizes = [[]], [0]
         for b, (text, size) in enumerate(parts):
@@ -199,8 +202,10 @@ def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int
             if last:
                 body = declarations + "\n" + body + "\n" + main
             yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, hot, size)
-    if packed:
-        yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(packed), packed_hot, packed_size)
+    for hot, (texts, size) in packed.items():
+        if texts:
+            yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
+            count += 1
 
 
 def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str):
