@@ -128,9 +128,10 @@ def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
     same functions as several units that compile in parallel.)
     """
     lines = ["#include <math.h>", ""]
+    free = _free_symbols(prog)
     for fname, outputs in functions.items():
         attribute = _COLD_ATTRIBUTE if fname in cold else ""
-        parts, main = _c_function(prog, fname, outputs, chunk, attribute)
+        parts, main = _c_function(prog, fname, outputs, chunk, attribute, free)
         lines.extend(f"{attribute}static {text}" for text, _ in parts)
         lines.append(main)
     return "\n".join(lines)
@@ -172,13 +173,14 @@ def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int
     ``c_source``."""
     packed = {True: ([], [0]), False: ([], [0])}  # hot / cold: texts, statements
     count = 0
+    free = _free_symbols(prog)
     for fname, outputs in functions.items():
         hot = fname not in cold
-        parts, main = _c_function(prog, fname, outputs, chunk, "")
+        parts, main = _c_function(prog, fname, outputs, chunk, "", free)
         total = sum(size for _, size in parts)
         if total > unit:  # its own function only calls the chunks and copies the outputs out of
             # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
-            parts, main = _c_function(prog, fname, outputs, chunk, _COLD_ATTRIBUTE)
+            main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
         if total <= unit:
             texts, size = packed[hot]
             if texts and size[0] + total > unit:
@@ -211,20 +213,44 @@ def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int
             count += 1
 
 
-def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str):
+def _free_symbols(prog) -> dict:
+    """``{symbol: free symbols of its expression}`` of every assignment, computed once per
+    program (sympy walks the expression each time it is asked)."""
+    return {symbol: expr.free_symbols for symbol, expr in prog.assignments}
+
+
+def _needed(prog, outputs, free: dict) -> list:
+    """``prog.needed(outputs)`` (the assignments the outputs depend on, in order) on the
+    free symbols computed once."""
+    import sympy as sp
+    wanted = set()
+    for name in outputs:
+        for expr in prog.outputs[name]:
+            wanted |= sp.sympify(expr).free_symbols
+    keep = []
+    for symbol, expr in reversed(prog.assignments):
+        if symbol in wanted:
+            keep.append((symbol, expr))
+            wanted |= free[symbol]
+    keep.reverse()
+    return keep
+
+
+def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: dict | None = None):
     """``([(part text, statements)], main text)`` of one generated function: its chunks
     (``void name_partB(..., double *w) {...}``, for the caller to prefix with their linkage)
     and the function that calls them in order and writes the outputs, followed by its
-    ``name_many``."""
+    ``name_many``.  ``free``: ``_free_symbols(prog)`` when the caller has it."""
     import sympy as sp
-    needed = prog.needed(outputs)
+    free = _free_symbols(prog) if free is None else free
+    needed = _needed(prog, outputs, free)
     results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
     blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
     block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
     shared = {}
     for b, block in enumerate(blocks):
-        for _, expr in block:
-            for s in expr.free_symbols:
+        for symbol, _ in block:
+            for s in free[symbol]:
                 if block_of.get(s, b) != b and s not in shared:
                     shared[s] = len(shared)
     for e in results:
