@@ -55,6 +55,8 @@ if mode == "warm":
     done = time.perf_counter()
     out.update(simulate_s=done - compiled, in_process_s=done - started, q_end=float(result.q[-1][-1]),
                sympy="sympy" in sys.modules, scipy_integrate="scipy.integrate" in sys.modules)
+own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+out["cpu_s"] = own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime  # this process and the compilers
 kib = 1024 if sys.platform != "darwin" else 1024 * 1024
 out["rss_python_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / kib
 out["rss_compiler_mib"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / kib
@@ -96,6 +98,7 @@ def measure(n: int, tree: str | None) -> dict:
         warm = run_child(n, "warm", cache, tree)
         assert warm["cache_hit"], "the warm run did not find the code the cold run stored"
     return {"tree": Path(tree).name if tree else "", "N": n, "import_s": cold["import_s"], "cold_s": cold["compile_s"] + cold["build_s"],
+            "cold_total_cpu_s": cold["cpu_s"],
             "rss_python_mib": cold["rss_python_mib"], "rss_compiler_mib": cold["rss_compiler_mib"],
             "rss_total_mib": cold["rss_python_mib"] + cold["rss_compiler_mib"],
             "warm_total_s": warm["wall_s"], "warm_import_s": warm["import_s"],
