@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from . import cache, codegen
+from . import cache, codegen, recursive
 from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
 from .components._values import name_of
 from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
@@ -39,7 +39,8 @@ class CompiledModel:
     """What compilation produces and every ``System`` of the same structure shares:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
-    def __init__(self, model, *, cache: bool, backend: str):
+    def __init__(self, model, *, cache: bool, backend: str, dynamics: str = "auto"):
+        """``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"`` (``recursive.choose``)."""
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
         self.flat_model = model
@@ -54,8 +55,11 @@ class CompiledModel:
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
+        #: How the tree accelerations are computed: "dense" or "recursive" (recursive.py).
+        self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}")
         #: Everything about the model that decides the generated code (part of the cache key).
-        self.description = structure_description(model, self.topology, self.layout, self.inputs, self.drives)
+        self.description = (structure_description(model, self.topology, self.layout, self.inputs, self.drives)
+                            + f"\ndynamics|{self.dynamics}")
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
@@ -83,7 +87,8 @@ class CompiledModel:
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
+            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
+                                          recursive=self.dynamics == "recursive")
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
 
@@ -102,7 +107,10 @@ class CompiledModel:
         """The hand-written C emitted with every model (accelerations, dae solve, integrators)."""
         from .integrators import c_integrators
         nv = self.topology.nv  # the mass matrix and the accelerations are in speed space
-        return (codegen.c_accelerations(nv) + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
+        tree = codegen.c_accelerations(nv)
+        if self.dynamics == "recursive":
+            tree = recursive.c_accelerations(nv, self.n_inputs, tree)
+        return (tree + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
                 + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):
@@ -121,7 +129,7 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
-        source = codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS) + templates
+        source = codegen.c_source(self.program, self._functions(), cold=COLD_FUNCTIONS) + templates
         inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
         return c_functions(source, self.sizes, key=self.key if use_cache else None, inputs=inputs)
 
@@ -132,11 +140,19 @@ class CompiledModel:
         if source is not None:
             self.cache_hit = True
         else:
-            source = codegen.python_source(self.program, FUNCTIONS)
+            source = codegen.python_source(self.program, self._functions())
             if use_cache:
                 inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
                 cache.store(self.key, ".py", source.encode(), inputs)
-        return PythonFunctions(source, self.key, self.sizes)
+        functions = PythonFunctions(source, self.key, self.sizes)
+        if self.dynamics == "recursive":  # the generated aba replaces numpy's dense solve
+            solve = recursive.PythonAccelerations(codegen.load_python(source, self.key)["aba"], self.topology.nv)
+            functions.accelerations, functions.bind_parameters = solve, solve.bind_parameters
+        return functions
+
+    def _functions(self) -> dict:
+        """The generated functions ``{name: [output names]}``: the recursive program adds ``aba``."""
+        return {**FUNCTIONS, "aba": ["aba"]} if self.dynamics == "recursive" else FUNCTIONS
 
 
 def _as_list(x):

@@ -660,20 +660,20 @@ class System:
 
 
 def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
-                  **options: Any) -> System:
+                  dynamics: str = "auto", **options: Any) -> System:
     """Model -> System (see ``Model.compile``)."""
     from .compiler import CompiledModel
     from .formulations import get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
-    compiled = CompiledModel(model, cache=cache, backend=backend)
+    compiled = CompiledModel(model, cache=cache, backend=backend, dynamics=dynamics)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     derivation = getattr(model, "derivation", None)
     # How to rebuild this System elsewhere (pickling for process pools and clusters); a
     # model with sub-models keeps how its values follow their parameters.
     compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
-                       dict(options), backend)
+                       {**options, "dynamics": dynamics}, backend)
     compiled.derivation = derivation
     parameters = dict(compiled.default_parameters)
     if derivation is not None:
