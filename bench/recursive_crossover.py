@@ -11,7 +11,8 @@ once per round); each figure is the best round.  The dense and recursive acceler
 checked to agree (relative 1e-10) before timing.
 
 Usage: python bench/recursive_crossover.py [--sizes 2 3 4 6 8 10 15 20 30 50] [--rounds 5] [--cold]
-(``--cold`` also records cold compile times, in a fresh cache directory.)
+(``--cold`` also records cold compile times, wall and CPU including the C compiler, in a
+fresh cache directory.)
 Writes bench/results/recursive_crossover.csv.
 """
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -79,6 +81,13 @@ class Variant:
             n = int(n * max(2.0, target / max(per * n, 1e-9)))
 
 
+def compile_cpu() -> float:
+    """CPU seconds of this process and its finished children (the C compiler) so far: on a
+    shared machine a steadier measure of compile work than wall time."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
 def per_call_us(fn, repeat: int = 7) -> float:
     number, _ = timeit.Timer(fn).autorange()
     number = max(1, number // 10)
@@ -109,9 +118,10 @@ def main(argv=None):
             row = {"n": n}
             variants = {}
             for kind in ("dense", "recursive"):
-                started = time.perf_counter()
+                started, cpu = time.perf_counter(), compile_cpu()
                 system = model.compile(dynamics=kind)
                 row[f"{kind}_compile_s"] = round(time.perf_counter() - started, 3) if args.cold else ""
+                row[f"{kind}_compile_cpu_s"] = round(compile_cpu() - cpu, 3) if args.cold else ""
                 variants[kind] = Variant(system, timer, q, qd)
             a, b = (variants[k].system.accelerations(q, qd) for k in ("dense", "recursive"))
             row["max_rel_diff"] = float(np.max(np.abs(a - b)) / np.max(np.abs(a)))

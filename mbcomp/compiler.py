@@ -129,7 +129,8 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
-        source = codegen.c_source(self.program, self._functions(), cold=COLD_FUNCTIONS) + templates
+        cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
+        source = codegen.c_source(self.program, self._functions(), cold=cold) + templates
         inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
         return c_functions(source, self.sizes, key=self.key if use_cache else None, inputs=inputs)
 

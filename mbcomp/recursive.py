@@ -39,9 +39,13 @@ from .errors import ModelError
 #: ``compile(dynamics=...)``: how the tree accelerations are computed.
 DYNAMICS = ("auto", "dense", "recursive")
 
-#: ``dynamics="auto"`` chooses the recursive program from this many speeds on (measured by
-#: ``bench/recursive_crossover.py``: ``results/recursive_crossover.csv``).
-CROSSOVER_NV = 8
+#: ``dynamics="auto"`` chooses the recursive program from this many speeds on.  Measured by
+#: ``bench/recursive_crossover.py`` (``results/recursive_crossover.csv``): on the pendulum
+#: chain one compiled evaluation costs, recursive over dense, 0.82-0.97 for N = 2..8, 0.83 at
+#: 10, 0.77 at 15, 0.73 at 20, 0.45 at 30, 0.30 at 50, while cold compiling costs 15-25% more
+#: CPU up to N = 20 (the generated ``aba`` on top of the mass matrix) and less from N = 50 on.
+#: From about 12 speeds the evaluation is a fifth cheaper or more: worth the compile time.
+CROSSOVER_NV = 12
 
 
 def choose(dynamics: str, topology, owner: str = "compile") -> Literal["dense", "recursive"]:
@@ -58,6 +62,20 @@ def choose(dynamics: str, topology, owner: str = "compile") -> Literal["dense", 
         return dynamics
     tree = not topology.cut_joints and not topology.constraints
     return "recursive" if tree and topology.nv >= CROSSOVER_NV else "dense"
+
+
+#: Compile the dense ``dynamics`` function without optimisation when the recursive program
+#: serves the integrators of a tree (see ``cold_functions``).
+DENSE_COLD = True
+
+
+def cold_functions(dynamics: str, topology) -> tuple[str, ...]:
+    """Generated functions that need no optimisation: with the recursive program on a tree
+    without constraints or contacts, the dense ``dynamics`` (mass matrix and forces) is only
+    called per Python call (``mass_matrix``, ``tree_dynamics``, analyses), never per step, and
+    compiling it without optimisation saves most of the compile time the recursive program adds."""
+    plain_tree = not (topology.cut_joints or topology.constraints or topology.contacts)
+    return ("dynamics",) if DENSE_COLD and dynamics == "recursive" and plain_tree else ()
 
 
 def _inertia_matrix(I) -> list:
