@@ -226,3 +226,13 @@ def test_speed_tree_of_a_branched_model():
     assert pred[v["ball"].start] == 5                                # ball after free
     assert pred[v["hinge"].start] == v["universal"].start - 1        # branch off the euler body
     assert attach["b7"] == attach["b6"] == v["slide"].start          # welded to b6
+
+
+def test_pickled_system_keeps_its_dynamics():
+    """A System rebuilt elsewhere (process pools, clusters) compiles the same program."""
+    import pickle
+    system = pendulum_chain(3).compile(dynamics="recursive", backend="python")
+    again = pickle.loads(pickle.dumps(system))
+    assert again._compiled.dynamics == "recursive"
+    q, qd = np.array([0.1, -0.4, 0.9]), np.array([0.3, 0.0, -0.2])
+    np.testing.assert_array_equal(again.accelerations(q, qd), system.accelerations(q, qd))
