@@ -39,8 +39,9 @@ class CompiledModel:
     """What compilation produces and every ``System`` of the same structure shares:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
-    def __init__(self, model, *, cache: bool, backend: str, dynamics: str = "auto"):
-        """``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"`` (``recursive.choose``)."""
+    def __init__(self, model, *, cache: bool, backend: str, dynamics: str = "auto", formulation: str | None = None):
+        """``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"``; with ``formulation`` (its
+        name) the automatic choice (``recursive.choose``)."""
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
         self.flat_model = model
@@ -56,7 +57,7 @@ class CompiledModel:
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
         #: How the tree accelerations are computed: "dense" or "recursive" (recursive.py).
-        self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}")
+        self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}", formulation)
         #: Everything about the model that decides the generated code (part of the cache key).
         self.description = (structure_description(model, self.topology, self.layout, self.inputs, self.drives)
                             + f"\ndynamics|{self.dynamics}")
@@ -88,7 +89,7 @@ class CompiledModel:
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
             self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
-                                          recursive=self.dynamics == "recursive")
+                                          recursive=self.dynamics == "recursive", factors=bool(self.geometric_rows))
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
 
@@ -107,10 +108,13 @@ class CompiledModel:
         """The hand-written C emitted with every model (accelerations, dae solve, integrators)."""
         from .integrators import c_integrators
         nv = self.topology.nv  # the mass matrix and the accelerations are in speed space
+        ng = len(self.geometric_rows)
         tree = codegen.c_accelerations(nv)
-        if self.dynamics == "recursive":
-            tree = recursive.c_accelerations(nv, self.n_inputs, tree)
-        return (tree + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
+        dae = codegen.c_dae_accelerations(nv, ng)
+        if self.dynamics == "recursive":  # the tree solve and the dae KKT solve by the recursive program
+            tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
+            dae += recursive.c_dae(self.topology, ng)
+        return (tree + dae
                 + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):

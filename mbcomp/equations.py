@@ -340,7 +340,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None,
-                  recursive: bool = False) -> Program:
+                  recursive: bool = False, factors: bool = False) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
@@ -349,7 +349,8 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     with ``qdd`` the speeds' rates), ``"energy"`` (kinetic, potential), and
     ``"kinematics"`` (per body R, origin, V, A-bias; per speed S); with ``recursive``
     also ``"aba"`` (``recursive.aba_outputs``: the accelerations by the O(N)
-    articulated-body recursion, with the run-time generalised forces as extra inputs).
+    articulated-body recursion, with the run-time generalised forces as extra inputs; with
+    ``factors`` also what the dae formulation's KKT solve needs).
     """
     nq, nv = topology.nq, topology.nv
     n_inputs = sum(size for _, size in inputs.values())
@@ -478,7 +479,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     prog.outputs["kinematics"] = kinematics
     if recursive:
         from .recursive import aba_outputs
-        aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature)
+        aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature, factors=factors)
     constraint_outputs(prog, kin, equations)
     constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
     from .drive_equations import drive_outputs

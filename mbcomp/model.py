@@ -165,7 +165,8 @@ class Model:
         dynamics : how the compiled code computes the tree's accelerations: ``"dense"``
             (mass matrix and Cholesky factorisation, O(N^3)), ``"recursive"`` (the
             articulated-body algorithm, O(N)) or ``"auto"`` (recursive for trees without
-            constraints from a measured size on, ``mbcomp.recursive.CROSSOVER_NV`` speeds).
+            constraints from a measured size on, ``mbcomp.recursive.CROSSOVER_NV`` speeds, and
+            for ``"dae"`` with constraints from ``DAE_CROSSOVER_NV``).
             Both give the same accelerations to rounding; part of the cache key.
         options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
         """

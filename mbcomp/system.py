@@ -667,7 +667,8 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
-    compiled = CompiledModel(model, cache=cache, backend=backend, dynamics=dynamics)
+    compiled = CompiledModel(model, cache=cache, backend=backend, dynamics=dynamics,
+                             formulation=getattr(formulation_class, "name", None))
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     derivation = getattr(model, "derivation", None)
     # How to rebuild this System elsewhere (pickling for process pools and clusters); a

@@ -189,15 +189,20 @@ def test_pendulum_matches_the_closed_form():
         assert system.accelerations([q], [0.3], tau=[tau])[0] == pytest.approx(expected, rel=1e-13)
 
 
+def structure(model):
+    """The compiled structure (topology) of a model, without generating code."""
+    from mbcomp.flatten import flatten
+    from mbcomp.topology import build_topology
+    return build_topology(flatten(model.flat()))
+
+
 def test_auto_choice_by_size_and_structure():
-    small, large = pendulum_chain(2), pendulum_chain(recursive.CROSSOVER_NV)
-    topo = lambda model: model.compile(backend="python", dynamics="dense").topology  # noqa: E731
-    assert recursive.choose("auto", topo(small)) == "dense"
-    assert recursive.choose("auto", topo(large)) == "recursive"
-    assert recursive.choose("dense", topo(large)) == "dense"
-    assert recursive.choose("recursive", topo(small)) == "recursive"
-    four_bar = mb.load(library_models()["four_bar"])
-    assert recursive.choose("auto", four_bar.compile(backend="python").topology) == "dense"  # constraints
+    small, large = structure(pendulum_chain(2)), structure(pendulum_chain(recursive.CROSSOVER_NV))
+    assert recursive.choose("auto", small) == "dense"
+    assert recursive.choose("auto", large) == "recursive"
+    assert recursive.choose("dense", large) == "dense"
+    assert recursive.choose("recursive", small) == "recursive"
+    assert recursive.choose("auto", structure(mb.load(library_models()["four_bar"]))) == "dense"  # constraints
 
 
 def test_bad_dynamics_option_names_it():
@@ -236,3 +241,48 @@ def test_pickled_system_keeps_its_dynamics():
     assert again._compiled.dynamics == "recursive"
     q, qd = np.array([0.1, -0.4, 0.9]), np.array([0.3, 0.0, -0.2])
     np.testing.assert_array_equal(again.accelerations(q, qd), system.accelerations(q, qd))
+
+
+def chain_on_rail(n: int) -> mb.Model:
+    """The pendulum chain with its tip held on the vertical line through the pivot (a slider:
+    two constraint rows)."""
+    m = pendulum_chain(n)
+    m.add(mb.Slider("rail", f"link{n - 1}", (0, 0, -0.5), origin=(0, 0, 0), axis=(0, 0, 1)))
+    return m
+
+
+def test_dae_compiled_kkt_solve_by_the_recursion():
+    """The dae formulation's compiled KKT solve with M^-1 J^T from the articulated-body
+    factors gives the dense solve's trajectory (fixed-step RK4, compiled loop, projection on)."""
+    model = chain_on_rail(4)
+    dense, rec = model.compile("dae", dynamics="dense"), model.compile("dae", dynamics="recursive")
+    assert rec._compiled.dynamics == "recursive"
+    q, qd = dense.assemble(np.zeros(4), np.array([0.5, 0.7, 0.9, 1.0]))
+    a = dense.simulate(0.5, q, qd, method="RK4", dt=1e-3)
+    b = rec.simulate(0.5, q, qd, method="RK4", dt=1e-3)
+    assert a.stats["integrator"] == b.stats["integrator"] == "compiled"
+    np.testing.assert_allclose(b.q, a.q, rtol=0, atol=1e-12)
+    assert b.constraint_violation().max() < 1e-9
+
+
+def test_motor_only_constraints_with_the_recursive_program():
+    """A motor adds a constraint equation but no geometric row: the recursive program then
+    carries no KKT factors (the compiled and generated outputs must agree in size)."""
+    model = pendulum_chain(2)
+    model.add(mb.Motor("drive", "joint0", speed=1.0))
+    dense, rec = model.compile(dynamics="dense"), model.compile(dynamics="recursive")
+    q, qd = np.array([0.2, -0.3]), np.array([1.0, 0.4])
+    np.testing.assert_allclose(rec.accelerations(q, qd), dense.accelerations(q, qd), rtol=1e-12, atol=1e-12)
+    rng = np.random.default_rng(5)
+    tau = rng.uniform(-1, 1, 2)
+    expected, M = dense_solution(dense, 0.0, q, qd, tau)
+    assert_same_accelerations(tree_accelerations(rec, 0.0, q, qd, tau), expected, M)
+
+
+def test_auto_choice_for_constrained_models():
+    """With constraints: dense under lagrange; recursive under dae from DAE_CROSSOVER_NV speeds."""
+    topology = structure(chain_on_rail(recursive.DAE_CROSSOVER_NV))
+    assert recursive.choose("auto", topology, formulation="lagrange") == "dense"
+    assert recursive.choose("auto", topology, formulation="dae") == "recursive"
+    small = structure(chain_on_rail(3))
+    assert recursive.choose("auto", small, formulation="dae") == "dense"
