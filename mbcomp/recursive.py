@@ -230,7 +230,7 @@ static void aba_solve(const double *D, const double *W, const double *S, const d
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
                       const double *tau, double *qdd, double *work) {{
     const int n = ABA_NV, nr = dae_nr;
-    double ue[ABA_NU + ABA_NV + 1], fac[14 * ABA_NV], c[NG * (ABA_NV + 2)], X[ABA_NV * NG], A[NG * NG];
+    double ue[ABA_NU + ABA_NV + 1], fac[14 * ABA_NV], c[CONSTRAINTS_SIZE], X[ABA_NV * NG], A[NG * NG];
     double r[NG], lam[NG], col[ABA_NV], pa[6 * ABA_NV];
     (void)work;
     for (int i = 0; i < ABA_NU; ++i) ue[i] = u[i];
@@ -241,7 +241,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     for (int i = 0; i < n; ++i) if (fabs(D[i]) > scale) scale = fabs(D[i]);
     for (int i = 0; i < n; ++i) if (!(D[i] > 1e-13 * scale)) return 1;
     constraints(q, qd, p, u, c);
-    const double *g = c, *J = c + NG, *bias = c + NG + NG * n;
+    const double *g = c + CONSTRAINTS_RESIDUAL_OFF, *J = c + CONSTRAINTS_JACOBIAN_OFF, *bias = c + CONSTRAINTS_BIAS_OFF;
     for (int k = 0; k < nr; ++k) {{  /* X[:, k] = M^-1 J_row^T; the row's right-hand side */
         const double *Jr = J + dae_rows[k] * n;
         aba_solve(D, W, S, Jr, col, pa);

@@ -17,7 +17,7 @@ from conftest import pendulum_chain
 
 def tree_accelerations(system, t, q, qd, tau):
     """The unconstrained tree accelerations of a System (its compiled or generated solve)."""
-    kernel = getattr(system, "kernel", None)
+    kernel = getattr(system, "kernel", None) or getattr(system, "_kernel", None)
     if kernel is not None and hasattr(kernel, "tree_accelerations"):
         return kernel.tree_accelerations(t, q, qd, tau)
     return system._tree_accelerations(t, q, qd, tau)
