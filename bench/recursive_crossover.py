@@ -64,10 +64,11 @@ class Variant:
     """One compiled System and the buffers of a timed ``accelerations`` loop."""
 
     def __init__(self, system, timer, q, qd):
-        fns = system._compiled.functions
+        kernel = system.kernel
+        fns = kernel.compiled.functions
         n = system.nv
         self.system, self.timer = system, timer
-        self.arrays = [np.array(q), np.array(qd), system._p, np.zeros(max(system._compiled.n_inputs, 1)),
+        self.arrays = [np.array(q), np.array(qd), kernel.p, np.zeros(max(kernel.compiled.n_inputs, 1)),
                        np.empty(n), np.empty(n * (n + 1) // 2 + n + 16)]
         self.fn = ctypes.cast(fns.lib.accelerations, ctypes.c_void_p).value
 

@@ -17,10 +17,7 @@ from conftest import pendulum_chain
 
 def tree_accelerations(system, t, q, qd, tau):
     """The unconstrained tree accelerations of a System (its compiled or generated solve)."""
-    kernel = getattr(system, "kernel", None) or getattr(system, "_kernel", None)
-    if kernel is not None and hasattr(kernel, "tree_accelerations"):
-        return kernel.tree_accelerations(t, q, qd, tau)
-    return system._tree_accelerations(t, q, qd, tau)
+    return system.kernel.tree_accelerations(t, q, qd, tau)
 
 
 def dense_solution(system, t, q, qd, tau):
@@ -48,7 +45,7 @@ def test_every_library_model_has_the_dense_tree_accelerations(name):
     ``M^-1 (f + tau)`` of the dense program at random states and torques."""
     model = mb.load(library_models()[name])
     system = model.compile(backend="python", dynamics="recursive")
-    assert system._compiled.dynamics == "recursive"
+    assert system.kernel.compiled.dynamics == "recursive"
     rng = np.random.default_rng(sum(map(ord, name)))
     for _ in range(3):
         q, qd, tau = random_state(system, rng)
@@ -96,7 +93,7 @@ def test_every_joint_kind_accelerations_agree(zoo_pair):
     branch, with springs, a callable torque, a point force and a drive's reflected inertia on
     the diagonal: the public accelerations (with tau) agree to rounding."""
     dense, rec = zoo_pair
-    assert (dense._compiled.dynamics, rec._compiled.dynamics) == ("dense", "recursive")
+    assert (dense.kernel.compiled.dynamics, rec.kernel.compiled.dynamics) == ("dense", "recursive")
     assert dense.nq == rec.nq == dense.nv + 2  # two quaternions
     rng = np.random.default_rng(7)
     for t in (0.0, 0.4):
@@ -145,9 +142,9 @@ def test_ball_chain_compiled_accelerations_agree(ball_pair):
     """Compiled C, a Free and two Ball joints (13 speeds: auto chooses the recursive program);
     the dynamics choice is part of the cache key."""
     auto, dense = ball_pair
-    assert auto._compiled.dynamics == "recursive" and dense._compiled.dynamics == "dense"
+    assert auto.kernel.compiled.dynamics == "recursive" and dense.kernel.compiled.dynamics == "dense"
     assert auto.backend == dense.backend == "c"
-    assert auto._compiled.key != dense._compiled.key
+    assert auto.kernel.compiled.key != dense.kernel.compiled.key
     rng = np.random.default_rng(3)
     for _ in range(3):
         q, qd, tau = random_state(dense, rng)
@@ -238,7 +235,7 @@ def test_pickled_system_keeps_its_dynamics():
     import pickle
     system = pendulum_chain(3).compile(dynamics="recursive", backend="python")
     again = pickle.loads(pickle.dumps(system))
-    assert again._compiled.dynamics == "recursive"
+    assert again.kernel.compiled.dynamics == "recursive"
     q, qd = np.array([0.1, -0.4, 0.9]), np.array([0.3, 0.0, -0.2])
     np.testing.assert_array_equal(again.accelerations(q, qd), system.accelerations(q, qd))
 
@@ -256,7 +253,7 @@ def test_dae_compiled_kkt_solve_by_the_recursion():
     factors gives the dense solve's trajectory (fixed-step RK4, compiled loop, projection on)."""
     model = chain_on_rail(4)
     dense, rec = model.compile("dae", dynamics="dense"), model.compile("dae", dynamics="recursive")
-    assert rec._compiled.dynamics == "recursive"
+    assert rec.kernel.compiled.dynamics == "recursive"
     q, qd = dense.assemble(np.zeros(4), np.array([0.5, 0.7, 0.9, 1.0]))
     a = dense.simulate(0.5, q, qd, method="RK4", dt=1e-3)
     b = rec.simulate(0.5, q, qd, method="RK4", dt=1e-3)
