@@ -17,28 +17,51 @@ from .shapes import Box, Cylinder, Mesh, Sphere
 from .result import Energy, Event, Result
 from .system import BodyState, System
 
-# Many simulations at once
-from .batch import sweep
-
 # Errors
 from .errors import CompileError, ModelError, SimulationError
 
 # Operations that lower layers offer as methods, implemented above them (see services.py)
+# Operations of rarely needed layers (files, plots, the viewer) import them on first use,
+# so that ``import mbcomp`` stays quick (no sympy, scipy.integrate, matplotlib: see
+# tests/test_imports.py).
 from . import services as _services
 from . import post as _post
-from .io import save as _save
-from .plotting import animate_result as _animate_result, plot_result as _plot_result
 from .system import compile_model as _compile_model
 
+
+def _on_first_use(module: str, name: str):
+    """``module.name``, imported when first called."""
+    def call(*args, **kwargs):
+        from importlib import import_module
+        return getattr(import_module(module, __name__), name)(*args, **kwargs)
+    call.__name__ = call.__qualname__ = name
+    return call
+
+
 _services.provide("compile", _compile_model)
-_services.provide("save", _save)
+_services.provide("save", _on_first_use(".io", "save"))
 _services.provide("energy", _post.energy)
 _services.provide("reactions", _post.reactions)
 _services.provide("constraint_violation", _post.constraint_violation)
-_services.provide("plot", _plot_result)
-_services.provide("animate", _animate_result)
-from .viewer import view as _view
-_services.provide("view", _view)
+_services.provide("plot", _on_first_use(".plotting", "plot_result"))
+_services.provide("animate", _on_first_use(".plotting", "animate_result"))
+_services.provide("view", _on_first_use(".viewer", "view"))
+
+#: Public names defined in modules imported on first use (PEP 562).
+_LAZY = {"sweep": ".batch"}
+
+
+def __getattr__(name: str):
+    """Names and submodules imported on first use: ``mbcomp.sweep``, ``mbcomp.io`` ..."""
+    from importlib import import_module, util
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name], __name__), name)
+    elif not name.startswith("_") and util.find_spec(f"{__name__}.{name}") is not None:
+        value = import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 __version__ = "0.1.0"
 

@@ -8,6 +8,7 @@ import subprocess
 import sysconfig
 import tempfile
 import threading
+import time
 import warnings
 from pathlib import Path
 
@@ -146,27 +147,125 @@ class CFunctions:
         return status, arrays["out"].copy()
 
 
-#: Flags of every compiled model (part of the cache key).
-C_FLAGS = ("-O1", "-shared", "-fPIC", "-fno-math-errno")
+#: Flags of the hot code (the generated right-hand side, the solves and the integrators);
+#: chosen by measurement (bench/compile_startup.py): -O1 runs the right-hand side 2.5-4.5x
+#: faster than -O0 for twice the compile time, -O2 is no faster than -O1 and compiles 1.3-1.8x
+#: longer.  Part of the cache key, with ``COLD_FLAGS`` and the unit plan.
+C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno")
+#: Flags of the cold units (functions called per output sample, not per step).
+COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno")
+#: Statements per generated translation unit (``codegen.c_units``).
+UNIT_STATEMENTS = 1500
 
 
-def compile_c(source: str, compiler: str) -> bytes | None:
-    """The shared library built from C ``source`` (its bytes), or None when the compiler
-    fails (with a warning).  The build directory is removed on every path."""
-    with tempfile.TemporaryDirectory(prefix="mbcomp-build-") as tmp:
-        src = Path(tmp) / "model.c"
-        src.write_text(source)
-        out = Path(tmp) / "model.so"
-        cmd = [compiler, *C_FLAGS, str(src), "-o", str(out), "-lm"]
+def compile_jobs() -> int:
+    """How many compilers run at once: the cores this process may use (at most 4: each
+    compiler of a large unit holds ~100 MiB)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 4))
+
+
+class CBuild:
+    """A shared library built from C units compiled in parallel in a private temporary
+    directory (removed on every path), then linked.
+
+    Units start compiling as they are added (the longest waiting first when every job
+    slot is busy), so a caller can add the hand-written templates before it generates the
+    model's code and compile them meanwhile.  ``finish`` links and returns the library's
+    bytes, or None (with a warning) when a compiler fails.
+    """
+
+    TIMEOUT = 600
+
+    def __init__(self, compiler: str, jobs: int | None = None):
+        self.compiler = compiler
+        self.jobs = jobs or compile_jobs()
+        self._tmp = Path(tempfile.mkdtemp(prefix="mbcomp-build-"))
+        self._waiting: list = []   # (statements, name, flags)
+        self._running: list = []   # (process, name)
+        self._objects: list[str] = []
+        self._linked_last: list[str] = []
+        self._failure: str | None = None
+
+    def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False) -> None:
+        """Queue ``text`` as unit ``name`` (a file stem, unique in this build), compiled with
+        ``flags``; ``last``: linked after the units without it (the library's layout)."""
+        (self._linked_last if last else self._objects).append(str(self._tmp / f"{name}.o"))  # link order
+        (self._tmp / f"{name}.c").write_text(text)
+        self._waiting.append((statements, name, tuple(flags)))
+        self._waiting.sort(key=lambda item: item[0])
+        self._pump()
+
+    def _pump(self, block: bool = False) -> None:
+        """Reap finished compilers and start waiting units while slots are free; with
+        ``block``, until every unit is compiled (or one failed, or ``TIMEOUT`` s passed)."""
+        deadline = time.monotonic() + self.TIMEOUT
+        while True:
+            still = []
+            for process, name in self._running:
+                if process.poll() is None:
+                    still.append((process, name))
+                elif process.returncode and self._failure is None:
+                    log = self._tmp / f"{name}.log"
+                    self._failure = (log.read_text(errors="replace")[-2000:] if log.exists() else "") or \
+                        f"exit status {process.returncode} compiling {name}"
+            self._running = still
+            while self._waiting and len(self._running) < self.jobs and self._failure is None:
+                _, name, flags = self._waiting.pop()
+                source, obj = self._tmp / f"{name}.c", self._tmp / f"{name}.o"
+                cmd = [self.compiler, *flags, "-c", str(source), "-o", str(obj)]
+                try:
+                    with open(self._tmp / f"{name}.log", "wb") as log:  # a file: a pipe could fill and block
+                        process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+                except OSError as exc:
+                    self._failure = str(exc)
+                    break
+                self._running.append((process, name))
+            if not block or not self._running:
+                return
+            if time.monotonic() > deadline:
+                self._failure = f"a compiler ran for more than {self.TIMEOUT} s"
+                return
+            time.sleep(0.002)
+
+    def finish(self) -> bytes | None:
+        """Wait for every unit, link them, remove the directory; the library's bytes or None."""
         try:
-            subprocess.run(cmd, check=True, capture_output=True, timeout=600)
-            return out.read_bytes()
-        except subprocess.CalledProcessError as exc:
-            warnings.warn(f"mbcomp: the C compiler failed, using the Python backend: {exc.stderr.decode()[-2000:]}",
-                          RuntimeWarning, stacklevel=2)
+            self._pump(block=True)
+            if self._failure is None:
+                out = self._tmp / "model.so"
+                done = subprocess.run([self.compiler, "-shared", *self._objects, *self._linked_last, "-o", str(out),
+                                       "-lm"],
+                                      capture_output=True, timeout=600, check=False)
+                if done.returncode == 0:
+                    return out.read_bytes()
+                self._failure = done.stderr.decode(errors="replace")[-2000:]
+            warnings.warn(f"mbcomp: the C compiler failed, using the Python backend: {self._failure}",
+                          RuntimeWarning, stacklevel=3)
             return None
         except (OSError, subprocess.SubprocessError):
             return None
+        finally:
+            self.cancel()
+
+    def cancel(self) -> None:
+        """Stop every compiler still running and remove the build directory."""
+        for process, _ in self._running:
+            process.kill()
+            process.wait()
+        self._running, self._waiting = [], []
+        shutil.rmtree(self._tmp, ignore_errors=True)
+
+
+def compile_c(source: str, compiler: str) -> bytes | None:
+    """The shared library built from one C ``source`` with the hot flags (its bytes), or
+    None when the compiler fails (with a warning).  The build directory is removed on every path."""
+    build = CBuild(compiler)
+    build.add("model", source, C_FLAGS)
+    return build.finish()
 
 
 def load_private(data: bytes, sizes: dict) -> "CFunctions":
@@ -187,7 +286,13 @@ def c_functions(source: str, sizes: dict, *, key: str | None = None, inputs: dic
     compiler = c_compiler()
     if compiler is None:
         return None
-    data = compile_c(source, compiler)
+    return c_library(compile_c(source, compiler), sizes, key=key, inputs=inputs)
+
+
+def c_library(data: bytes | None, sizes: dict, *, key: str | None = None,
+              inputs: dict | None = None) -> "CFunctions | None":
+    """Load built library bytes; with ``key``, store them in the cache first (signed manifest
+    with ``inputs``) and load them from there.  None when there is no library."""
     if data is None:
         return None
     if key is not None:

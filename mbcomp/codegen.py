@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import functools
 import inspect
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
-
-import sympy as sp
 
 CODEGEN_VERSION = "10"
 
@@ -27,6 +27,7 @@ class Printer:
         return f"({text})" if text.startswith("-") else text
 
     def __call__(self, e) -> str:
+        import sympy as sp  # never at ``import mbcomp``: only code generation needs it
         if e.is_Symbol:
             return self.names[e]
         if e.is_Number:
@@ -100,6 +101,7 @@ def _names(prog, language: str) -> dict:
 def python_source(prog, functions: dict) -> str:
     """Python module source: one function per entry of ``functions``
     (``{name: [output names]}``), each ``f(q, qd, p, u) -> list of floats``."""
+    import sympy as sp
     names = _names(prog, "python")
     printer = Printer(names, "python")
     lines = ["from math import sin, cos, sqrt, tanh", ""]
@@ -115,55 +117,169 @@ def python_source(prog, functions: dict) -> str:
 
 def c_source(prog, functions: dict, chunk: int = 300, cold: tuple = ()) -> str:
     """C source: ``void name(const double *q, const double *qd, const double *p,
-    const double *u, double *out)`` per function.
+    const double *u, double *out)`` per function, as one translation unit.
 
     Long programs are split into static functions of about ``chunk`` statements that
     pass only the values crossing a chunk boundary through a workspace array: a
     compiler's register allocation grows faster than linearly with function size,
     so this keeps compile time proportional to the program.  Functions named in
     ``cold`` (called per sample, not per step) are compiled without optimisation,
-    which saves compile time where run time does not matter.
+    which saves compile time where run time does not matter.  (``c_units`` gives the
+    same functions as several units that compile in parallel.)
     """
     lines = ["#include <math.h>", ""]
+    free = _free_symbols(prog)
     for fname, outputs in functions.items():
-        needed = prog.needed(outputs)
-        results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
-        blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
-        block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
-        shared = {}
-        for b, block in enumerate(blocks):
-            for _, expr in block:
-                for s in expr.free_symbols:
-                    if block_of.get(s, b) != b and s not in shared:
-                        shared[s] = len(shared)
-        for e in results:
-            for s in e.free_symbols:
-                if s in block_of and s not in shared:
+        attribute = _COLD_ATTRIBUTE if fname in cold else ""
+        parts, main = _c_function(prog, fname, outputs, chunk, attribute, free)
+        lines.extend(f"{attribute}static {text}" for text, _ in parts)
+        lines.append(main)
+    return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class CUnit:
+    """One C translation unit of a model's library: its file stem, text, and whether it is
+    hot (run per right-hand side: optimised) or cold (per output sample: unoptimised)."""
+
+    name: str
+    text: str
+    hot: bool
+    statements: int = 0  # its size, to start the longest compilations first
+
+
+#: A cold function in an optimised unit.
+_COLD_ATTRIBUTE = '__attribute__((optimize("O0"))) '
+#: Part functions called from another unit: linked into one library, never exported from it.
+_HIDDEN = '__attribute__((visibility("hidden"))) '
+_ARGS = "const double *q, const double *qd, const double *p, const double *u"
+
+
+def c_prototypes(functions) -> str:
+    """Declarations of the generated functions, for hand-written C compiled in its own unit."""
+    return "#include <math.h>\n" + "".join(f"void {name}({_ARGS}, double *out);\n" for name in functions)
+
+
+def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int = 1500):
+    """The functions of ``c_source`` as translation units of about ``unit`` statements,
+    each hot or cold as a whole, yielded as they are printed (the caller compiles each
+    while the next is printed).
+
+    A function longer than ``unit`` gets units of its own, so that a compiler per core
+    shares it; shorter ones are packed together, the hot ones apart from the cold ones
+    (a small model: two units that compile side by side).  The chunks in the unit of their
+    function stay ``static`` (the compiler inlines them and keeps the workspace in
+    registers).  The same statements in the same order: the numbers are those of
+    ``c_source``."""
+    packed = {True: ([], [0]), False: ([], [0])}  # hot / cold: texts, statements
+    count = 0
+    free = _free_symbols(prog)
+    for fname, outputs in functions.items():
+        hot = fname not in cold
+        parts, main = _c_function(prog, fname, outputs, chunk, "", free)
+        total = sum(size for _, size in parts)
+        if total > unit:  # its own function only calls the chunks and copies the outputs out of
+            # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
+            main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
+        if total <= unit:
+            texts, size = packed[hot]
+            if texts and size[0] + total > unit:
+                yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
+                count += 1
+                texts.clear()
+                size[0] = 0
+            texts.append("".join(f"static {text}\n" for text, _ in parts) + main)
+            size[0] += total
+            continue
+        groups, sizes = [[]], [0]
+        for b, (text, size) in enumerate(parts):
+            if groups[-1] and sizes[-1] + size > unit:
+                groups.append([])
+                sizes.append(0)
+            groups[-1].append((b, text))
+            sizes[-1] += size
+        elsewhere = [b for group in groups[:-1] for b, _ in group]
+        declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in elsewhere)
+        for g, (group, size) in enumerate(zip(groups, sizes)):
+            last = g == len(groups) - 1
+            prefix = "static " if last else _HIDDEN
+            body = "\n".join(prefix + text for _, text in group)
+            if last:
+                body = declarations + "\n" + body + "\n" + main
+            yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, hot, size)
+    for hot, (texts, size) in packed.items():
+        if texts:
+            yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
+            count += 1
+
+
+def _free_symbols(prog) -> dict:
+    """``{symbol: free symbols of its expression}`` of every assignment, computed once per
+    program (sympy walks the expression each time it is asked)."""
+    return {symbol: expr.free_symbols for symbol, expr in prog.assignments}
+
+
+def _needed(prog, outputs, free: dict) -> list:
+    """``prog.needed(outputs)`` (the assignments the outputs depend on, in order) on the
+    free symbols computed once."""
+    import sympy as sp
+    wanted = set()
+    for name in outputs:
+        for expr in prog.outputs[name]:
+            wanted |= sp.sympify(expr).free_symbols
+    keep = []
+    for symbol, expr in reversed(prog.assignments):
+        if symbol in wanted:
+            keep.append((symbol, expr))
+            wanted |= free[symbol]
+    keep.reverse()
+    return keep
+
+
+def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: dict | None = None):
+    """``([(part text, statements)], main text)`` of one generated function: its chunks
+    (``void name_partB(..., double *w) {...}``, for the caller to prefix with their linkage)
+    and the function that calls them in order and writes the outputs, followed by its
+    ``name_many``.  ``free``: ``_free_symbols(prog)`` when the caller has it."""
+    import sympy as sp
+    free = _free_symbols(prog) if free is None else free
+    needed = _needed(prog, outputs, free)
+    results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
+    blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
+    block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}
+    shared = {}
+    for b, block in enumerate(blocks):
+        for symbol, _ in block:
+            for s in free[symbol]:
+                if block_of.get(s, b) != b and s not in shared:
                     shared[s] = len(shared)
-        names = _names(prog, "c")
-        names.update({s: f"w[{i}]" for s, i in shared.items()})
-        printer = Printer(names, "c")
-        args = "const double *q, const double *qd, const double *p, const double *u"
-        attribute = '__attribute__((optimize("O0"))) ' if fname in cold else ""
-        for b, block in enumerate(blocks):
-            lines.append(f"{attribute}static void {fname}_part{b}({args}, double *w) {{")
-            for symbol, expr in block:
-                if symbol in shared:
-                    lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
-                else:
-                    lines.append(f"    const double {symbol.name} = {printer(expr)};")
-            lines.append("}")
-            lines.append("")
-        lines.append(f"{attribute}void {fname}({args}, double *out) {{")
-        lines.append(f"    double w[{max(len(shared), 1)}];")
-        for b in range(len(blocks)):
-            lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")
-        for k, e in enumerate(results):
-            lines.append(f"    out[{k}] = {printer(e)};")
+    for e in results:
+        for s in e.free_symbols:
+            if s in block_of and s not in shared:
+                shared[s] = len(shared)
+    names = _names(prog, "c")
+    names.update({s: f"w[{i}]" for s, i in shared.items()})
+    printer = Printer(names, "c")
+    parts = []
+    for b, block in enumerate(blocks):
+        lines = [f"void {fname}_part{b}({_ARGS}, double *w) {{"]
+        for symbol, expr in block:
+            if symbol in shared:
+                lines.append(f"    w[{shared[symbol]}] = {printer(expr)};")
+            else:
+                lines.append(f"    const double {symbol.name} = {printer(expr)};")
         lines.append("}")
         lines.append("")
-        lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
-    return "\n".join(lines)
+        parts.append(("\n".join(lines), len(block)))
+    lines = [f"{main_prefix}void {fname}({_ARGS}, double *out) {{", f"    double w[{max(len(shared), 1)}];"]
+    for b in range(len(blocks)):
+        lines.append(f"    {fname}_part{b}(q, qd, p, u, w);")
+    for k, e in enumerate(results):
+        lines.append(f"    out[{k}] = {printer(e)};")
+    lines.append("}")
+    lines.append("")
+    lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
+    return parts, "\n".join(lines)
 
 
 #: ``name_many``: the function at ``m`` states in one call (rows of q, qd, u with the given
@@ -241,11 +357,17 @@ int accelerations(const double *q, const double *qd, const double *p, const doub
 @functools.lru_cache(maxsize=1)
 def generator_text() -> str:
     """The code generator's own text (version, printer, source templates): part of the cache
-    key, so that a changed generator never reuses code it did not write."""
+    key, so that a changed generator never reuses code it did not write.  This module's whole
+    file (reading it costs a tenth of a millisecond; ``inspect.getsource`` of its functions
+    tokenizes it, ten milliseconds of every process that loads a model)."""
     try:
-        parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source)]
-    except (OSError, TypeError):
-        parts = []
+        parts = [Path(__file__).read_text(encoding="utf-8")]
+    except OSError:
+        try:
+            parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source, c_prototypes,
+                                                       c_units, _c_function)]
+        except (OSError, TypeError):
+            parts = []
     return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])
 
 

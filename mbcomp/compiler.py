@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from . import cache, codegen
-from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
+from . import cache, codegen, recursive
+from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
+                      c_compiler, c_library)
 from .components._values import name_of
-from .equations import build_program, input_layout, parameter_layout, parameter_values
+from .param_layout import input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
 from .errors import ModelError
 from .layout import OutputLayout
@@ -40,9 +41,12 @@ class CompiledModel:
     """What compilation produces and every ``System`` of the same structure shares:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
-    def __init__(self, model, *, cache: bool, backend: str, c_snippets: tuple = ()):
+    def __init__(self, model, *, cache: bool, backend: str, c_snippets: tuple = (), dynamics: str = "auto",
+                 formulation: str | None = None):
         """``c_snippets``: callables ``(nv, ng) -> str`` giving the C code the formulations
-        add to the library (every registered formulation's, so that one library serves all)."""
+        add to the library (every registered formulation's, so that one library serves all).
+        ``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"``; with ``formulation`` (its
+        name) the automatic choice (``recursive.choose``)."""
         self.c_snippets = tuple(c_snippets)
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
@@ -58,12 +62,14 @@ class CompiledModel:
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
+        #: How the tree accelerations are computed: "dense" or "recursive" (recursive.py).
+        self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}", formulation)
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
                                              len(self.topology.contacts), self.drives.nz)
         #: Everything about the model that decides the generated code (part of the cache key).
         self.description = (structure_description(model, self.topology, self.layout, self.inputs, self.drives)
-                            + "\nlayout|" + self.output_layout.description())
+                            + "\nlayout|" + self.output_layout.description() + f"\ndynamics|{self.dynamics}")
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
@@ -86,8 +92,10 @@ class CompiledModel:
     def program(self):
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
+            from .equations import build_program  # sympy: only when code is generated
             equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
+            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
+                                          recursive=self.dynamics == "recursive", factors=bool(self.geometric_rows))
             self._check_layout(self._program)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
@@ -116,8 +124,12 @@ class CompiledModel:
         accelerations, the formulations' code and the integrators."""
         from .integrators import c_integrators
         nv, ng = self.topology.nv, len(self.geometric_rows)  # the mass matrix and accelerations are in speed space
-        return (self.output_layout.c_defines() + codegen.c_accelerations(nv)
+        tree = codegen.c_accelerations(nv)
+        if self.dynamics == "recursive":  # the tree solve, and the dae KKT solve, by the recursive program
+            tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
+        return (self.output_layout.c_defines() + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
+                + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
                 + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
@@ -127,7 +139,8 @@ class CompiledModel:
             return None
         templates = self._c_templates()
         tools = cache.toolchain(compiler, C_FLAGS)
-        self.key = cache.entry_key(self.description, templates + codegen.generator_text(), tools)
+        plan = f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit"  # how the C is built
+        self.key = cache.entry_key(self.description, templates + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
             if path is not None:
@@ -137,9 +150,24 @@ class CompiledModel:
                     return functions
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
-        source = codegen.c_source(self.program, FUNCTIONS, cold=COLD_FUNCTIONS) + templates
-        inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
-        return c_functions(source, self.sizes, key=self.key if use_cache else None, inputs=inputs)
+        functions = self._functions()
+        cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
+        build = CBuild(compiler)
+        try:
+            # The templates compile on another core while sympy generates the program; each
+            # generated unit starts compiling as soon as it is printed.
+            # Linked after the generated code, as in one unit: the layout of the integrators'
+            # loops changes their speed by up to 15 % (N = 5 chain).
+            build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True)
+            digest = hashlib.sha256(templates.encode())
+            for unit in codegen.c_units(self.program, functions, cold=cold, unit=UNIT_STATEMENTS):
+                build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
+                digest.update(unit.text.encode())
+        except BaseException:
+            build.cancel()
+            raise
+        inputs = {**tools, "cold_flags": list(COLD_FLAGS), "source_sha256": digest.hexdigest()}
+        return c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
 
     def _load_python(self, use_cache: bool):
         tools = cache.toolchain()
@@ -148,11 +176,19 @@ class CompiledModel:
         if source is not None:
             self.cache_hit = True
         else:
-            source = codegen.python_source(self.program, FUNCTIONS)
+            source = codegen.python_source(self.program, self._functions())
             if use_cache:
                 inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
                 cache.store(self.key, ".py", source.encode(), inputs)
-        return PythonFunctions(source, self.key, self.sizes)
+        functions = PythonFunctions(source, self.key, self.sizes)
+        if self.dynamics == "recursive":  # the generated aba replaces numpy's dense solve
+            solve = recursive.PythonAccelerations(codegen.load_python(source, self.key)["aba"], self.topology.nv)
+            functions.accelerations, functions.bind_parameters = solve, solve.bind_parameters
+        return functions
+
+    def _functions(self) -> dict:
+        """The generated functions ``{name: [output names]}``: the recursive program adds ``aba``."""
+        return {**FUNCTIONS, "aba": ["aba"]} if self.dynamics == "recursive" else FUNCTIONS
 
 
 def _as_list(x):

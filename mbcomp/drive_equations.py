@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import sympy as sp
 
 from .errors import CompileError, describe
 
@@ -101,6 +100,7 @@ class DriveContext:
 
     def number(self, value: float):
         """A sympy number, exact for integers so that 0 and 1 prune."""
+        import sympy as sp
         value = float(value)
         return sp.Integer(int(value)) if value.is_integer() else sp.Float(value)
 
@@ -149,6 +149,7 @@ class DriveContext:
 def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
     """Outputs ``"drive_forces"`` (nv: generalised forces on the speeds) and ``"state_rates"``
     (nz) of the program."""
+    import sympy as sp  # the warm path (drive_layout) never needs it
     nv = kin.topology.nv
     if layout is None:
         prog.du = [sp.Symbol("du0")]

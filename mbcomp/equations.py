@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 import sympy as sp
 
 from .components import Body
@@ -41,64 +40,8 @@ def matvec(R, v):
     return [dot(row, v) for row in R]
 
 
-# -- parameters ------------------------------------------------------------------
-@dataclass(frozen=True)
-class ParameterLayout:
-    """Where each parameter lives in the flat parameter vector ``p``.
-
-    ``entries[key] = (start, shape)`` with key ``"component.attribute"`` (``"gravity"``
-    for the model's gravity); ``shape`` is ``()`` for a scalar or ``(k,)``.
-    """
-
-    entries: dict
-    size: int
-
-    def pack(self, values: dict) -> np.ndarray:
-        """Flat ``p`` from ``{key: value}`` (every key of the layout)."""
-        p = np.empty(self.size)
-        for key, (start, shape) in self.entries.items():
-            width = shape[0] if shape else 1
-            p[start:start + width] = np.asarray(values[key], dtype=float).reshape(-1)
-        return p
-
-    def symbols(self, key: str):
-        start, shape = self.entries[key]
-        if not shape:
-            return sp.Symbol(_symbol_name(key))
-        return [sp.Symbol(_symbol_name(f"{key}[{i}]")) for i in range(shape[0])]
-
-
-def _symbol_name(key: str) -> str:
-    return key
-
-
-def parameter_values(model) -> dict[str, Any]:
-    """``{"component.attribute": value}`` for every numeric parameter of the model."""
-    values: dict[str, Any] = {"gravity": tuple(model.gravity)}
-    for comp in model.components.values():
-        for attr, value in comp.parameter_values().items():
-            values[f"{comp.name}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
-    return values
-
-
-def parameter_layout(values: dict[str, Any]) -> ParameterLayout:
-    entries, size = {}, 0
-    for key, value in values.items():
-        shape = () if np.ndim(value) == 0 else (len(value),)
-        entries[key] = (size, shape)
-        size += shape[0] if shape else 1
-    return ParameterLayout(entries=entries, size=size)
-
-
-def input_layout(topology) -> dict[str, tuple[int, int]]:
-    """Run-time inputs (callable forces and torques): ``{component name: (start, size)}``."""
-    layout, size = {}, 0
-    for comp in topology.forces:
-        width = topology.input_sizes.get(comp.name, 0)
-        if width:
-            layout[comp.name] = (size, width)
-            size += width
-    return layout
+# -- parameters: in param_layout.py (no sympy there: a cached model loads without it) --
+from .param_layout import ParameterLayout, input_layout, parameter_layout, parameter_values  # noqa: E402,F401
 
 
 # -- the straight-line program --------------------------------------------------------
@@ -339,14 +282,18 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
     prog.outputs[output] = g_out + J_out + bias_out
 
 
-def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None) -> Program:
+def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None,
+                  recursive: bool = False, factors: bool = False) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
     Outputs: ``"mass_matrix"`` (nv x nv, lower triangle, row-major), ``"forces"`` (f_bar:
     gravity, force elements, convective and gyroscopic terms; ``M_bar qdd = f_bar + tau``
     with ``qdd`` the speeds' rates), ``"energy"`` (kinetic, potential), and
-    ``"kinematics"`` (per body R, origin, V, A-bias; per speed S).
+    ``"kinematics"`` (per body R, origin, V, A-bias; per speed S); with ``recursive``
+    also ``"aba"`` (``recursive.aba_outputs``: the accelerations by the O(N)
+    articulated-body recursion, with the run-time generalised forces as extra inputs; with
+    ``factors`` also what the dae formulation's KKT solve needs).
     """
     nq, nv = topology.nq, topology.nv
     n_inputs = sum(size for _, size in inputs.values())
@@ -434,6 +381,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         kinetic += dot(V, momentum) / 2
         body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
         wrench[body.name] = prog.lets(body_force)
+    own_wrench = dict(wrench)  # each body's own, before the subtree sums (recursive program)
     for body in reversed(topology.bodies):
         parent = topology.parent_of[body.name].name
         if parent != ground:
@@ -456,9 +404,11 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
             if j <= i:
                 M[i, j] = prog.let(dot(kin.S[j], F))
         forces.append(prog.let(generalized[i] - dot(kin.S[i], wrench[body.name])))
+    armature = {}
     for element in topology.forces:  # reflected rotor inertias of drives (drivetrain.py)
         for joint, value in element.armature(kin) if hasattr(element, "armature") else ():
             i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
+            armature[i] = armature.get(i, 0) + value
             M[i, i] = prog.let(M[i, i] + value)
             kinetic += value * prog.qd[i] ** 2 / 2
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
@@ -470,6 +420,9 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     for S in kin.S:
         kinematics += S
     prog.outputs["kinematics"] = kinematics
+    if recursive:
+        from .recursive import aba_outputs
+        aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature, factors=factors)
     constraint_outputs(prog, kin, equations)
     constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
     from .drive_equations import drive_outputs

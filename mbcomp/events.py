@@ -3,7 +3,6 @@ applied, resting contacts held closed and released when their reaction would pul
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .errors import SimulationError
 from .impact import GAP_TOLERANCE, solve_impact
@@ -55,6 +54,7 @@ class ContactWatch:
                 q, qd = workspace.full_state(s, dense(s))
                 return self.gaps(q, qd).g[i]
 
+            from scipy.optimize import brentq
             te = t_old if gap(t_old) <= 0.0 else brentq(gap, t_old, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
             if earliest is None or te < earliest:
                 earliest = te
@@ -84,6 +84,7 @@ class ContactWatch:
         contact = self.persistent[k]
         if force(t_old) <= 0.0:
             return t_old, contact
+        from scipy.optimize import brentq
         return brentq(force, t_old, t_new, xtol=1e-13, rtol=4 * np.finfo(float).eps), contact
 
     # -- acting on events --------------------------------------------------------------------------

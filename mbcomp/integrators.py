@@ -7,8 +7,12 @@ Norsett & Wanner, Solving ODEs I, II.5), so results match ``solve_ivp`` to round
 """
 from __future__ import annotations
 
+import functools
+import importlib.util
+import sys
+from pathlib import Path
+
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as dop
 
 #: Status codes returned by the compiled loops.
 FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
@@ -23,6 +27,35 @@ def _array(name: str, values) -> str:
     return f"static const double {name}{shape} = {{{flat}}};"
 
 
+@functools.lru_cache(maxsize=1)
+def _dop853_tables() -> tuple[str, ...]:
+    """The C tables of scipy's DOP853 tableau (``scipy.integrate._ivp.dop853_coefficients``).
+
+    Read from that module's file without importing ``scipy.integrate``: the package costs
+    about half a second of imports, and a process that loads a cached model and runs it
+    in compiled code needs this text only for the cache key, never the package.  Falls
+    back to the package import when the file is not where scipy keeps it."""
+    dop = sys.modules.get("scipy.integrate._ivp.dop853_coefficients") or _dop853_from_file()
+    if dop is None:
+        from scipy.integrate._ivp import dop853_coefficients as dop
+    return (_array("DOP_A", dop.A[:16, :16]), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
+            _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D))
+
+
+def _dop853_from_file():
+    """scipy's ``dop853_coefficients`` module executed from its file (it imports only numpy),
+    or None when it is not found there."""
+    try:
+        spec = importlib.util.find_spec("scipy")  # finds the package, does not import it
+        path = Path(spec.submodule_search_locations[0]) / "integrate" / "_ivp" / "dop853_coefficients.py"
+        file_spec = importlib.util.spec_from_file_location("_mbcomp_dop853_coefficients", path)
+        module = importlib.util.module_from_spec(file_spec)
+        file_spec.loader.exec_module(module)
+        return module
+    except (ImportError, OSError, AttributeError, TypeError, IndexError):
+        return None
+
+
 def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
     """C source of ``dop853_run`` and ``rk4_run`` for a tree with the given coordinates and
     speeds (``statemap.StateMap``): the state is ``y = [q, v, z]``, its rate
@@ -30,7 +63,6 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
     ``drives``, the ``nz`` states of drive elements follow the mechanical ones
     (``drive_equations``: their forces join ``tau``, their rates come from ``drives``)."""
     nq, nv = state_map.nq, state_map.nv
-    A = dop.A[:16, :16]
     lines = [
         "#include <stdlib.h>",
         "#include <string.h>",
@@ -46,8 +78,7 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
         "#define NY (NMECH + NZ)",
         f"#define NQUAT {state_map.quat_q.size}",
         "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
-        _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
-        _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
+        *_dop853_tables(),
     ]
     if not state_map.identity:
         ints = lambda name, values: f"static const int {name}[] = {{{', '.join(str(int(v)) for v in values) or '0'}}};"

@@ -152,7 +152,7 @@ class Model:
 
     # -- compilation ------------------------------------------------------------
     def compile(self, formulation: Any = "lagrange", *, cache: bool = True, backend: str = "auto",
-                **options: Any):
+                dynamics: str = "auto", **options: Any):
         """Compile to an immutable ``System``.
 
         Parameters
@@ -162,9 +162,16 @@ class Model:
         cache : reuse generated code stored on disk for the same model structure.
         backend : ``"auto"`` (compiled C when a C compiler works, else Python), ``"c"`` or
             ``"python"``.
+        dynamics : how the compiled code computes the tree's accelerations: ``"dense"``
+            (mass matrix and Cholesky factorisation, O(N^3)), ``"recursive"`` (the
+            articulated-body algorithm, O(N)) or ``"auto"`` (recursive for trees without
+            constraints from a measured size on, ``mbcomp.recursive.CROSSOVER_NV`` speeds, and
+            for ``"dae"`` with constraints from ``DAE_CROSSOVER_NV``).
+            Both give the same accelerations to rounding; part of the cache key.
         options : formulation options (``baumgarte=(alpha, beta)`` for ``"dae"``).
         """
-        return service("compile")(self, formulation=formulation, cache=cache, backend=backend, **options)
+        return service("compile")(self, formulation=formulation, cache=cache, backend=backend, dynamics=dynamics,
+                                  **options)
 
     def save(self, path) -> None:
         """Write the model as a declarative TOML file that ``mb.load`` reads back."""

@@ -3,8 +3,9 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+import sys
+
 import numpy as np
-import sympy as sp
 
 from .errors import ModelError
 
@@ -12,8 +13,10 @@ AXIS_NAMES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
 def _math(a):
-    """sympy functions for symbolic angles, numpy for numbers."""
-    return sp if isinstance(a, sp.Basic) else np
+    """sympy functions for symbolic angles, numpy for numbers (a symbolic angle means
+    sympy is imported already: numbers never import it)."""
+    sp = sys.modules.get("sympy")
+    return sp if sp is not None and isinstance(a, sp.Basic) else np
 
 
 def unit_axis(spec: Any, owner: Any = None) -> tuple[float, float, float]:
@@ -66,7 +69,8 @@ def axis_angle(axis: Sequence[float], angle: Any) -> Any:
         [y * x * (1 - c) + z * s, c + y * y * (1 - c), y * z * (1 - c) - x * s],
         [z * x * (1 - c) - y * s, z * y * (1 - c) + x * s, c + z * z * (1 - c)],
     ]
-    if m is sp:
+    if m is not np:
+        sp = m
         return sp.Matrix(rows).applyfunc(lambda e: sp.expand(e) if e.has(sp.cos(angle)) else e)
     return np.array(rows, dtype=float)
 

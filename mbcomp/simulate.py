@@ -5,8 +5,6 @@ import time
 from typing import Any
 
 import numpy as np
-from scipy.integrate import OdeSolver
-from scipy.integrate._ivp.ivp import METHODS
 
 from . import checks
 from .errors import ModelError, SimulationError, TrialStateError
@@ -34,9 +32,12 @@ def _delay(progress: Any) -> float:
     return max(float(progress), 0.0)
 
 
-def solver_class(method: Any) -> type[OdeSolver]:
+def solver_class(method: Any) -> type:
     """scipy's ``OdeSolver`` for a name (``"RK45"``, ``"DOP853"``, ``"Radau"``, ``"BDF"``,
-    ``"LSODA"``, ``"RK23"``) or a subclass passed directly."""
+    ``"LSODA"``, ``"RK23"``) or a subclass passed directly.  (scipy.integrate is imported
+    here, for scipy's stepping only: runs in compiled code never need it.)"""
+    from scipy.integrate import OdeSolver
+    from scipy.integrate._ivp.ivp import METHODS
     if isinstance(method, type) and issubclass(method, OdeSolver):
         return method
     if isinstance(method, str) and method in METHODS:

@@ -595,7 +595,7 @@ class System:
 
 
 def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",
-                  **options: Any) -> System:
+                  dynamics: str = "auto", **options: Any) -> System:
     """Model -> System (see ``Model.compile``)."""
     from .compiler import CompiledModel
     from .formulations import FORMULATIONS, get_formulation
@@ -604,13 +604,14 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     # The library carries every registered formulation's C code: one library serves them all.
     snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
-    compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
+    compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets, dynamics=dynamics,
+                             formulation=getattr(formulation_class, "name", None))
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     derivation = getattr(model, "derivation", None)
     # How to rebuild this System elsewhere (pickling for process pools and clusters); a
     # model with sub-models keeps how its values follow their parameters.
     compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
-                       dict(options), backend)
+                       {**options, "dynamics": dynamics}, backend)
     compiled.derivation = derivation
     parameters = dict(compiled.default_parameters)
     if derivation is not None:

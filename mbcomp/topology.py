@@ -4,8 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import networkx as nx
-
 from .components import Body, Component, Constraint, ForceElement, Joint
 from .components.contacts import Contact
 from .components._values import name_of
@@ -40,7 +38,6 @@ class Topology:
     constraints: tuple
     contacts: tuple
     components: dict
-    graph: Any = field(repr=False, compare=False)
     speeds: tuple = ()
     v_slice: dict = field(default_factory=dict)
     input_sizes: dict = field(default_factory=dict)
@@ -61,6 +58,20 @@ class Topology:
         if found is None:
             found = StateMap.of(self)
             object.__setattr__(self, "_state_map", found)
+        return found
+
+    @property
+    def graph(self):
+        """The model as a networkx ``MultiDiGraph``: bodies as nodes, every joint as an edge
+        parent -> child keyed by its name (with the joint as ``joint``); built on first use."""
+        found = self.__dict__.get("_graph")
+        if found is None:
+            import networkx as nx  # not needed to compile: imported only here
+            found = nx.MultiDiGraph()
+            found.add_nodes_from(c.name for c in self.components.values() if isinstance(c, Body))
+            for joint in (*self.tree_joints, *self.cut_joints):
+                found.add_edge(name_of(joint.parent), name_of(joint.child), key=joint.name, joint=joint)
+            object.__setattr__(self, "_graph", found)
         return found
 
     @property
@@ -130,32 +141,35 @@ def build_topology(model) -> Topology:
     # Components with broken references stay out of the graph; the checks go on so that
     # every problem is reported at once.
     joints = [c for c in components.values() if isinstance(c, Joint) and c.name not in broken]
-    graph = nx.MultiDiGraph()
-    graph.add_nodes_from(c.name for c in components.values() if isinstance(c, Body))
-    tree = nx.DiGraph()
-    tree.add_node(ground.name)
+    # The spanning tree, grown joint by joint in the model's order: a joint whose child has
+    # a parent already, or whose bodies the tree joins already, is cut (closes a loop).
+    degree = {c.name: 0 for c in components.values() if isinstance(c, Body)}  # joints at each body
+    children: dict[str, list[str]] = {}
+    joined = _Joined(ground.name)
     tree_joint_of: dict[str, Joint] = {}
     cut_joints = []
     for joint in joints:
         parent, child = name_of(joint.parent), name_of(joint.child)
-        graph.add_edge(parent, child, key=joint.name, joint=joint)
+        degree[parent] = degree.get(parent, 0) + 1
+        degree[child] = degree.get(child, 0) + 1
         if parent == child:
             problems.append(f"{describe(joint)}: connects body {parent!r} to itself")
             continue
-        if child == ground.name or child in tree_joint_of or _connected(tree, parent, child):
+        if child == ground.name or child in tree_joint_of or joined.together(parent, child):
             cut_joints.append(joint)
         else:
-            tree.add_edge(parent, child)
+            children.setdefault(parent, []).append(child)
+            joined.join(parent, child)
             tree_joint_of[child] = joint
 
-    reachable = nx.descendants(tree, ground.name) if ground.name in tree else set()
-    for node in graph.nodes:
-        if node != ground.name and node not in reachable and not (broken and graph.degree(node) == 0 and
+    order = _depth_first(children, ground.name)  # parents before children, children in joint order
+    reachable = set(order)
+    for node, joints_at in degree.items():
+        if node != ground.name and node not in reachable and not (broken and joints_at == 0 and
                                                                     _mentioned_by_broken(node, broken, components)):
-            why = "has no joint" if graph.degree(node) == 0 else "is not connected to the ground by a chain of parent->child joints"
+            why = "has no joint" if joints_at == 0 else "is not connected to the ground by a chain of parent->child joints"
             problems.append(f"{describe(components[node])}: {why}")
 
-    order = [n for n in nx.dfs_preorder_nodes(tree, ground.name) if n != ground.name]
     bodies = tuple(components[n] for n in order)
     tree_joints = tuple(tree_joint_of[n] for n in order)
     parent_of = {n: components[name_of(tree_joint_of[n].parent)] for n in order}
@@ -211,15 +225,47 @@ def build_topology(model) -> Topology:
         raise CompileError(problems=problems)
     return Topology(ground=ground, bodies=bodies, tree_joints=tree_joints, cut_joints=tuple(cut_joints),
                     parent_of=parent_of, coords=tuple(coords), q_slice=q_slice, forces=forces,
-                    constraints=constraints, contacts=contacts, components=components, graph=graph,
+                    constraints=constraints, contacts=contacts, components=components,
                     speeds=tuple(speeds), v_slice=v_slice, input_sizes=input_sizes)
 
 
-def _connected(tree: nx.DiGraph, a: str, b: str) -> bool:
-    """True when ``a`` and ``b`` are already joined in the (undirected) tree."""
-    if a not in tree or b not in tree:
-        return False
-    return nx.has_path(tree.to_undirected(as_view=True), a, b)
+class _Joined:
+    """Which bodies the tree joins so far (disjoint sets, path halving): a joint between two
+    joined bodies would close a loop.  (networkx's graph algorithms give the same answers
+    but cost a tenth of a second of imports at every compile, cached or not.)"""
+
+    def __init__(self, ground: str):
+        self.root = {ground: ground}
+
+    def _find(self, node: str) -> str:
+        root = self.root
+        while root[node] != node:
+            root[node] = root[root[node]]
+            node = root[node]
+        return node
+
+    def together(self, a: str, b: str) -> bool:
+        """True when ``a`` and ``b`` are both in the tree and joined by it."""
+        return a in self.root and b in self.root and self._find(a) == self._find(b)
+
+    def join(self, a: str, b: str) -> None:
+        for node in (a, b):
+            self.root.setdefault(node, node)
+        self.root[self._find(b)] = self._find(a)
+
+
+def _depth_first(children: dict, start: str) -> list:
+    """Nodes reachable from ``start`` (excluded) in depth-first preorder, each node's
+    children in the order given (networkx's ``dfs_preorder_nodes`` on the same edges)."""
+    order, stack = [], [iter(children.get(start, ()))]
+    while stack:
+        node = next(stack[-1], None)
+        if node is None:
+            stack.pop()
+            continue
+        order.append(node)
+        stack.append(iter(children.get(node, ())))
+    return order
 
 
 def _mentioned_by_broken(body: str, broken: set, components: dict) -> bool:

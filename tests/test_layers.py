@@ -22,7 +22,7 @@ LAYERS = {
     # 3 build: flattening, topology, symbolic program, layouts; files <-> models
     "flatten": 3, "topology": 3, "constraint_set": 3, "equations": 3, "layout": 3, "io": 3,
     "fileform": 3,
-    "urdf": 3, "drive_equations": 3,
+    "urdf": 3, "drive_equations": 3, "param_layout": 3, "recursive": 3,
     # 4 generated code: printers, C templates, compilers, cache
     "codegen": 4, "backend": 4, "cache": 4, "integrators": 4, "formulations.dae_c": 4,
     "fastcall": 4,
@@ -44,8 +44,10 @@ SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen
               ("fastcall", "backend"), ("fastcall", "cache"),
               ("formulations.base", "impact"), ("simulate", "events"), ("model", "components"),
               ("compose", "components"), ("compose", "model"), ("model", "compose"), ("io", "topology"), ("io", "fileform"),
-              ("equations", "drive_equations"), ("simulate", "drive_runtime"), ("servo", "components"),
-              ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"), ("cli", "cli_analyse")}
+              ("equations", "drive_equations"), ("equations", "param_layout"), ("equations", "recursive"),
+              ("simulate", "drive_runtime"),
+              ("servo", "components"), ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"),
+              ("cli", "cli_analyse")}
 #: Known breaches being removed: ``(file, problem)``.  Do not add to this list.
 KNOWN: set[tuple[str, str]] = {
     ('mbcomp/compiler.py', 'imports the private module mbcomp.components._values'),

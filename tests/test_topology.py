@@ -175,3 +175,57 @@ class TestCutJoints:
         m.add(mb.JointTorque("push", "back", []))
         with pytest.raises(mb.ModelError, match="JointTorque 'push': joint 'back' closes a loop"):
             build_topology(m)
+
+
+def _networkx_spanning_tree(model):
+    """The body order and cut joints by networkx (the graph algorithms topology.py used to
+    call): an independent computation of the same spanning tree."""
+    import networkx as nx
+    from mbcomp.flatten import flatten
+    flat = flatten(model)
+    tree, cut, parent_of = nx.DiGraph(), [], {}
+    tree.add_node(flat.ground.name)
+    for joint in (c for c in flat.components.values() if isinstance(c, mb.components.Joint)):
+        parent, child = mb.components._values.name_of(joint.parent), mb.components._values.name_of(joint.child)
+        joined = parent in tree and child in tree and nx.has_path(tree.to_undirected(as_view=True), parent, child)
+        if child == flat.ground.name or child in parent_of or joined:
+            cut.append(joint.name)
+        else:
+            tree.add_edge(parent, child)
+            parent_of[child] = parent
+    order = [n for n in nx.dfs_preorder_nodes(tree, flat.ground.name) if n != flat.ground.name]
+    return order, cut
+
+
+def _loop_model():
+    """Two loops and a branch; joints in an order unrelated to the tree."""
+    m = mb.Model("loops")
+    m.add(*(body(n) for n in "ABCDEF"))
+    m.add(mb.Revolute("jC", "B", "C", axis="x"))
+    m.add(mb.Revolute("jA", "ground", "A", axis="x"))
+    m.add(mb.Revolute("jB", "A", "B", axis="x"))
+    m.add(mb.Revolute("close1", "C", "A", axis="x"))       # closes A-B-C
+    m.add(mb.Revolute("jD", "ground", "D", axis="y"))
+    m.add(mb.Revolute("jE", "D", "E", axis="y"))
+    m.add(mb.Revolute("close2", "E", "B", axis="y"))       # closes ground-D-E-B-A
+    m.add(mb.Revolute("jF", "A", "F", axis="z"))
+    return m
+
+
+@pytest.mark.parametrize("name", ["branched", "loops", "library"])
+def test_body_order_and_cut_joints_are_networkxs(name):
+    from pathlib import Path
+    from mbcomp.flatten import flatten
+    if name == "library":
+        models = [mb.load(p) for p in sorted((Path(__file__).resolve().parent.parent / "library").glob("*.toml"))]
+    else:
+        models = [branched_model() if name == "branched" else _loop_model()]
+    for model in models:
+        topology = build_topology(flatten(model))
+        order, cut = _networkx_spanning_tree(model)
+        assert [b.name for b in topology.bodies] == order, model.name
+        assert [j.name for j in topology.cut_joints] == cut, model.name
+    if name == "loops":
+        assert cut == ["close1", "close2"]
+        graph = topology.graph  # still offered, built on first use
+        assert graph.number_of_edges() == 8 and set(graph.nodes) == set("ABCDEF") | {topology.ground.name}

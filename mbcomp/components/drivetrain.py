@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import sympy as sp
 
 from ..errors import ModelError
 from ..params import ParameterSpec, in_range, nonnegative, positive
@@ -217,6 +216,7 @@ class JointFriction(_OnJoint):
     def _loads(self, kin):
         (qd,) = kin.qd(self.joint)
         c, v, s = (kin.param(self, n) for n in ("coulomb", "viscous", "speed_scale"))
+        import sympy as sp  # only where the equations are built
         return [("generalized", self.joint, [-v * qd - c * sp.tanh(kin.let(qd / s))])]
 
 

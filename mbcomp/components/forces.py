@@ -10,7 +10,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import sympy as sp
 
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, nonnegative
@@ -68,6 +67,7 @@ class _TwoPointElement(ForceElement):
         vb = kin.velocity(self.body_b, kin.param(self, "point_b"))
         d = [kin.let(x - y) for x, y in zip(pb, pa)]
         dd = [kin.let(x - y) for x, y in zip(vb, va)]
+        import sympy as sp  # only where the equations are built
         length = kin.let(sp.sqrt(_dot(d, d)))
         return pa, pb, d, dd, length
 

@@ -7,8 +7,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
-import scipy.optimize
 
 from ..constraint_set import ConstraintValues
 from ..errors import format_state, ModelError, SimulationError
@@ -35,6 +33,7 @@ def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 
     """
     if J.shape[0] == 0 or J.shape[1] == 0:
         return np.arange(0)
+    import scipy.linalg  # on first use: scipy is not imported with mbcomp
     if prefer is not None and 0 < np.count_nonzero(prefer) < J.shape[0]:
         first, second = np.flatnonzero(prefer), np.flatnonzero(~np.asarray(prefer, dtype=bool))
         reference = max(float(np.max(np.linalg.norm(J, axis=1))), scale)
@@ -310,6 +309,7 @@ class Formulation:
             # plain Newton steps explode (near-singular Jacobians off the solution set).
             # (With quaternions the Jacobian in speed space is exact at the guess only,
             # enough for trf; the Newton polish below is exact.)
+            import scipy.optimize  # on first use: scipy is not imported with mbcomp
             solution = scipy.optimize.least_squares(residual, q if state_map.identity else zero, jac=jacobian,
                                                     method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=400)
             q = position(solution.x)
@@ -444,6 +444,7 @@ def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationIn
         # The generic rank is the largest found: a configuration may be singular (a
         # parallelogram built collinear), never more regular than the mechanism.
         if best is None or rows.size > best[0].size:
+            import scipy.linalg  # on first use: scipy is not imported with mbcomp
             pivots = np.abs(np.diag(scipy.linalg.qr(J.T, mode="economic", pivoting=True)[1]))
             best = (rows, J.shape[0], float(pivots[0]) if pivots.size else 0.0, q)
         if consistent >= 3:

@@ -70,6 +70,7 @@ static int dae_gram_solve(double *A, const double *r, double *lam, int nr, doubl
     return dropped;
 }}
 
+#ifndef MBCOMP_RECURSIVE_DAE  /* the recursive program brings its own (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
                       const double *tau, double *qdd, double *work) {{
     const int n = NQ, nr = dae_nr;
@@ -115,6 +116,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     upper_solve(L, qdd);
     return 0;
 }}
+#endif
 
 /* Move y = [q, qd] back onto the constraints after an accepted step: positions by Newton
    (minimum-norm steps on the configured rows), speeds by the mass-orthogonal projection

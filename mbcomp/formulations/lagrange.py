@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from ..errors import SimulationError, TrialStateError, format_state
 from ..statemap import Chart
@@ -22,6 +21,7 @@ def partition(J: np.ndarray):
     nq = J.shape[1]
     if J.shape[0] == 0:
         return np.arange(0), np.arange(nq)
+    import scipy.linalg  # on first use: scipy is not imported with mbcomp
     _, _, piv = scipy.linalg.qr(J, mode="economic", pivoting=True)
     dep = np.sort(piv[: J.shape[0]])
     ind = np.setdiff1d(np.arange(nq), dep)

@@ -1,0 +1,126 @@
+"""The C build: generated code split into translation units compiled in parallel (codegen.c_units,
+backend.CBuild), with the same numbers as the single-unit source."""
+from __future__ import annotations
+
+import json
+import tempfile
+
+import numpy as np
+import pytest
+
+from mbcomp import backend, codegen
+from mbcomp.backend import C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CBuild, c_compiler, c_functions, c_library
+from conftest import pendulum_chain
+
+needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
+
+
+@pytest.fixture(scope="module")
+def chain():
+    """A 4-link chain's compiled model (Python backend: the program is built here) and parameters."""
+    compiled = pendulum_chain(4).compile(backend="python", cache=False)._compiled
+    return compiled, compiled.layout.pack(compiled.default_parameters)
+
+
+def _states(compiled, seed):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-2, 2, compiled.topology.nq), rng.uniform(-3, 3, compiled.topology.nv)
+
+
+def _split_library(compiled, chunk, unit, jobs=None):
+    build = CBuild(c_compiler(), jobs=jobs)
+    build.add("templates", codegen.c_prototypes(FUNCTIONS) + compiled.output_layout.c_defines()
+              + codegen.c_accelerations(compiled.topology.nv), C_FLAGS)
+    units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS, chunk=chunk, unit=unit))
+    for u in units:
+        build.add(u.name, u.text, C_FLAGS if u.hot else COLD_FLAGS, u.statements)
+    return units, c_library(build.finish(), compiled.sizes)
+
+
+class TestUnits:
+    def test_units_cover_each_function_once_and_split_long_ones(self, chain):
+        compiled, _ = chain
+        units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS, chunk=10, unit=40))
+        names = [u.name for u in units]
+        assert len(names) == len(set(names))
+        for fname in FUNCTIONS:  # every function defined exactly once
+            head = f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
+            defining = [u for u in units if head in u.text]
+            assert len(defining) == 1, fname
+            assert defining[0].hot == (fname not in COLD_FUNCTIONS), fname
+        dynamics = [u for u in units if u.name.startswith("dynamics")]
+        needed = len(compiled.program.needed(FUNCTIONS["dynamics"]))
+        assert len(dynamics) == -(-needed // 40)  # chunks of 10 statements, 4 to a unit
+        assert sum(u.statements for u in dynamics) == needed
+        assert all(u.statements <= 40 for u in dynamics) and all(u.hot for u in dynamics)
+
+    def test_a_small_model_is_a_hot_and_a_cold_unit(self, chain):
+        """Short functions are packed: two compilers for the whole generated program."""
+        compiled, _ = chain
+        units = list(codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS))
+        assert [(u.name, u.hot) for u in units] == [("functions0", True), ("functions1", False)]
+        for u in units:
+            names = [f for f in FUNCTIONS if (f in COLD_FUNCTIONS) != u.hot]
+            assert u.statements == sum(len(compiled.program.needed(FUNCTIONS[f])) for f in names)
+
+    @needs_cc
+    @pytest.mark.parametrize("chunk, unit, jobs", [(300, 1500, None), (7, 30, None), (7, 30, 1)],
+                             ids=["one-unit-each", "many-units", "many-units-one-job"])
+    def test_split_units_give_the_numbers_of_one_unit(self, chain, chunk, unit, jobs):
+        compiled, p = chain
+        single = c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                             + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
+                             compiled.sizes)
+        units, split = _split_library(compiled, chunk, unit, jobs)
+        assert len(units) == 2 if unit == 1500 else len(units) > len(FUNCTIONS)
+        u = np.zeros(0)
+        for seed in range(3):
+            q, qd = _states(compiled, seed)
+            for name in FUNCTIONS:
+                a, b = single(name, q, qd, p, u), split(name, q, qd, p, u)
+                assert a.shape == (compiled.sizes[name],)
+                assert np.array_equal(a, b), f"{name} differs between one unit and {len(units)}"
+            s1, qdd1 = single.accelerations(q, qd, single.bind_parameters(p), u, None)
+            s2, qdd2 = split.accelerations(q, qd, split.bind_parameters(p), u, None)
+            assert s1 == s2 == 0 and np.array_equal(qdd1, qdd2)
+            M = np.zeros((4, 4))
+            out = single("dynamics", q, qd, p, u)
+            M[np.tril_indices(4)] = out[:10]
+            M = M + np.tril(M, -1).T
+            np.testing.assert_allclose(qdd2, np.linalg.solve(M, out[10:]), rtol=1e-10, atol=1e-12)
+
+
+class TestBuild:
+    @needs_cc
+    def test_a_failing_unit_warns_stops_the_others_and_leaves_nothing(self, tmp_path, monkeypatch):
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+        build = CBuild(c_compiler(), jobs=1)
+        build.add("good", "double f(double x) { return 2.0 * x; }\n", C_FLAGS, 10)
+        build.add("bad", "this is not C\n", C_FLAGS, 5)
+        build.add("waiting", "double g(double x) { return x; }\n", C_FLAGS, 1)
+        with pytest.warns(RuntimeWarning, match="compiler failed"):
+            assert build.finish() is None
+        assert list(tmp_path.iterdir()) == []
+
+    @needs_cc
+    def test_a_cancelled_build_leaves_nothing(self, tmp_path, monkeypatch):
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+        build = CBuild(c_compiler())
+        build.add("a", "double f(double x) { return 2.0 * x; }\n", C_FLAGS)
+        build.cancel()
+        assert list(tmp_path.iterdir()) == []
+
+    def test_compile_jobs_is_a_small_positive_count(self):
+        assert 1 <= backend.compile_jobs() <= 4
+
+
+@needs_cc
+def test_the_cache_entry_records_both_flag_sets_and_cold_flags_change_the_key(tmp_path, monkeypatch):
+    from mbcomp import compiler
+    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+    first = pendulum_chain(2).compile(backend="c")._compiled
+    manifest = json.loads((tmp_path / f"{first.key}.so.json").read_text())
+    assert manifest["inputs"]["flags"] == list(C_FLAGS) and manifest["inputs"]["cold_flags"] == list(COLD_FLAGS)
+    monkeypatch.setattr(compiler, "COLD_FLAGS", ("-O1", "-fPIC", "-fno-math-errno"))
+    second = pendulum_chain(2).compile(backend="c")._compiled
+    assert second.key != first.key and not second.cache_hit
