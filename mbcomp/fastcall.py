@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import math
 import importlib.machinery
 import importlib.util
 import os
@@ -382,11 +383,19 @@ def _plain(a: Any, n: int) -> bool:
     return total - total == 0.0 or bool(np.all(np.isfinite(a)))
 
 
+def _finite(a: np.ndarray) -> bool:
+    """Every entry of ``a`` finite (a dot product that overflows says no: the caller's checked
+    path then decides, so this never wrongly says yes)."""
+    return math.isfinite(a.dot(a))
+
+
 class CtypesCalls:
     """The extension's ``Calls`` interface through ``ctypes`` (where it cannot be built).
 
     Same contract: the result, or ``None`` when the inputs or the result need the checked
-    path.  Thread-safe (``CFunctions`` keeps per-thread buffers)."""
+    path.  ``accelerations`` copies the state into this thread's buffers, whose pointers are
+    bound once per thread (ctypes releases the GIL during the call: threads never share
+    them); the other calls go through ``CFunctions``."""
 
     def __init__(self, functions: Any, layout: Any, p: np.ndarray, nq: int, nv: int):
         self.functions, self.layout, self.p = functions, layout, p
@@ -396,17 +405,40 @@ class CtypesCalls:
         self.no_inputs = np.zeros(0)
         self.offsets = _offsets(layout)
         self.tril = np.tril_indices(nv)
+        self.function = functions.lib.accelerations
+        self.function.restype = ctypes.c_int
+        self.local = threading.local()
+
+    def _thread_buffers(self):
+        """``(state, q, qd, out, args)`` of this thread: ``q`` and ``qd`` are views of one
+        ``state`` buffer; ``args`` the bound pointers of the compiled call."""
+        state, out = np.empty(self.nq + self.nv), np.empty(self.nv)
+        work, u = np.empty(max(self.offsets["dyn_size"], 1)), np.zeros(1)
+        q, qd = state[: self.nq], state[self.nq:]
+        pointer = ctypes.c_void_p
+        args = (pointer(q.ctypes.data), pointer(qd.ctypes.data), self.pointer, pointer(u.ctypes.data), None,
+                pointer(out.ctypes.data), pointer(work.ctypes.data))
+        buffers = self.local.buffers = (state, q, qd, out, args, work, u)  # the arrays outlive the pointers
+        return buffers
 
     def check(self, q: Any, qd: Any) -> bool:
         return _plain(q, self.nq) and (qd is None or _plain(qd, self.nv))
 
     def accelerations(self, q: Any, qd: Any) -> np.ndarray | None:
-        if not self.check(q, qd):
+        if type(q) is not np.ndarray or q.dtype != np.float64 or q.shape != (self.nq,):
             return None
-        status, out = self.functions.accelerations(q, self.zeros if qd is None else qd, self.pointer,
-                                                   self.no_inputs, None)
-        total = float(out.sum())
-        return None if status or total - total != 0.0 else out
+        if qd is None:
+            qd = self.zeros
+        elif type(qd) is not np.ndarray or qd.dtype != np.float64 or qd.shape != (self.nv,):
+            return None
+        buffers = getattr(self.local, "buffers", None) or self._thread_buffers()
+        state, bq, bqd, out, args = buffers[:5]
+        bq[:] = q
+        bqd[:] = qd
+        if not _finite(state) or self.function(*args):
+            return None
+        qdd = out.copy()
+        return qdd if _finite(qdd) else None
 
     def mass_matrix(self, q: Any) -> np.ndarray | None:
         if not _plain(q, self.nq):
