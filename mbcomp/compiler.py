@@ -55,6 +55,10 @@ class CompiledModel:
         from .constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
+        #: The lagrange formulation's reduced loop is compiled in (constraints on coordinates that are
+        #: their own chart, no drive states; see formulations/lagrange_c.py).
+        self.reduced_loop = (self.constraint_set is not None and self.topology.state_map.identity
+                             and not self.drives.nz)
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
@@ -116,7 +120,8 @@ class CompiledModel:
         accelerations, the formulations' code and the integrators."""
         from .integrators import c_integrators
         nv, ng = self.topology.nv, len(self.geometric_rows)  # the mass matrix and accelerations are in speed space
-        return (self.output_layout.c_defines() + codegen.c_accelerations(nv)
+        reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
+        return (reduced + self.output_layout.c_defines() + codegen.c_accelerations(nv)
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
                 + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))

@@ -136,7 +136,9 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
     compiled = None
     if reason is None:
-        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0)
+        # (speed motors hold their coordinate at its start value, as in Python stepping)
+        start_offsets = formulation.motor_offsets(q0, 0.0)
+        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0, start_offsets)
 
         def run():
             return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
@@ -161,12 +163,13 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     if compiled is not None:
         times, values, counts, wall = compiled
         n = kernel.nq
-        stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
+        stats = {"method": method, "integrator": "compiled", "restarts": 0, **counts, "njev": 0, "nlu": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
         nv = kernel.nv
         return _result(kernel, formulation, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
+                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau,
+                       offsets=formulation.motor_offsets(q_start, 0.0))
     if integrator == "compiled" and reason is not None:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)

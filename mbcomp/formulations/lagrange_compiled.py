@@ -1,0 +1,180 @@
+"""The Python side of the lagrange formulation's compiled loop (``lagrange_c.py``).
+
+The compiled DOP853 loop steps the reduced state ``[q_i, qd_i]`` in C and returns to Python
+only where the scipy-stepped path would do something other than step:
+
+- ``PAUSED``: after an accepted step whose dependent block is ill-conditioned, the
+  ``LagrangeWorkspace`` decides (as in Python stepping) whether to choose the independent
+  coordinates afresh; a new choice restarts the integrator there (as a new scipy solver
+  would), no new choice resumes it unchanged;
+- ``TRIAL_FAILED``: a trial state had no dependent coordinates: back to the last accepted
+  state with a quarter of the step (``Workspace.retreat``), at most ``MAX_RETRIES`` times in
+  a row.
+
+A model without degrees of freedom (every coordinate driven or dependent) has nothing to
+integrate: ``prescribed`` evaluates the motion at the output times in C.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..errors import SimulationError
+from .lagrange import REPARTITION_CONDITION, LagrangeWorkspace
+from ..integrators import PAUSED, TRIAL_FAILED
+
+#: Trial failures in a row (without an accepted step between) before the run gives up.
+MAX_RETRIES = 10
+
+_VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
+
+
+def _ptr(array: np.ndarray) -> int:
+    return array.ctypes.data
+
+
+class ReducedRun:
+    """One compiled lagrange run of ``formulation`` on ``kernel`` from the consistent state
+    ``(q0, qd0)`` at t = 0 with constant generalised forces ``tau`` (None or nv values).
+
+    Owns the arrays the C code reads (partition, motor rows) and writes (``acc``: time,
+    coordinates and speeds of the last accepted state).  ``close()`` switches the loop off.
+    """
+
+    def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau):
+        self.formulation, self.kernel, self.lib = formulation, kernel, lib
+        self.n = kernel.nv
+        constraints = formulation.constraints
+        topology = kernel.topology
+        self.workspace = LagrangeWorkspace(formulation, kernel, 0.0, q0, qd0, tau)
+        nc = constraints.nc
+        self.geo = np.full(nc, -1, dtype=np.int64)
+        self.geo[constraints.geometric_rows] = np.arange(len(constraints.geometric_rows))
+        self.mq = np.zeros(nc, dtype=np.int64)
+        self.mv = np.zeros(nc, dtype=np.int64)
+        self.speed = np.zeros(nc)
+        self.offset = np.zeros(nc)
+        for r in constraints.coordinate_rows:
+            joint = constraints.equations[r].joint
+            joint = joint if isinstance(joint, str) else joint.name
+            self.mq[r] = topology.q_slice[joint].start
+            self.mv[r] = topology.v_slice[joint].start
+            self.speed[r] = constraints.motor_speed(kernel, r)
+            self.offset[r] = self.workspace.offsets[r]
+        self.acc = np.concatenate(([0.0], q0, qd0))
+        self.info = np.zeros(1)
+        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.retries, self.t_retry = 0, -np.inf
+        self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
+        configure = lib.lagrange_configure
+        configure.argtypes = [_INT] + [_VOID] * 5 + [_INT, _VOID, _VOID, _INT, _VOID, _DBL, _DBL, _VOID, _VOID]
+        configure.restype = ctypes.c_int
+        self.run = lib.dop853_reduced_run
+        self._configure()
+
+    # -- configuration ---------------------------------------------------------------------------
+    def _configure(self) -> None:
+        ws = self.workspace
+        self.rows = np.ascontiguousarray(ws.rows, dtype=np.int64)
+        self.dep = np.ascontiguousarray(ws.dep, dtype=np.int64)
+        self.ind = np.ascontiguousarray(ws.ind, dtype=np.int64)
+        status = self.lib.lagrange_configure(
+            len(self.geo), _ptr(self.geo), _ptr(self.mq), _ptr(self.mv), _ptr(self.speed), _ptr(self.offset),
+            len(self.rows), _ptr(self.rows), _ptr(self.dep), len(self.ind), _ptr(self.ind),
+            float(self.formulation.jacobian_scale), float(REPARTITION_CONDITION), _ptr(self.acc), _ptr(self.info))
+        if status:
+            raise SimulationError("the compiled lagrange loop could not allocate its work space")
+
+    def close(self) -> None:
+        self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
+
+    def __enter__(self) -> "ReducedRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- the state ---------------------------------------------------------------------------------
+    @property
+    def ni(self) -> int:
+        """Degrees of freedom in the current partition (the reduced state has 2 ni entries)."""
+        return len(self.workspace.ind)
+
+    @property
+    def y0(self) -> np.ndarray:
+        return np.ascontiguousarray(self.workspace.y0, dtype=float)
+
+    def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(t, q, qd)`` of the last accepted state (as the C loop left it)."""
+        n = self.n
+        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:].copy()
+
+    def _sync(self) -> None:
+        ws = self.workspace
+        ws.t_accepted, ws.q_accepted, ws.qd_accepted = self.accepted()
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The reduced right-hand side at ``(t, y)`` from the C code."""
+        fn = self.lib.lagrange_rhs
+        fn.argtypes = [_DBL, _VOID, _VOID, _VOID, _VOID]
+        fn.restype = ctypes.c_int
+        f = np.empty_like(y)
+        status = fn(float(t), _ptr(y), _ptr(f), _ptr(self.kernel.p), None if self.tau is None else _ptr(self.tau))
+        if status:
+            raise SimulationError(f"no dependent coordinates at t = {t:.6g} s (the constraints "
+                                  f"{self.formulation.row_names(self.rows)} cannot be solved there)")
+        return f
+
+    # -- between compiled stretches --------------------------------------------------------------------
+    def resume(self, status: int, state: np.ndarray, y: np.ndarray, f: np.ndarray, counts: np.ndarray):
+        """Act on a ``PAUSED`` or ``TRIAL_FAILED`` return; the ``(y, f)`` to continue with
+        (``state`` is updated in place: a restart sets a new first step)."""
+        ws = self.workspace
+        self._sync()
+        if status == PAUSED:
+            t, q, qd = self.accepted()
+            y_new = ws.repartition(t, q, qd)
+            if y_new is None:
+                return y, f  # no clearly better choice: carry on with the same step size
+            self._configure()
+            self.restarts += 1
+            y = np.ascontiguousarray(y_new, dtype=float)
+            state[:] = (t, 0.0)  # a new start, as a new scipy solver would make
+            return y, np.empty_like(y)
+        if status != TRIAL_FAILED:
+            raise SimulationError(f"compiled lagrange loop: unexpected status {status}")
+        if state[0] > self.t_retry:
+            self.retries = 0
+        self.retries += 1
+        if self.retries > MAX_RETRIES:
+            raise SimulationError(f"dependent coordinates cannot be found near t = {state[0]:.6g} s: constraints "
+                                  f"{self.formulation.row_names(self.rows)}")
+        h = state[1] if state[1] > 0 else 1e-3
+        t_back, y_back = ws.retreat()
+        self.t_retry = t_back
+        self._configure()
+        self.restarts += 1
+        y = np.ascontiguousarray(y_back, dtype=float)
+        f = self.rhs(t_back, y)
+        counts[0] += 1
+        state[:] = (t_back, max(h / 4, 1e-12))
+        return y, f
+
+    def prescribed(self, t_end: float, t_eval, max_step: float):
+        """No degree of freedom: ``(times, rows of [q, qd], counts)`` at the output times
+        (``t_eval``, or as Python stepping chooses them), computed in C."""
+        if t_eval is None:
+            count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
+            t_eval = np.linspace(0.0, t_end, count + 1)
+        times = np.ascontiguousarray(t_eval, dtype=float)
+        out = np.empty((len(times), 2 * self.n))
+        done = np.zeros(1, dtype=np.int64)
+        fn = self.lib.lagrange_prescribed
+        fn.argtypes = [_VOID, _LONG, _VOID, _VOID, _VOID]
+        fn.restype = ctypes.c_int
+        if fn(_ptr(self.kernel.p), len(times), _ptr(times), _ptr(out), _ptr(done)):
+            t = times[int(done[0])]
+            raise SimulationError(f"the prescribed motion cannot be followed at t = {t:.6g} s: constraints "
+                                  f"{self.formulation.row_names(self.rows)} have no solution near the last one")
+        return times, out, {"nfev": 0, "steps": max(len(times) - 1, 0), "rejected": 0, "method": "prescribed"}
