@@ -15,6 +15,8 @@ FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED,
 #: The reduced (lagrange) loop's: paused after an accepted step for Python to look at the
 #: partition; a trial state without dependent coordinates (formulations/lagrange_c.py).
 PAUSED, TRIAL_FAILED = 2, -8
+#: ... and with contacts watched: a step in which a contact closes or a held one would pull.
+EVENT = 3
 #: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
 #: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
 COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
@@ -80,6 +82,7 @@ static double @INIT@(double t0, const double *y0, const double *f0, double t_end
                            double rtol, double atol, const double *p, const double *tau, double *work,
                            double *y1, double *f1, long *nfev) {
     double scaled[NY], d0, d1, d2, h0, h1;
+    if (LOOP_NY == 0) return INFINITY;  /* nothing to integrate (every coordinate held): as scipy */
     for (int i = 0; i < LOOP_NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
     d0 = rms(scaled, LOOP_NY);
     for (int i = 0; i < LOOP_NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
@@ -181,8 +184,15 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
             counts[2] += 1;
         }
         counts[1] += 1;
-        /* dense output for the requested times within (t, t_new] */
-        if (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new) {
+#if LOOP_REDUCED
+        /* contacts watched: a step in which one closes or a held one would pull is not taken */
+        const int event = lag_nk ? lagrange_event(t_new, y_new, p, tau) : 0;
+        if (event < 0) { status = event; goto done; }
+#else
+        const int event = 0;
+#endif
+        /* dense output for the requested times within (t, t_new] (and of an event step) */
+        if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
             for (int s = 13; s < 16; ++s) {
                 for (int i = 0; i < LOOP_NY; ++i) {
                     double acc = 0.0;
@@ -203,6 +213,16 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                     F[(3 + r) * LOOP_NY + i] = h * acc;
                 }
             }
+#if LOOP_REDUCED
+            if (event) {  /* [t_new, y_new, f_new, F] for Python; the loop stays at the step's start */
+                lag_ev[0] = t_new;
+                memcpy(lag_ev + 1, y_new, sizeof(double) * LOOP_NY);
+                memcpy(lag_ev + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+                memcpy(lag_ev + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
+                status = LAG_EVENT;
+                goto done;
+            }
+#endif
             while (*i_out < n_out && t_out[*i_out] <= t_new) {
                 double x = (t_out[*i_out] - t) / h;
                 double *out = y_out + (*i_out) * NY;
@@ -451,7 +471,7 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return reason
     if method not in getattr(formulation, "compiled_methods", COMPILED_METHODS):
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
-    if topology.contacts:
+    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
         return "the model has contacts"
     if kernel.n_inputs:
         return "the model has callable forces or torques"
@@ -568,7 +588,19 @@ class _Hook:
         raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
 
 
-def _bind_reduced(lib):
+@contextlib.contextmanager
+def hooked(lib) -> Iterator["_Hook"]:
+    """Within the block, compiled loops run by this thread on ``lib`` call the step hook
+    (Ctrl-C, ``step_hook`` callbacks); for drivers that run several compiled stretches."""
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        yield hook
+    finally:
+        hook.remove(lib)
+
+
+def bind_reduced(lib):
     """``dop853_reduced_run`` (the lagrange formulation's reduced loop), same arguments as ``dop853_run``."""
     void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
     run = lib.dop853_reduced_run
@@ -731,10 +763,10 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if session.ni == 0:  # nothing to integrate: the motion follows from the constraints
             times, values, stats = session.prescribed(t_end, t_eval, max_step)
             return times, values, stats, time.perf_counter() - started
-        run = _bind_reduced(lib)
+        run = bind_reduced(lib)
         full0, y = y, session.y0
     else:
-        full0 = y
+        full0 = y.copy()  # (the loop advances y in place)
     if method == "RK4":
         if dt is None:
             raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
@@ -755,58 +787,66 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
-    f = np.empty(y.size)
     counts = np.zeros(3, dtype=np.int64)
-    i_out = np.zeros(1, dtype=np.int64)
-    n_steps = np.zeros(1, dtype=np.int64)
-
-    def failed(status):
-        if status == STOPPED:
-            hook.stopped(state[0], method)
-        if status:
-            _fail(kernel, status, state[0], y if session is None else np.concatenate(session.accepted()[1:]), method)
-
     if t_eval is not None:
         t_out = np.ascontiguousarray(t_eval, dtype=float)
         y_out = np.empty((len(t_out), ny))
+        i_out = np.zeros(1, dtype=np.int64)
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = full0
             i_out[0] = 1
-        while True:
-            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
-                         rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
-                         None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
-            if session is not None and status in (PAUSED, TRIAL_FAILED):
-                y, f = session.resume(status, state, y, f, counts)
-                continue
-            failed(status)
-            break
+        dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end, rtol, atol, max_step,
+                       tau_ptr, counts, t_out, i_out, y_out)
         times, values = t_out, y_out
     else:
-        chunks_t, chunks_y = [np.zeros(1)], [full0[None, :].copy()]
-        cap = 256
-        while True:
-            t_steps = np.empty(cap)
-            y_steps = np.empty((cap, ny))
+        _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end,
+                                                   rtol, atol, max_step, tau_ptr, counts)
+        times, values = np.concatenate(([0.0], steps_t)), np.concatenate((full0[None, :], steps_y))
+    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
+    if session is not None:
+        stats["restarts"] = session.restarts
+    return times, values, stats, time.perf_counter() - started
+
+
+def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol, atol, max_step, tau_ptr, counts,
+                   t_out=None, i_out=None, y_out=None):
+    """Run a compiled DOP853 loop (``run``: ``dop853_run`` or ``dop853_reduced_run``) from
+    ``state = [t, h]`` (h <= 0: a first step is chosen and ``f`` computed) and ``y`` to
+    ``t_end`` or to a step the loop stops at (EVENT).  Output rows at ``t_out`` from index
+    ``i_out[0]`` into ``y_out``, or (``t_out`` None) every accepted step.  PAUSED and
+    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``.
+    Returns ``(status, step times, step rows, y, f)`` (status FINISHED or EVENT; ``y``,
+    ``f``: the state the loop stopped at, which a restart may have replaced)."""
+    p = kernel.p
+    n_steps = np.zeros(1, dtype=np.int64)
+    if i_out is None:
+        i_out = np.zeros(1, dtype=np.int64)
+    chunks_t, chunks_y = [np.zeros(0)], [np.zeros((0, kernel.nq + kernel.nv + kernel.compiled.drives.nz))]
+    cap = 256
+    while True:
+        if t_out is None:
+            t_steps, y_steps = np.empty(cap), np.empty((cap, chunks_y[0].shape[1]))
             n_steps[0] = 0
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
             chunks_t.append(t_steps[: n_steps[0]])
             chunks_y.append(y_steps[: n_steps[0]])
-            if status == BUFFER_FULL:
-                cap = min(cap * 4, 1 << 20)
-                continue
-            if session is not None and status in (PAUSED, TRIAL_FAILED):
-                y, f = session.resume(status, state, y, f, counts)
-                continue
-            failed(status)
-            break
-        times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
-    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
-    if session is not None:
-        stats["restarts"] = session.restarts
-    return times, values, stats, time.perf_counter() - started
+        else:
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                         rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
+                         None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == BUFFER_FULL:
+            cap = min(cap * 4, 1 << 20)
+            continue
+        if session is not None and status in (PAUSED, TRIAL_FAILED):
+            y, f = session.resume(status, state, y, f, counts)
+            continue
+        if status in (FINISHED, EVENT):
+            return status, np.concatenate(chunks_t), np.concatenate(chunks_y), y, f
+        if status == STOPPED:
+            hook.stopped(state[0], method)
+        _fail(kernel, status, state[0], y if session is None else np.concatenate(session.accepted()[1:]), method)
 
 
 def _hermite(kernel, t, y, t_eval, tau):

@@ -175,9 +175,15 @@ class LagrangeFormulation(Formulation):
 
     @property
     def compiled_methods(self) -> tuple[str, ...]:
-        """The compiled loops this formulation can step in: DOP853 only with constraints
-        (the reduced loop has no fixed-step variant)."""
-        return ("DOP853", "RK4") if self.constraints is None else ("DOP853",)
+        """The compiled loops this formulation can step in: DOP853 only with constraints or
+        contacts (the reduced loop has no fixed-step variant)."""
+        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.topology.contacts else ("DOP853",)
+
+    @property
+    def compiled_contacts(self) -> bool:
+        """Whether the compiled loop can watch this model's contacts (the reduced loop is
+        compiled in and the constraints, if any, run in it)."""
+        return bool(getattr(self.compiled, "reduced_loop", False)) and self.compiled_loop() is None
 
     def compiled_loop(self) -> str | None:
         if self.constraints is None:

@@ -17,6 +17,13 @@ generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, t
 and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
 numpy arrays that Python owns and configures per thread with ``lagrange_configure``.
 Only models whose coordinates are their own chart (no free rotations) use this code.
+
+Contacts: a contact held closed (persistent) is one more row (its gap).  With
+``lagrange_watch`` configured, the loop checks every accepted step for a free contact whose
+gap closes (the test of ``events.ContactWatch``) and a held contact whose normal force
+(from ``J^T lam = M qdd - f - tau`` on the chosen rows) would pull; such a step is not
+taken: the loop returns EVENT with the step's end state and dense output in the watch
+buffer, and Python locates and applies the event (``events.ContactWatch``).
 """
 from __future__ import annotations
 
@@ -24,7 +31,7 @@ from __future__ import annotations
 # failed or the dependent block is singular; like ``TrialStateError``, the step is retried
 # from the last accepted state); PAUSED, after an accepted step for Python to look at the
 # partition.
-from ..integrators import PAUSED, TRIAL_FAILED
+from ..integrators import EVENT, PAUSED, TRIAL_FAILED
 
 
 def c_lagrange(nv: int, ng: int) -> str:
@@ -33,7 +40,7 @@ def c_lagrange(nv: int, ng: int) -> str:
     configuration (``lagrange_configure``) and prescribed motion without degrees of freedom
     (``lagrange_prescribed``), for a model with ``nv`` speeds and ``ng`` geometric
     constraint rows (offsets from the ``OutputLayout`` defines)."""
-    return _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED))
+    return _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
 
 
 _C = r"""
@@ -42,6 +49,7 @@ _C = r"""
 #include <string.h>
 #define LAG_TRIAL @TRIAL@
 #define LAG_PAUSED @PAUSED@
+#define LAG_EVENT @EVENT@
 #define LAG_NEWTON_TOL 1e-12
 #define LAG_NEWTON_ITER 25
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
@@ -56,10 +64,21 @@ static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag
     *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
 static __thread int *lag_piv;
 static double lag_u[1];
+/* the contact watch: nk contacts, held[k] (1: a persistent row), gaps at the last accepted
+   step (updated), tolerance; ev: [t_new, y_new, f_new, F (7 rows)] of an event step */
+static __thread int lag_nk = 0;
+static __thread const long *lag_held;
+static __thread double *lag_gaps, *lag_ev, lag_gap_tol, lag_kc[CONTACTS_SIZE + 1];
+
+int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, double *ev) {
+    lag_nk = nk; lag_held = held; lag_gaps = gaps; lag_gap_tol = gap_tol; lag_ev = ev;
+    return 0;
+}
 
 /* Configure this thread's reduced loop (nc < 0: switch it off and free the scratch).
-   geo[r]: the generated constraint row of equation r, or -1 for a motor row with
-   coordinate mq[r], speed index mv[r], speed speed[r] and start value offset[r].
+   geo[r]: the generated constraint row of equation r, -1 for a motor row with coordinate
+   mq[r], speed index mv[r], speed speed[r] and start value offset[r], or -2 - k for the gap
+   of contact k (held closed).
    rows (nr), dep (nr), ind (ni): the partition.  acc: [t, q, qd] of the last accepted
    state (read and written).  info: [condition of the last accepted state]. */
 int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, const double *speed,
@@ -68,10 +87,11 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     free(lag_mem);
     lag_mem = 0;
     lag_on = 0;
+    lag_nk = 0;
     if (nc < 0) return 0;
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
-        + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 4L * n + 8;
+        + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 4L * n + 8;
     lag_mem = malloc(sizeof(double) * size);
     if (!lag_mem) return -4;
     double *w = lag_mem;
@@ -88,7 +108,7 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_Mr = w; w += (long)ni * ni;
     lag_h = w; w += n;
     lag_v = w; w += n;
-    lag_eig = w; w += 2L * m * m;
+    lag_eig = w; w += 2L * m * m + 6L * n + 8;
     lag_q = w; w += 2L * n;
     lag_qd = w; w += 2L * n;
     lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
@@ -101,10 +121,17 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
 /* g, J, g_t and bias of every equation at (q, qd, t). */
 static void lag_values(double t, const double *q, const double *qd, const double *p) {
     constraints(q, qd, p, lag_u, lag_c);
+    if (lag_nk) contacts(q, qd, p, lag_u, lag_kc);
     for (int r = 0; r < lag_nc; ++r) {
         double *Jr = lag_J + (long)r * NQ;
         const long j = lag_geo[r];
-        if (j >= 0) {
+        if (j <= -2) {  /* a contact held closed: its gap */
+            const long k = -2 - j;
+            lag_g[r] = lag_kc[CONTACTS_GAP_OFF + k];
+            for (int i = 0; i < NQ; ++i) Jr[i] = lag_kc[CONTACTS_JACOBIAN_OFF + k * NQ + i];
+            lag_gt[r] = 0.0;
+            lag_bias[r] = lag_kc[CONTACTS_BIAS_OFF + k];
+        } else if (j >= 0) {
             lag_g[r] = lag_c[CONSTRAINTS_RESIDUAL_OFF + j];
             for (int i = 0; i < NQ; ++i) Jr[i] = lag_c[CONSTRAINTS_JACOBIAN_OFF + j * NQ + i];
             lag_gt[r] = 0.0;
@@ -329,6 +356,73 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
     const double condition = lag_condition();  /* J at q from lagrange_full */
     lag_info[0] = condition;
     return condition < lag_limit ? 0 : LAG_PAUSED;
+}
+
+/* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
+   contact's gap closed in the step or a held contact's force would pull at its end (the
+   step is an event step), 0 otherwise (the gaps become the accepted ones), or LAG_TRIAL. */
+int lagrange_event(double t, const double *y, const double *p, const double *tau) {
+    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    int status = lagrange_full(t, y, q, qd, p);
+    if (status) return status;
+    contacts(q, qd, p, lag_u, lag_kc);
+    const double *gap = lag_kc + CONTACTS_GAP_OFF;
+    int event = 0, held = 0;
+    for (int k = 0; k < lag_nk; ++k) {
+        if (lag_held[k]) { held = 1; continue; }
+        const double g0 = lag_gaps[k], g1 = gap[k];
+        if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -lag_gap_tol && -lag_gap_tol < g0)) event = 1;
+    }
+    if (!event && held && nr) {  /* the held contacts' forces: J_r^T lam = M qdd - f - tau (least squares) */
+        double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
+        double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
+        status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, X, J at this state */
+        if (status) return status < 0 ? status : LAG_TRIAL;
+        const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+        for (int i = 0; i < n; ++i) qdd[i] = 0.0;
+        for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
+        for (int a = 0; a < nr; ++a) {
+            double v = -lag_X[a * (ni + 1) + ni];
+            for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[ni + k];
+            qdd[lag_dep[a]] = v;
+        }
+        for (int i = 0; i < n; ++i) {
+            double v = -force[i] - (tau ? tau[i] : 0.0);
+            for (int j = 0; j < n; ++j) v += LAG_MIJ(M, i, j) * qdd[j];
+            res[i] = v;
+        }
+        for (int a = 0; a < nr; ++a) {  /* Gram matrix J_r J_r^T (lower) and J_r res */
+            const double *Ja = lag_J + lag_rows[a] * NQ;
+            for (int b = 0; b <= a; ++b) {
+                const double *Jb = lag_J + lag_rows[b] * NQ;
+                double v = 0.0;
+                for (int i = 0; i < n; ++i) v += Ja[i] * Jb[i];
+                A[a * nr + b] = v;
+            }
+            double v = 0.0;
+            for (int i = 0; i < n; ++i) v += Ja[i] * res[i];
+            lam[a] = v;
+        }
+        for (int j = 0; j < nr; ++j) {
+            double v = A[j * nr + j];
+            for (int k = 0; k < j; ++k) v -= A[j * nr + k] * A[j * nr + k];
+            if (!(v > 0.0)) return 1;  /* (the chosen rows are independent: cannot happen) */
+            const double d = sqrt(v);
+            A[j * nr + j] = d;
+            for (int i = j + 1; i < nr; ++i) {
+                double w = A[i * nr + j];
+                for (int k = 0; k < j; ++k) w -= A[i * nr + k] * A[j * nr + k];
+                A[i * nr + j] = w / d;
+            }
+        }
+        for (int i = 0; i < nr; ++i) { double v = lam[i]; for (int k = 0; k < i; ++k) v -= A[i * nr + k] * lam[k]; lam[i] = v / A[i * nr + i]; }
+        for (int i = nr - 1; i >= 0; --i) { double v = lam[i]; for (int k = i + 1; k < nr; ++k) v -= A[k * nr + i] * lam[k]; lam[i] = v / A[i * nr + i]; }
+        for (int a = 0; a < nr; ++a)
+            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
+    }
+    if (!event) for (int k = 0; k < lag_nk; ++k) lag_gaps[k] = gap[k];
+    return event;
 }
 
 /* No degree of freedom: the full state at each of the n times t_out (rows of NQ + NQ in

@@ -42,27 +42,35 @@ class ReducedRun:
     coordinates and speeds of the last accepted state).  ``close()`` switches the loop off.
     """
 
-    def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau):
+    def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0,
+                 contacts: tuple = (), offsets: dict | None = None):
         self.formulation, self.kernel, self.lib = formulation, kernel, lib
         self.n = kernel.nv
         constraints = formulation.constraints
         topology = kernel.topology
-        self.workspace = LagrangeWorkspace(formulation, kernel, 0.0, q0, qd0, tau)
-        nc = constraints.nc
+        self.contacts = tuple(contacts)
+        self.workspace = LagrangeWorkspace(formulation, kernel, t0, q0, qd0, tau, self.contacts)
+        if offsets is not None:  # after an event: the speed motors keep the run's start values
+            self.workspace.offsets = offsets
+        nm = 0 if constraints is None else constraints.nc
+        nc = nm + len(self.contacts)
         self.geo = np.full(nc, -1, dtype=np.int64)
-        self.geo[constraints.geometric_rows] = np.arange(len(constraints.geometric_rows))
         self.mq = np.zeros(nc, dtype=np.int64)
         self.mv = np.zeros(nc, dtype=np.int64)
         self.speed = np.zeros(nc)
         self.offset = np.zeros(nc)
-        for r in constraints.coordinate_rows:
-            joint = constraints.equations[r].joint
-            joint = joint if isinstance(joint, str) else joint.name
-            self.mq[r] = topology.q_slice[joint].start
-            self.mv[r] = topology.v_slice[joint].start
-            self.speed[r] = constraints.motor_speed(kernel, r)
-            self.offset[r] = self.workspace.offsets[r]
-        self.acc = np.concatenate(([0.0], q0, qd0))
+        if constraints is not None:
+            self.geo[constraints.geometric_rows] = np.arange(len(constraints.geometric_rows))
+            for r in constraints.coordinate_rows:
+                joint = constraints.equations[r].joint
+                joint = joint if isinstance(joint, str) else joint.name
+                self.mq[r] = topology.q_slice[joint].start
+                self.mv[r] = topology.v_slice[joint].start
+                self.speed[r] = constraints.motor_speed(kernel, r)
+                self.offset[r] = self.workspace.offsets[r]
+        for j, k in enumerate(self.contacts):
+            self.geo[nm + j] = -2 - k
+        self.acc = np.concatenate(([t0], q0, qd0))
         self.info = np.zeros(1)
         self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
         self.retries, self.t_retry = 0, -np.inf
@@ -71,7 +79,32 @@ class ReducedRun:
         configure.argtypes = [_INT] + [_VOID] * 5 + [_INT, _VOID, _VOID, _INT, _VOID, _DBL, _DBL, _VOID, _VOID]
         configure.restype = ctypes.c_int
         self.run = lib.dop853_reduced_run
+        self.gaps = self.event = self.held = None
         self._configure()
+
+    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
+        """Check every accepted step for contact events (see ``lagrange_c``): ``gaps`` of every
+        contact at the start (updated by the loop), the closed ones are this run's contacts."""
+        nk = len(gaps)
+        self.gap_tolerance = float(gap_tolerance)
+        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
+        self.held = np.zeros(nk, dtype=np.int64)
+        self.held[list(self.contacts)] = 1
+        self.event = np.zeros(1 + 9 * 2 * self.n)
+        watch = self.lib.lagrange_watch
+        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
+        watch.restype = ctypes.c_int
+        watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
+
+    def event_step(self, t_old: float, y_old: np.ndarray):
+        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its
+        dense output (scipy's DOP853 interpolant, from the loop's coefficients)."""
+        from scipy.integrate._ivp.rk import Dop853DenseOutput
+        ny = len(y_old)
+        t_new = float(self.event[0])
+        y_new = self.event[1:1 + ny].copy()
+        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
+        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
 
     # -- configuration ---------------------------------------------------------------------------
     def _configure(self) -> None:
@@ -85,6 +118,9 @@ class ReducedRun:
             float(self.formulation.jacobian_scale), float(REPARTITION_CONDITION), _ptr(self.acc), _ptr(self.info))
         if status:
             raise SimulationError("the compiled lagrange loop could not allocate its work space")
+        if self.gaps is not None:  # (configuring clears the contact watch)
+            self.lib.lagrange_watch(len(self.gaps), _ptr(self.held), _ptr(self.gaps), self.gap_tolerance,
+                                    _ptr(self.event))
 
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
@@ -110,7 +146,8 @@ class ReducedRun:
         n = self.n
         return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:].copy()
 
-    def _sync(self) -> None:
+    def sync(self) -> None:
+        """The Python workspace's accepted state becomes the loop's."""
         ws = self.workspace
         ws.t_accepted, ws.q_accepted, ws.qd_accepted = self.accepted()
 
@@ -131,7 +168,7 @@ class ReducedRun:
         """Act on a ``PAUSED`` or ``TRIAL_FAILED`` return; the ``(y, f)`` to continue with
         (``state`` is updated in place: a restart sets a new first step)."""
         ws = self.workspace
-        self._sync()
+        self.sync()
         if status == PAUSED:
             t, q, qd = self.accepted()
             y_new = ws.repartition(t, q, qd)

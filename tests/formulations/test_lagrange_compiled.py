@@ -177,3 +177,84 @@ class TestConservationAndClosedForms:
         from scipy.integrate import trapezoid
         E = res.energy().total
         assert trapezoid(torque * 2.0, t) == pytest.approx(E[-1] - E[0], rel=1e-4)
+
+
+def hopper():
+    """A cart on a vertical slide resting on the floor (plastic contact) with a rod spinning
+    below it: the rod's pull lifts the cart off (the held contact's force would pull) and it
+    lands again, twice in a second."""
+    m = mb.Model("hopper", gravity=(0, 0, -9.81))
+    cart = m.add(mb.Body("cart", mass=0.2))
+    rod = m.add(mb.Body("rod", mass=1.0, com=(0, 0, -0.25), inertia=(0.5 ** 2 / 12, 0.5 ** 2 / 12, 1e-4)))
+    m.add(mb.Prismatic("lift", m.ground, cart, axis="z", coords="z"))
+    m.add(mb.Revolute("hinge", cart, rod, axis="y", coords="th"))
+    m.add(mb.Contact("floor", cart, normal=(0, 0, 1), restitution=0.0))
+    return compiled(m.compile())
+
+
+class TestContacts:
+    """Contacts in the compiled loop: stretches between events run in C, which stops at a step
+    with an event; Python locates and applies it as in Python stepping."""
+
+    def test_bouncing_ball_impacts_follow_the_geometric_series(self):
+        system, q, qd = library("bouncing_ball")
+        assert system.integration_path() == "compiled"
+        a = system.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12)
+        b = system.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12, integrator="scipy")
+        assert a.stats["integrator"] == "compiled" and b.stats["integrator"] == "scipy"
+        g, e, drop = 9.81, 0.8, 1.0 - 0.05
+        first = np.sqrt(2 * drop / g)
+        expected = first + np.cumsum([2 * e ** k * g * first / g for k in range(1, 6)])
+        times = [ev.time for ev in a.events]
+        np.testing.assert_allclose(times, np.concatenate(([first], expected)), rtol=1e-9)
+        np.testing.assert_allclose(times, [ev.time for ev in b.events], rtol=1e-12)
+        np.testing.assert_allclose([ev.impulse for ev in a.events], [ev.impulse for ev in b.events], rtol=1e-9)
+
+    def test_coming_to_rest_holds_the_contact(self):
+        """After the bounces' series sums up the ball is held on the floor (no degree of
+        freedom left: the loop steps an empty state to the end)."""
+        system, q, qd = library("bouncing_ball")
+        t = np.linspace(0, 5.0, 51)
+        a = system.simulate(5.0, q, qd, t_eval=t)
+        b = system.simulate(5.0, q, qd, t_eval=t, integrator="scipy")
+        assert a.stats["integrator"] == "compiled"
+        assert a.persistent_contacts == b.persistent_contacts == ["floor"]
+        assert a.closed_contacts == b.closed_contacts
+        np.testing.assert_allclose(a.q[-1], [0.05], atol=1e-12)
+        np.testing.assert_allclose(a.q, b.q, atol=1e-9)
+
+    def test_held_contact_lets_go_and_lands_again(self):
+        system = hopper()
+        assert system.integration_path() == "compiled"
+        t = np.linspace(0, 1.0, 101)
+        a = system.simulate(1.0, [0.0, 0.0], [0.0, 12.0], rtol=1e-10, atol=1e-12, t_eval=t)
+        b = system.simulate(1.0, [0.0, 0.0], [0.0, 12.0], rtol=1e-10, atol=1e-12, t_eval=t, integrator="scipy")
+        assert a.stats["integrator"] == "compiled"
+        lift_offs = [i for i in range(1, len(t)) if a.closed_contacts[i] == () and a.closed_contacts[i - 1] == (0,)]
+        assert len(lift_offs) == 3 and len(a.events) == 2    # three lift-offs, two landings
+        assert a.closed_contacts == b.closed_contacts
+        assert [ev.time for ev in a.events] == pytest.approx([ev.time for ev in b.events], rel=1e-10)
+        np.testing.assert_allclose(a.q, b.q, atol=1e-9)
+        held = np.array([c == (0,) for c in a.closed_contacts])
+        np.testing.assert_allclose(a["z"][held], 0.0, atol=1e-12)   # on the floor while held
+        assert a["z"].max() > 1e-3   # hops of ~2 mm
+
+    def test_pendulum_against_a_wall(self):
+        system, q, qd = library("pendulum_wall")
+        t = np.linspace(0, 4.0, 81)
+        a = system.simulate(4.0, q, qd, rtol=1e-10, atol=1e-12, t_eval=t)
+        b = system.simulate(4.0, q, qd, rtol=1e-10, atol=1e-12, t_eval=t, integrator="scipy")
+        assert a.stats["integrator"] == "compiled" and len(a.events) == len(b.events) > 0
+        np.testing.assert_allclose(a.q, b.q, atol=1e-9)
+        np.testing.assert_allclose([ev.energy_loss for ev in a.events], [ev.energy_loss for ev in b.events], rtol=1e-8)
+
+
+@pytest.mark.parametrize("name", ["four_bar", "bouncing_ball", "double_pendulum"])
+def test_every_step_output_starts_at_the_initial_state(name):
+    """The compiled loops advance their state in place: the first output row is the start."""
+    system, q, qd = library(name)
+    q, qd = system.assemble(q, qd)
+    res = system.simulate(0.2, q, qd)
+    assert res.stats["integrator"] == "compiled" and res.t[0] == 0.0
+    np.testing.assert_allclose(res.q[0], q, atol=1e-12)   # (simulate assembles again: rounding)
+    np.testing.assert_allclose(res.qd[0], qd, atol=1e-12)
