@@ -354,7 +354,10 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
     n = kernel.nv
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
-    watch = ContactWatch(kernel, formulation, rest_speed, offsets, tau)
+    applied = tau  # (what the events see: the drive elements' forces join tau, as in Python stepping)
+    if kernel.compiled.drives.elements:
+        applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
+    watch = ContactWatch(kernel, formulation, rest_speed, offsets, applied)
     qd0 = watch.start(q0, qd0)
     recorder = _Recorder(t_eval, lambda: watch.persistent)
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):

@@ -12,6 +12,7 @@ coordinates and their speeds); everything else follows in C, as in ``LagrangeWor
   regular size, over the smallest of ``J_d``): above the limit the loop pauses and Python
   chooses the partition afresh.
 
+Drive elements without states add their forces (the generated ``drives`` at time t).
 Motor rows (``q_k - offset - speed t``) are evaluated here, the geometric rows come from the
 generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
 and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
@@ -64,6 +65,26 @@ static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag
     *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
 static __thread int *lag_piv;
 static double lag_u[1];
+/* drive elements without states (nz = 0, no callables): their forces join tau */
+static __thread int lag_drives = 0;
+static __thread double lag_dv[DRIVES_SIZE + 1];
+
+int lagrange_drives(int on) {
+    lag_drives = on;
+    return 0;
+}
+
+/* The drive elements' forces at (t, q, qd) into lag_dv (zero without drive elements). */
+static const double *lag_drive_forces(double t, const double *q, const double *qd, const double *p) {
+    if (!lag_drives) {
+        for (int i = 0; i < NQ; ++i) lag_dv[DRIVES_FORCES_OFF + i] = 0.0;
+    } else {
+        double u[1];
+        u[0] = t;
+        drives(q, qd, p, u, lag_dv);
+    }
+    return lag_dv + DRIVES_FORCES_OFF;
+}
 /* the contact watch: nk contacts, held[k] (1: a persistent row), gaps at the last accepted
    step (updated), tolerance; ev: [t_new, y_new, f_new, F (7 rows)] of an event step */
 static __thread int lag_nk = 0;
@@ -229,6 +250,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     lag_values(t, q, qd, p);  /* the bias at these speeds (J, and J_d's factors, unchanged) */
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+    const double *drive = lag_drive_forces(t, q, qd, p);
     double *X = lag_X, *col = lag_v, *h = lag_h;
     for (int k = 0; k <= ni; ++k) {  /* X = J_d^-1 [J_i, bias] (column k stored X[a * (ni + 1) + k]) */
         for (int a = 0; a < nr; ++a)
@@ -238,7 +260,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     }
     /* h = f + tau - M c, with c = -X[:, ni] on the dependent speeds */
     for (int i = 0; i < n; ++i) {
-        double s = force[i] + (tau ? tau[i] : 0.0);
+        double s = force[i] + drive[i] + (tau ? tau[i] : 0.0);
         for (int a = 0; a < nr; ++a) s += LAG_MIJ(M, i, lag_dep[a]) * X[a * (ni + 1) + ni];
         h[i] = s;
     }
@@ -380,6 +402,7 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
         status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, X, J at this state */
         if (status) return status < 0 ? status : LAG_TRIAL;
         const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+        const double *drive = lag_dv + DRIVES_FORCES_OFF;  /* (as lagrange_rhs left them) */
         for (int i = 0; i < n; ++i) qdd[i] = 0.0;
         for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
         for (int a = 0; a < nr; ++a) {
@@ -388,7 +411,7 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
             qdd[lag_dep[a]] = v;
         }
         for (int i = 0; i < n; ++i) {
-            double v = -force[i] - (tau ? tau[i] : 0.0);
+            double v = -force[i] - drive[i] - (tau ? tau[i] : 0.0);
             for (int j = 0; j < n; ++j) v += LAG_MIJ(M, i, j) * qdd[j];
             res[i] = v;
         }

@@ -81,6 +81,9 @@ class ReducedRun:
         self.run = lib.dop853_reduced_run
         self.gaps = self.event = self.held = None
         self._configure()
+        drives = lib.lagrange_drives
+        drives.argtypes, drives.restype = [_INT], ctypes.c_int
+        drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
 
     def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
         """Check every accepted step for contact events (see ``lagrange_c``): ``gaps`` of every
@@ -124,6 +127,7 @@ class ReducedRun:
 
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
+        self.lib.lagrange_drives(0)
 
     def __enter__(self) -> "ReducedRun":
         return self
