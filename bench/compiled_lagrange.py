@@ -3,8 +3,9 @@
 Models: the crank-rocker four-bar of ``constraints_work_precision.py`` (released at crank
 angle 1 rad turning at 1 rad/s) and the library four-bar (``library/four_bar.toml``, its
 initial state); the library slider-crank (a speed motor, no degree of freedom: prescribed
-motion).  Each run: 10 s (slider-crank 2 s), rtol as given (default 1e-6), atol = rtol / 100,
-output at every step.  Settings:
+motion); the library bouncing ball (a contact, restitution 0.8: six impacts in 3 s, each
+located and applied in Python between compiled stretches).  Each run: 10 s (slider-crank
+2 s, ball 3 s), rtol as given (default 1e-6), atol = rtol / 100, output at every step.  Settings:
 
   lagrange compiled   the default: coordinate partitioning and Newton in C
   lagrange scipy      the same formulation stepped by scipy (``integrator="scipy"``), the
@@ -59,6 +60,9 @@ def cases():
     model = library("slider_crank")
     lag = model.compile("lagrange")
     yield "slider-crank, motor (library)", 2.0, lag, None, *initial(model, lag)
+    model = library("bouncing_ball")
+    lag = model.compile("lagrange")
+    yield "bouncing ball, contact (library)", 3.0, lag, None, *initial(model, lag)
 
 
 def main(argv=None) -> list[dict]:

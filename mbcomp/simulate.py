@@ -374,6 +374,8 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
         while t < t_end:
             with ReducedRun(formulation, kernel, lib, q, qd, tau_arr, t0=t, contacts=watch.persistent,
                             offsets=offsets) as segment:
+                if t == 0.0 and segment.ni == 0:
+                    max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
                 segment.watch_contacts(gaps, GAP_TOLERANCE)
                 state, y = np.array([t, 0.0]), segment.y0
                 i_out = np.array([recorder.next], dtype=np.int64)
@@ -391,8 +393,12 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
                     break
                 segment.sync()  # the Python workspace at the step's start, where the loop stopped
                 t_new, y_new, dense = segment.event_step(float(state[0]), y)
-                t, restart, corrected, gaps = _contact_step(watch, segment.workspace, _EventStep(
-                    float(state[0]), t_new, y_new, dense), recorder, segment.gaps.copy())
+                watch.locator = segment.locator(float(state[0]), y)  # the root finder's gaps and forces in C
+                try:
+                    t, restart, corrected, gaps = _contact_step(watch, segment.workspace, _EventStep(
+                        float(state[0]), t_new, y_new, dense), recorder, segment.gaps.copy())
+                finally:
+                    watch.locator = None
                 restarts += 1
                 if restart is None:  # (the loop's watch and Python's disagree: carry on from the step's end)
                     q, qd = segment.workspace.full_state(t, y_new if corrected is None else corrected)

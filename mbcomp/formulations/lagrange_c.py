@@ -380,11 +380,101 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
     return condition < lag_limit ? 0 : LAG_PAUSED;
 }
 
+/* The multipliers of the chosen rows at (t, y) (*lam: nr values in scratch), from
+   J_r^T lam = M qdd - f - tau (least squares): the held contacts' normal forces among them.
+   Returns 0, 1 (rows dependent: cannot happen for chosen rows) or LAG_TRIAL. */
+static int lag_held_forces(double t, const double *y, const double *p, const double *tau, double **lam_out) {
+    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
+    double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
+    int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
+    if (status) return status < 0 ? status : LAG_TRIAL;
+    const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+    const double *drive = lag_dv + DRIVES_FORCES_OFF;
+    for (int i = 0; i < n; ++i) qdd[i] = 0.0;
+    for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
+    for (int a = 0; a < nr; ++a) {
+        double v = -lag_X[a * (ni + 1) + ni];
+        for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[ni + k];
+        qdd[lag_dep[a]] = v;
+    }
+    for (int i = 0; i < n; ++i) {
+        double v = -force[i] - drive[i] - (tau ? tau[i] : 0.0);
+        for (int j = 0; j < n; ++j) v += LAG_MIJ(M, i, j) * qdd[j];
+        res[i] = v;
+    }
+    for (int a = 0; a < nr; ++a) {  /* Gram matrix J_r J_r^T (lower) and J_r res */
+        const double *Ja = lag_J + lag_rows[a] * NQ;
+        for (int b = 0; b <= a; ++b) {
+            const double *Jb = lag_J + lag_rows[b] * NQ;
+            double v = 0.0;
+            for (int i = 0; i < n; ++i) v += Ja[i] * Jb[i];
+            A[a * nr + b] = v;
+        }
+        double v = 0.0;
+        for (int i = 0; i < n; ++i) v += Ja[i] * res[i];
+        lam[a] = v;
+    }
+    for (int j = 0; j < nr; ++j) {
+        double v = A[j * nr + j];
+        for (int k = 0; k < j; ++k) v -= A[j * nr + k] * A[j * nr + k];
+        if (!(v > 0.0)) return 1;
+        const double d = sqrt(v);
+        A[j * nr + j] = d;
+        for (int i = j + 1; i < nr; ++i) {
+            double w = A[i * nr + j];
+            for (int k = 0; k < j; ++k) w -= A[i * nr + k] * A[j * nr + k];
+            A[i * nr + j] = w / d;
+        }
+    }
+    for (int i = 0; i < nr; ++i) { double v = lam[i]; for (int k = 0; k < i; ++k) v -= A[i * nr + k] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    for (int i = nr - 1; i >= 0; --i) { double v = lam[i]; for (int k = i + 1; k < nr; ++k) v -= A[k * nr + i] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    *lam_out = lam;
+    return 0;
+}
+
+/* The event step's dense output at time s (the loop's interpolant of y_old and the 7 rows
+   of F, ny entries, on [t_old, t_old + h]) into y. */
+static void lag_dense(double s, double t_old, double h, const double *y_old, const double *F, int ny, double *y) {
+    const double x = (s - t_old) / h;
+    for (int i = 0; i < ny; ++i) {
+        double v = 0.0;
+        for (int r = 6; r >= 0; --r) {
+            v += F[r * ny + i];
+            v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+        }
+        y[i] = v + y_old[i];
+    }
+}
+
+/* Locating an event on its step (Python's root finder calls these): the gap of contact k
+   (m), or the normal force (N) of the held contact whose row is `row`, at time s of the
+   event step; NaN when the state cannot be found there.  The loop must have stopped at
+   the step (the accepted state is its start). */
+double lagrange_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
+                       const double *p) {
+    double y[2 * NQ + 1];
+    lag_dense(s, t_old, h, y_old, F, ny, y);
+    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    if (lagrange_full(s, y, q, qd, p)) return NAN;
+    contacts(q, qd, p, lag_u, lag_kc);
+    return lag_kc[CONTACTS_GAP_OFF + k];
+}
+
+double lagrange_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
+                         const double *p, const double *tau) {
+    double y[2 * NQ + 1], *lam;
+    lag_dense(s, t_old, h, y_old, F, ny, y);
+    if (lag_held_forces(s, y, p, tau, &lam)) return NAN;
+    for (int a = 0; a < lag_nr; ++a) if (lag_rows[a] == row) return lam[a];
+    return 0.0;
+}
+
 /* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
    contact's gap closed in the step or a held contact's force would pull at its end (the
    step is an event step), 0 otherwise (the gaps become the accepted ones), or LAG_TRIAL. */
 int lagrange_event(double t, const double *y, const double *p, const double *tau) {
-    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    const int nr = lag_nr;
     double *q = lag_q + NQ, *qd = lag_qd + NQ;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
@@ -396,51 +486,10 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
         const double g0 = lag_gaps[k], g1 = gap[k];
         if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -lag_gap_tol && -lag_gap_tol < g0)) event = 1;
     }
-    if (!event && held && nr) {  /* the held contacts' forces: J_r^T lam = M qdd - f - tau (least squares) */
-        double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
-        double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
-        status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, X, J at this state */
-        if (status) return status < 0 ? status : LAG_TRIAL;
-        const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
-        const double *drive = lag_dv + DRIVES_FORCES_OFF;  /* (as lagrange_rhs left them) */
-        for (int i = 0; i < n; ++i) qdd[i] = 0.0;
-        for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
-        for (int a = 0; a < nr; ++a) {
-            double v = -lag_X[a * (ni + 1) + ni];
-            for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[ni + k];
-            qdd[lag_dep[a]] = v;
-        }
-        for (int i = 0; i < n; ++i) {
-            double v = -force[i] - drive[i] - (tau ? tau[i] : 0.0);
-            for (int j = 0; j < n; ++j) v += LAG_MIJ(M, i, j) * qdd[j];
-            res[i] = v;
-        }
-        for (int a = 0; a < nr; ++a) {  /* Gram matrix J_r J_r^T (lower) and J_r res */
-            const double *Ja = lag_J + lag_rows[a] * NQ;
-            for (int b = 0; b <= a; ++b) {
-                const double *Jb = lag_J + lag_rows[b] * NQ;
-                double v = 0.0;
-                for (int i = 0; i < n; ++i) v += Ja[i] * Jb[i];
-                A[a * nr + b] = v;
-            }
-            double v = 0.0;
-            for (int i = 0; i < n; ++i) v += Ja[i] * res[i];
-            lam[a] = v;
-        }
-        for (int j = 0; j < nr; ++j) {
-            double v = A[j * nr + j];
-            for (int k = 0; k < j; ++k) v -= A[j * nr + k] * A[j * nr + k];
-            if (!(v > 0.0)) return 1;  /* (the chosen rows are independent: cannot happen) */
-            const double d = sqrt(v);
-            A[j * nr + j] = d;
-            for (int i = j + 1; i < nr; ++i) {
-                double w = A[i * nr + j];
-                for (int k = 0; k < j; ++k) w -= A[i * nr + k] * A[j * nr + k];
-                A[i * nr + j] = w / d;
-            }
-        }
-        for (int i = 0; i < nr; ++i) { double v = lam[i]; for (int k = 0; k < i; ++k) v -= A[i * nr + k] * lam[k]; lam[i] = v / A[i * nr + i]; }
-        for (int i = nr - 1; i >= 0; --i) { double v = lam[i]; for (int k = i + 1; k < nr; ++k) v -= A[k * nr + i] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    if (!event && held && nr) {  /* the held contacts' forces */
+        double *lam;
+        status = lag_held_forces(t, y, p, tau, &lam);
+        if (status) return status;
         for (int a = 0; a < nr; ++a)
             if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
     }

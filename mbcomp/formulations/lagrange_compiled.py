@@ -31,7 +31,7 @@ _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctype
 
 
 def _ptr(array: np.ndarray) -> int:
-    return array.ctypes.data
+    return array.__array_interface__["data"][0]
 
 
 class ReducedRun:
@@ -98,6 +98,11 @@ class ReducedRun:
         watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
         watch.restype = ctypes.c_int
         watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
+
+    def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
+        """The gaps and held contacts' forces on the event step the loop stopped at, in C
+        (for ``ContactWatch.locator``)."""
+        return _Locator(self, t_old, y_old)
 
     def event_step(self, t_old: float, y_old: np.ndarray):
         """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its
@@ -219,3 +224,37 @@ class ReducedRun:
             raise SimulationError(f"the prescribed motion cannot be followed at t = {t:.6g} s: constraints "
                                   f"{self.formulation.row_names(self.rows)} have no solution near the last one")
         return times, out, {"nfev": 0, "steps": max(len(times) - 1, 0), "rejected": 0, "method": "prescribed"}
+
+
+class _Locator:
+    """``gap(s, i)`` and ``force(s, k)`` on the event step of a ``ReducedRun`` (its dense
+    output, the dependent coordinates by Newton from the step's start), computed in C."""
+
+    def __init__(self, run: ReducedRun, t_old: float, y_old: np.ndarray):
+        self.run, self.t_old = run, float(t_old)
+        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
+        ny = len(self.y_old)
+        self.h = float(run.event[0]) - self.t_old
+        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
+        self.nm = 0 if run.formulation.constraints is None else run.formulation.constraints.nc
+        lib = run.lib
+        self._gap, self._force = lib.lagrange_gap_at, lib.lagrange_force_at
+        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
+        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
+        self._gap.restype = self._force.restype = _DBL
+        self.args = (self.t_old, self.h, _ptr(self.y_old), _ptr(self.F), ny)
+        self.p = _ptr(run.kernel.p)
+        self.tau = None if run.tau is None else _ptr(run.tau)
+
+    def _checked(self, value: float, s: float, what: str) -> float:
+        if value != value:
+            raise SimulationError(f"the {what} cannot be evaluated at t = {s:.6g} s (no dependent coordinates "
+                                  f"near the step's start)")
+        return value
+
+    def gap(self, s: float, i: int) -> float:
+        return self._checked(self._gap(float(s), *self.args, int(i), self.p), s, "gap")
+
+    def force(self, s: float, k: int) -> float:
+        value = self._force(float(s), *self.args, self.nm + int(k), self.p, self.tau)
+        return self._checked(value, s, "contact force")
