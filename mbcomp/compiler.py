@@ -59,6 +59,10 @@ class CompiledModel:
         from .constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
+        #: The lagrange formulation's reduced loop is compiled in (constraints or contacts on
+        #: coordinates that are their own chart, no drive states; see formulations/lagrange_c.py).
+        self.reduced_loop = ((self.constraint_set is not None or bool(self.topology.contacts))
+                             and self.topology.state_map.identity and not self.drives.nz)
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
@@ -127,7 +131,8 @@ class CompiledModel:
         tree = codegen.c_accelerations(nv)
         if self.dynamics == "recursive":  # the tree solve, and the dae KKT solve, by the recursive program
             tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
-        return (self.output_layout.c_defines() + tree
+        reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
+        return (reduced + self.output_layout.c_defines() + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"

@@ -19,6 +19,9 @@ class ContactWatch:
         self.names = [c.name for c in kernel.topology.contacts]
         self.persistent: tuple = ()
         self.events: list = []
+        #: Optional: evaluates ``gap(s, i)`` and ``force(s, k)`` (contact i's gap, the k-th
+        #: persistent contact's force) on the step being examined, e.g. in a compiled loop.
+        self.locator = None
 
     def gaps(self, q, qd):
         return self.kernel.contacts(q, qd)
@@ -51,6 +54,8 @@ class ContactWatch:
                 continue
 
             def gap(s, i=i):
+                if self.locator is not None:
+                    return self.locator.gap(s, i)
                 q, qd = workspace.full_state(s, dense(s))
                 return self.gaps(q, qd).g[i]
 
@@ -78,6 +83,8 @@ class ContactWatch:
         k = int(np.argmin(forces))
 
         def force(s):
+            if self.locator is not None:
+                return self.locator.force(s, k)
             q, qd = workspace.full_state(s, dense(s))
             return self.contact_forces(s, q, qd)[k]
 

@@ -16,6 +16,11 @@ import numpy as np
 
 #: Status codes returned by the compiled loops.
 FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
+#: The reduced (lagrange) loop's: paused after an accepted step for Python to look at the
+#: partition; a trial state without dependent coordinates (formulations/lagrange_c.py).
+PAUSED, TRIAL_FAILED = 2, -8
+#: ... and with contacts watched: a step in which a contact closes or a held one would pull.
+EVENT = 3
 #: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
 #: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
 COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
@@ -61,7 +66,10 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
     speeds (``statemap.StateMap``): the state is ``y = [q, v, z]``, its rate
     ``[q'(q, v), v', z']``; quaternions are normalised after every accepted step.  With
     ``drives``, the ``nz`` states of drive elements follow the mechanical ones
-    (``drive_equations``: their forces join ``tau``, their rates come from ``drives``)."""
+    (``drive_equations``: their forces join ``tau``, their rates come from ``drives``).
+    Where ``REDUCED_LOOP`` is defined (a constrained model the lagrange formulation steps
+    in compiled code), also ``dop853_reduced_run``: the same loop on the reduced state of
+    ``formulations/lagrange_c.py``."""
     nq, nv = state_map.nq, state_map.nv
     lines = [
         "#include <stdlib.h>",
@@ -84,13 +92,245 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
         ints = lambda name, values: f"static const int {name}[] = {{{', '.join(str(int(v)) for v in values) or '0'}}};"
         lines += [f"#define NSCREW {state_map.screw_q.size}", ints("SCREW_Q", state_map.screw_q),
                   ints("SCREW_V", state_map.screw_v), ints("QUAT_Q", state_map.quat_q), ints("QUAT_V", state_map.quat_v)]
-    return "\n".join(lines + [_C_BODY])
+    loops = [_instance("dop853_run", "initial_step", reduced=False),
+             "#ifdef REDUCED_LOOP", _instance("dop853_reduced_run", "reduced_initial_step", reduced=True), "#endif"]
+    return "\n".join(lines + [_C_BODY.replace("@LOOPS@", "\n".join(loops))])
+
+
+def _instance(run: str, init: str, reduced: bool) -> str:
+    """One DOP853 loop: on the tree state (``rhs``) or on the lagrange formulation's reduced
+    state (``lagrange_rhs``; full output rows)."""
+    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni)\n"
+              "#define LOOP_RHS(tt, yy, ff) lagrange_rhs(tt, yy, ff, p, tau)\n" if reduced else
+              "#define LOOP_REDUCED 0\n#define LOOP_NY NY\n#define LOOP_RHS(tt, yy, ff) rhs(tt, yy, ff, p, tau, work)\n")
+    return (macros + _LOOP.replace("@RUN@", run).replace("@INIT@", init)
+            + "#undef LOOP_REDUCED\n#undef LOOP_NY\n#undef LOOP_RHS\n")
+
+
+_LOOP = r"""
+/* scipy's select_initial_step (order 7). */
+static double @INIT@(double t0, const double *y0, const double *f0, double t_end, double max_step,
+                           double rtol, double atol, const double *p, const double *tau, double *work,
+                           double *y1, double *f1, long *nfev) {
+    double scaled[NY], d0, d1, d2, h0, h1;
+    if (LOOP_NY == 0) return INFINITY;  /* nothing to integrate (every coordinate held): as scipy */
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
+    d0 = rms(scaled, LOOP_NY);
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
+    d1 = rms(scaled, LOOP_NY);
+    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > t_end - t0) h0 = t_end - t0;
+    for (int i = 0; i < LOOP_NY; ++i) y1[i] = y0[i] + h0 * f0[i];
+    if (LOOP_RHS(t0 + h0, y1, f1)) memcpy(f1, f0, sizeof(double) * LOOP_NY);  /* (a failed trial: no curvature estimate) */
+    ++*nfev;
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
+    d2 = rms(scaled, LOOP_NY) / h0;
+    if (d1 <= 1e-15 && d2 <= 1e-15) {
+        h1 = h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6;
+    } else {
+        h1 = pow(0.01 / (d1 > d2 ? d1 : d2), 1.0 / 8.0);
+    }
+    double h = 100 * h0 < h1 ? 100 * h0 : h1;
+    if (h > t_end - t0) h = t_end - t0;
+    return h < max_step ? h : max_step;
+}
+
+/*
+ * Adaptive DOP853 from state[0] = t to t_end.  state[1] = h (<= 0: choose one).
+ * y (LOOP_NY) and f (LOOP_NY, the derivative at y; computed when state[1] <= 0) are updated in place.
+ * Output: dense values at t_out[*i_out .. n_out) into y_out (rows of NY), or, when
+ * n_out == 0, every accepted step into t_steps / y_steps (capacity cap, count *n_steps).
+ * counts: [nfev, accepted, rejected].  Returns FINISHED (0), BUFFER_FULL (1, resume by
+ * calling again), STEP_TOO_SMALL (-1), SINGULAR (-2) or NOT_FINITE (-3); the reduced loop
+ * (state [q_i, qd_i] of the lagrange formulation, full [q, qd] output rows) also PAUSED (2:
+ * after an accepted step, for Python to choose the partition afresh; resume by calling
+ * again) and TRIAL_FAILED (-8: no dependent coordinates at a trial state).
+ */
+int @RUN@(const double *p, const double *tau, double *state, double *y, double *f, double t_end,
+               double rtol, double atol, double max_step, const double *t_out, long n_out, long *i_out,
+               double *y_out, double *t_steps, double *y_steps, long cap, long *n_steps, long *counts) {
+    double *K = malloc(sizeof(double) * 16 * NY);
+    double *work = malloc(sizeof(double) * NWORK);
+    double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
+    double *F = malloc(sizeof(double) * 7 * NY);
+    int status = 0;
+    double t = state[0], h_abs = state[1], window_t0 = state[0];
+    long window_n = 0;
+    if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
+    if (h_abs <= 0) {
+        RHS_OR_FAIL(LOOP_RHS(t, y, f));
+        counts[0] += 1;
+        h_abs = @INIT@(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
+    }
+    while (t < t_end) {
+        if (n_out == 0 && *n_steps >= cap) { status = 1; goto done; }
+        double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
+        if (h_abs > max_step) h_abs = max_step;
+        else if (h_abs < min_step) h_abs = min_step;
+        int rejected = 0;
+        double h, t_new, err;
+        for (;;) {
+            if (hook_says_stop(t)) { status = -6; goto done; }
+            if (h_abs < min_step) { status = -1; goto done; }
+            t_new = t + h_abs;
+            if (t_new > t_end) t_new = t_end;
+            h = t_new - t;
+            h_abs = fabs(h);
+            memcpy(K, f, sizeof(double) * LOOP_NY);
+            for (int s = 1; s < 12; ++s) {
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
+            }
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double acc = 0.0;
+                for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * LOOP_NY + i];
+                y_new[i] = y[i] + h * acc;
+            }
+            RHS_OR_FAIL(LOOP_RHS(t_new, y_new, K + 12 * LOOP_NY));
+            counts[0] += 12;
+            if (!all_finite(y_new, LOOP_NY) || !all_finite(K + 12 * LOOP_NY, LOOP_NY)) { status = -3; goto done; }
+            double e5 = 0.0, e3 = 0.0;
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double scale = atol + rtol * (fabs(y[i]) > fabs(y_new[i]) ? fabs(y[i]) : fabs(y_new[i]));
+                double a5 = 0.0, a3 = 0.0;
+                for (int j = 0; j < 13; ++j) { a5 += DOP_E5[j] * K[j * LOOP_NY + i]; a3 += DOP_E3[j] * K[j * LOOP_NY + i]; }
+                a5 /= scale; a3 /= scale;
+                e5 += a5 * a5; e3 += a3 * a3;
+            }
+            err = (e5 == 0.0 && e3 == 0.0) ? 0.0 : h_abs * e5 / sqrt((e5 + 0.01 * e3) * LOOP_NY);
+            if (err < 1) {
+                double factor = err == 0.0 ? 10.0 : 0.9 * pow(err, -1.0 / 8.0);
+                if (factor > 10.0) factor = 10.0;
+                if (rejected && factor > 1.0) factor = 1.0;
+                h_abs *= factor;
+                break;
+            }
+            double factor = 0.9 * pow(err, -1.0 / 8.0);
+            h_abs *= factor > 0.2 ? factor : 0.2;
+            rejected = 1;
+            counts[2] += 1;
+        }
+        counts[1] += 1;
+#if LOOP_REDUCED
+        /* contacts watched: a step in which one closes or a held one would pull is not taken */
+        const int event = lag_nk ? lagrange_event(t_new, y_new, p, tau) : 0;
+        if (event < 0) { status = event; goto done; }
+#else
+        const int event = 0;
+#endif
+        /* dense output for the requested times within (t, t_new] (and of an event step) */
+        if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
+            for (int s = 13; s < 16; ++s) {
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
+            }
+            counts[0] += 3;
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double dy = y_new[i] - y[i];
+                F[0 * LOOP_NY + i] = dy;
+                F[1 * LOOP_NY + i] = h * K[i] - dy;
+                F[2 * LOOP_NY + i] = 2 * dy - h * (K[12 * LOOP_NY + i] + K[i]);
+                for (int r = 0; r < 4; ++r) {
+                    double acc = 0.0;
+                    for (int j = 0; j < 16; ++j) acc += DOP_D[r][j] * K[j * LOOP_NY + i];
+                    F[(3 + r) * LOOP_NY + i] = h * acc;
+                }
+            }
+#if LOOP_REDUCED
+            if (event) {  /* [t_new, y_new, f_new, F] for Python; the loop stays at the step's start */
+                lag_ev[0] = t_new;
+                memcpy(lag_ev + 1, y_new, sizeof(double) * LOOP_NY);
+                memcpy(lag_ev + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+                memcpy(lag_ev + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
+                status = LAG_EVENT;
+                goto done;
+            }
+#endif
+            while (*i_out < n_out && t_out[*i_out] <= t_new) {
+                double x = (t_out[*i_out] - t) / h;
+                double *out = y_out + (*i_out) * NY;
+#if LOOP_REDUCED
+                double *dense = y_stage;
+#else
+                double *dense = out;
+#endif
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double v = 0.0;
+                    for (int r = 6; r >= 0; --r) {
+                        v += F[r * LOOP_NY + i];
+                        v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+                    }
+                    dense[i] = v + y[i];
+                }
+#if LOOP_REDUCED
+                if (t_out[*i_out] == t_new) dense = y_new;
+                const int os_ = lagrange_full(t_out[*i_out], dense, out, out + NCOORD, p);
+                if (os_) { status = os_; goto done; }
+#else
+                normalize_state(out);
+                if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * LOOP_NY);
+#endif
+                ++*i_out;
+            }
+        }
+        t = t_new;
+#if LOOP_REDUCED
+        memcpy(y, y_new, sizeof(double) * LOOP_NY);
+        memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+        {  /* the full state becomes the accepted one (the next Newton starts there) */
+            const int as_ = lagrange_accept(t, y, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
+            if (as_ < 0) { status = as_; goto done; }
+            if (n_out == 0) t_steps[(*n_steps)++] = t;
+            if (as_ == LAG_PAUSED) { status = LAG_PAUSED; goto done; }
+        }
+#else
+        normalize_state(y_new);
+        memcpy(y, y_new, sizeof(double) * LOOP_NY);
+        memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+#endif
+#if NG > 0 && NQUAT == 0 && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
+            RHS_OR_FAIL(LOOP_RHS(t, y, f));
+            counts[0] += 1;
+        }
+#endif
+        if (n_out == 0 && !LOOP_REDUCED) {
+            t_steps[*n_steps] = t;
+            memcpy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
+            ++*n_steps;
+        }
+        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
+            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
+                status = -7;
+                goto done;
+            }
+            window_n = 0;
+            window_t0 = t;
+        }
+    }
+done:
+    state[0] = t;
+    state[1] = h_abs;
+    free(K); free(work); free(y_new); free(y_stage); free(F);
+    return status;
+}
+
+"""
 
 
 _C_BODY = r"""
 static double dummy_input[1];
-/* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank). */
-#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = rs_ == -5 ? -5 : -2; goto done; } } while (0)
+/* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank; -8: a
+   trial state without dependent coordinates). */
+#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = (rs_ == -5 || rs_ == -8) ? rs_ : -2; goto done; } } while (0)
 
 /* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
@@ -182,178 +422,7 @@ static double rms(const double *v, int n) {
     return sqrt(s / n);
 }
 
-/* scipy's select_initial_step (order 7). */
-static double initial_step(double t0, const double *y0, const double *f0, double t_end, double max_step,
-                           double rtol, double atol, const double *p, const double *tau, double *work,
-                           double *y1, double *f1, long *nfev) {
-    double scaled[NY], d0, d1, d2, h0, h1;
-    for (int i = 0; i < NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
-    d0 = rms(scaled, NY);
-    for (int i = 0; i < NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
-    d1 = rms(scaled, NY);
-    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    if (h0 > t_end - t0) h0 = t_end - t0;
-    for (int i = 0; i < NY; ++i) y1[i] = y0[i] + h0 * f0[i];
-    rhs(t0 + h0, y1, f1, p, tau, work);
-    ++*nfev;
-    for (int i = 0; i < NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
-    d2 = rms(scaled, NY) / h0;
-    if (d1 <= 1e-15 && d2 <= 1e-15) {
-        h1 = h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6;
-    } else {
-        h1 = pow(0.01 / (d1 > d2 ? d1 : d2), 1.0 / 8.0);
-    }
-    double h = 100 * h0 < h1 ? 100 * h0 : h1;
-    if (h > t_end - t0) h = t_end - t0;
-    return h < max_step ? h : max_step;
-}
-
-/*
- * Adaptive DOP853 from state[0] = t to t_end.  state[1] = h (<= 0: choose one).
- * y (NY) and f (NY, the derivative at y; computed when state[1] <= 0) are updated in place.
- * Output: dense values at t_out[*i_out .. n_out) into y_out (rows of NY), or, when
- * n_out == 0, every accepted step into t_steps / y_steps (capacity cap, count *n_steps).
- * counts: [nfev, accepted, rejected].  Returns FINISHED (0), BUFFER_FULL (1, resume by
- * calling again), STEP_TOO_SMALL (-1), SINGULAR (-2) or NOT_FINITE (-3).
- */
-int dop853_run(const double *p, const double *tau, double *state, double *y, double *f, double t_end,
-               double rtol, double atol, double max_step, const double *t_out, long n_out, long *i_out,
-               double *y_out, double *t_steps, double *y_steps, long cap, long *n_steps, long *counts) {
-    double *K = malloc(sizeof(double) * 16 * NY);
-    double *work = malloc(sizeof(double) * NWORK);
-    double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
-    double *F = malloc(sizeof(double) * 7 * NY);
-    int status = FINISHED_CODE;
-    double t = state[0], h_abs = state[1], window_t0 = state[0];
-    long window_n = 0;
-    if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
-    if (h_abs <= 0) {
-        RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
-        counts[0] += 1;
-        h_abs = initial_step(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
-    }
-    while (t < t_end) {
-        if (n_out == 0 && *n_steps >= cap) { status = 1; goto done; }
-        double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
-        if (h_abs > max_step) h_abs = max_step;
-        else if (h_abs < min_step) h_abs = min_step;
-        int rejected = 0;
-        double h, t_new, err;
-        for (;;) {
-            if (hook_says_stop(t)) { status = -6; goto done; }
-            if (h_abs < min_step) { status = -1; goto done; }
-            t_new = t + h_abs;
-            if (t_new > t_end) t_new = t_end;
-            h = t_new - t;
-            h_abs = fabs(h);
-            memcpy(K, f, sizeof(double) * NY);
-            for (int s = 1; s < 12; ++s) {
-                for (int i = 0; i < NY; ++i) {
-                    double acc = 0.0;
-                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
-                    y_stage[i] = y[i] + h * acc;
-                }
-                RHS_OR_FAIL(rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work));
-            }
-            for (int i = 0; i < NY; ++i) {
-                double acc = 0.0;
-                for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * NY + i];
-                y_new[i] = y[i] + h * acc;
-            }
-            RHS_OR_FAIL(rhs(t_new, y_new, K + 12 * NY, p, tau, work));
-            counts[0] += 12;
-            if (!all_finite(y_new, NY) || !all_finite(K + 12 * NY, NY)) { status = -3; goto done; }
-            double e5 = 0.0, e3 = 0.0;
-            for (int i = 0; i < NY; ++i) {
-                double scale = atol + rtol * (fabs(y[i]) > fabs(y_new[i]) ? fabs(y[i]) : fabs(y_new[i]));
-                double a5 = 0.0, a3 = 0.0;
-                for (int j = 0; j < 13; ++j) { a5 += DOP_E5[j] * K[j * NY + i]; a3 += DOP_E3[j] * K[j * NY + i]; }
-                a5 /= scale; a3 /= scale;
-                e5 += a5 * a5; e3 += a3 * a3;
-            }
-            err = (e5 == 0.0 && e3 == 0.0) ? 0.0 : h_abs * e5 / sqrt((e5 + 0.01 * e3) * NY);
-            if (err < 1) {
-                double factor = err == 0.0 ? 10.0 : 0.9 * pow(err, -1.0 / 8.0);
-                if (factor > 10.0) factor = 10.0;
-                if (rejected && factor > 1.0) factor = 1.0;
-                h_abs *= factor;
-                break;
-            }
-            double factor = 0.9 * pow(err, -1.0 / 8.0);
-            h_abs *= factor > 0.2 ? factor : 0.2;
-            rejected = 1;
-            counts[2] += 1;
-        }
-        counts[1] += 1;
-        /* dense output for the requested times within (t, t_new] */
-        if (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new) {
-            for (int s = 13; s < 16; ++s) {
-                for (int i = 0; i < NY; ++i) {
-                    double acc = 0.0;
-                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * NY + i];
-                    y_stage[i] = y[i] + h * acc;
-                }
-                RHS_OR_FAIL(rhs(t + DOP_C[s] * h, y_stage, K + s * NY, p, tau, work));
-            }
-            counts[0] += 3;
-            for (int i = 0; i < NY; ++i) {
-                double dy = y_new[i] - y[i];
-                F[0 * NY + i] = dy;
-                F[1 * NY + i] = h * K[i] - dy;
-                F[2 * NY + i] = 2 * dy - h * (K[12 * NY + i] + K[i]);
-                for (int r = 0; r < 4; ++r) {
-                    double acc = 0.0;
-                    for (int j = 0; j < 16; ++j) acc += DOP_D[r][j] * K[j * NY + i];
-                    F[(3 + r) * NY + i] = h * acc;
-                }
-            }
-            while (*i_out < n_out && t_out[*i_out] <= t_new) {
-                double x = (t_out[*i_out] - t) / h;
-                double *out = y_out + (*i_out) * NY;
-                for (int i = 0; i < NY; ++i) {
-                    double v = 0.0;
-                    for (int r = 6; r >= 0; --r) {
-                        v += F[r * NY + i];
-                        v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
-                    }
-                    out[i] = v + y[i];
-                }
-                normalize_state(out);
-                if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * NY);
-                ++*i_out;
-            }
-        }
-        t = t_new;
-        normalize_state(y_new);
-        memcpy(y, y_new, sizeof(double) * NY);
-        memcpy(f, K + 12 * NY, sizeof(double) * NY);
-#if NG > 0 && NQUAT == 0  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
-            RHS_OR_FAIL(rhs(t, y, f, p, tau, work));
-            counts[0] += 1;
-        }
-#endif
-        if (n_out == 0) {
-            t_steps[*n_steps] = t;
-            memcpy(y_steps + (*n_steps) * NY, y, sizeof(double) * NY);
-            ++*n_steps;
-        }
-        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
-            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
-                status = -7;
-                goto done;
-            }
-            window_n = 0;
-            window_t0 = t;
-        }
-    }
-done:
-    state[0] = t;
-    state[1] = h_abs;
-    free(K); free(work); free(y_new); free(y_stage); free(F);
-    return status;
-}
-
+@LOOPS@
 /* Jacobian d f / d y (NY x NY, row-major) by forward differences, for implicit methods. */
 int rhs_jacobian(const double *p, const double *tau, double t, const double *y, double *J) {
     double *f0 = malloc(sizeof(double) * NY), *f1 = malloc(sizeof(double) * NY);
@@ -466,7 +535,9 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
     reason = formulation.compiled_loop()
     if reason is not None:
         return reason
-    if topology.contacts:
+    if method not in getattr(formulation, "compiled_methods", COMPILED_METHODS):
+        return f"the {formulation.name} formulation of this model has no compiled {method} loop"
+    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
         return "the model has contacts"
     if kernel.n_inputs:
         return "the model has callable forces or torques"
@@ -581,6 +652,28 @@ class _Hook:
                 self.error.add_note(where)
             raise self.error
         raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
+
+
+@contextlib.contextmanager
+def hooked(lib) -> Iterator["_Hook"]:
+    """Within the block, compiled loops run by this thread on ``lib`` call the step hook
+    (Ctrl-C, ``step_hook`` callbacks); for drivers that run several compiled stretches."""
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        yield hook
+    finally:
+        hook.remove(lib)
+
+
+def bind_reduced(lib):
+    """``dop853_reduced_run`` (the lagrange formulation's reduced loop), same arguments as ``dop853_run``."""
+    void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
+    run = lib.dop853_reduced_run
+    run.argtypes = [void, void, void, void, void, dbl, dbl, dbl, dbl, void, lng, void, void, void, void, lng,
+                    void, void]
+    run.restype = ctypes.c_int
+    return run
 
 
 def _bind(lib):
@@ -698,27 +791,48 @@ def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndar
     entirely in compiled code; returns ``(t, y, stats, wall)``."""
     lib = kernel.compiled.functions.lib
     with formulation.compiled_setup(lib):  # e.g. the dae rows and gains, for this thread only
-        return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+        tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
+        session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
+        if session is None:
+            return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+        with session:
+            return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session)
 
 
-def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None):
     hook = _Hook()
     hook.install(lib)
     try:
-        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
+                           session)
     finally:
         hook.remove(lib)
 
 
-def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
+def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None,
+                session=None):
+    """The compiled loops.  With a ``session`` (a formulation stepping its own reduced state,
+    ``Formulation.compiled_session``) the DOP853 loop is ``dop853_reduced_run``: it starts from
+    ``session.y0``, writes full ``[q, qd]`` rows, and hands PAUSED and TRIAL_FAILED returns to
+    ``session.resume``."""
     run, rk4 = _bind(lib)
     p = kernel.p
     tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else np.asarray(z0, dtype=float)
     y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
-    ny = y.size
+    ny = y.size  # the output rows
     started = time.perf_counter()
+    if session is not None:
+        if method != "DOP853":
+            raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
+        if session.ni == 0:  # nothing to integrate: the motion follows from the constraints
+            times, values, stats = session.prescribed(t_end, t_eval, max_step)
+            return times, values, stats, time.perf_counter() - started
+        run = bind_reduced(lib)
+        full0, y = y, session.y0
+    else:
+        full0 = y.copy()  # (the loop advances y in place)
     if method == "RK4":
         if dt is None:
             raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
@@ -743,44 +857,64 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
-    f = np.empty(ny)
     counts = np.zeros(3, dtype=np.int64)
-    i_out = np.zeros(1, dtype=np.int64)
-    n_steps = np.zeros(1, dtype=np.int64)
     if t_eval is not None:
         t_out = np.ascontiguousarray(t_eval, dtype=float)
         y_out = np.empty((len(t_out), ny))
+        i_out = np.zeros(1, dtype=np.int64)
         if len(t_out) and t_out[0] == 0.0:
-            y_out[0] = y
+            y_out[0] = full0
             i_out[0] = 1
-        status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
-                     rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
-                     None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
-        if status == STOPPED:
-            hook.stopped(state[0], method)
-        if status:
-            _fail(kernel, status, state[0], y, method)
+        dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end, rtol, atol, max_step,
+                       tau_ptr, counts, t_out, i_out, y_out)
         times, values = t_out, y_out
     else:
-        chunks_t, chunks_y = [np.zeros(1)], [y[None, :].copy()]
-        cap = 256
-        while True:
-            t_steps = np.empty(cap)
-            y_steps = np.empty((cap, ny))
+        _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end,
+                                                   rtol, atol, max_step, tau_ptr, counts)
+        times, values = np.concatenate(([0.0], steps_t)), np.concatenate((full0[None, :], steps_y))
+    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
+    if session is not None:
+        stats["restarts"] = session.restarts
+    return times, values, stats, time.perf_counter() - started
+
+
+def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol, atol, max_step, tau_ptr, counts,
+                   t_out=None, i_out=None, y_out=None):
+    """Run a compiled DOP853 loop (``run``: ``dop853_run`` or ``dop853_reduced_run``) from
+    ``state = [t, h]`` (h <= 0: a first step is chosen and ``f`` computed) and ``y`` to
+    ``t_end`` or to a step the loop stops at (EVENT).  Output rows at ``t_out`` from index
+    ``i_out[0]`` into ``y_out``, or (``t_out`` None) every accepted step.  PAUSED and
+    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``.
+    Returns ``(status, step times, step rows, y, f)`` (status FINISHED or EVENT; ``y``,
+    ``f``: the state the loop stopped at, which a restart may have replaced)."""
+    p = kernel.p
+    n_steps = np.zeros(1, dtype=np.int64)
+    if i_out is None:
+        i_out = np.zeros(1, dtype=np.int64)
+    chunks_t, chunks_y = [np.zeros(0)], [np.zeros((0, kernel.nq + kernel.nv + kernel.compiled.drives.nz))]
+    cap = 256
+    while True:
+        if t_out is None:
+            t_steps, y_steps = np.empty(cap), np.empty((cap, chunks_y[0].shape[1]))
             n_steps[0] = 0
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
             chunks_t.append(t_steps[: n_steps[0]])
             chunks_y.append(y_steps[: n_steps[0]])
-            if status == BUFFER_FULL:
-                cap = min(cap * 4, 1 << 20)
-                continue
-            if status == STOPPED:
-                hook.stopped(state[0], method)
-            if status:
-                _fail(kernel, status, state[0], y, method)
-            break
-        times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
-    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
-    return times, values, stats, time.perf_counter() - started
+        else:
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                         rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
+                         None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == BUFFER_FULL:
+            cap = min(cap * 4, 1 << 20)
+            continue
+        if session is not None and status in (PAUSED, TRIAL_FAILED):
+            y, f = session.resume(status, state, y, f, counts)
+            continue
+        if status in (FINISHED, EVENT):
+            return status, np.concatenate(chunks_t), np.concatenate(chunks_y), y, f
+        if status == STOPPED:
+            hook.stopped(state[0], method)
+        _fail(kernel, status, state[0], y if session is None else np.concatenate(session.accepted()[1:]), method)
+

@@ -11,8 +11,8 @@ from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
-from .integrators import (CollapseWatch, RankLost, collapse_message, compiled_jacobian, poll_step_hooks, run_compiled,
-                          step_hook, why_not_compiled)
+from .integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_reduced, collapse_message, compiled_jacobian,
+                          dop853_segment, hooked, poll_step_hooks, run_compiled, step_hook, why_not_compiled)
 from .progress import ProgressBar
 
 #: scipy methods that use a Jacobian: given one computed in compiled code when possible.
@@ -137,9 +137,14 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
     compiled = None
     if reason is None:
-        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0)
+        # (speed motors hold their coordinate at its start value, as in Python stepping)
+        start_offsets = formulation.motor_offsets(q0, 0.0)
+        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0, start_offsets)
 
         def run():
+            if kernel.topology.contacts:  # compiled stretches between contact events
+                return _compiled_contacts(kernel, formulation, t_end, q0, qd0, rtol=rtol, atol=atol, t_eval=t_eval,
+                                          tau=tau, max_step=max_step, rest_speed=rest_speed)
             return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
                                 atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
         try:
@@ -159,15 +164,18 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
             if method == "RK4" or integrator == "compiled":
                 raise SimulationError(f"compiled {method} met a singular position of the constraints; "
                                       f"use integrator='scipy', which handles it") from None
+    if isinstance(compiled, Result):
+        return compiled
     if compiled is not None:
         times, values, counts, wall = compiled
         n = kernel.nq
-        stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
+        stats = {"method": method, "integrator": "compiled", "restarts": 0, **counts, "njev": 0, "nlu": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
                  "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
         nv = kernel.nv
         return _result(kernel, formulation, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
+                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau,
+                       offsets=formulation.motor_offsets(q_start, 0.0))
     if integrator == "compiled" and reason is not None:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)
@@ -323,6 +331,90 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
         watch.release(te, q, qd)
     recorder.add_event_state(te, q, qd)
     return te, (te, q, qd), None, watch.gaps(q, qd).g
+
+
+class _EventStep:
+    """The step a compiled loop stopped at because of a contact event: what ``_contact_step``
+    reads of a solver (its span, end state and dense output)."""
+
+    def __init__(self, t_old, t, y, dense):
+        self.t_old, self.t, self.y, self._dense = t_old, t, y, dense
+
+    def dense_output(self):
+        return self._dense
+
+
+def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eval, tau, max_step, rest_speed) -> Result:
+    """Contacts with the compiled loop: the stretches between events run in C (the lagrange
+    formulation's reduced loop, watching the contacts after every step); a step with an event
+    comes back here, where ``ContactWatch`` locates and applies it exactly as in Python
+    stepping (``_contact_step``), and the loop restarts after it."""
+    from .formulations.lagrange_compiled import ReducedRun
+    lib = kernel.compiled.functions.lib
+    run_loop = bind_reduced(lib)
+    n = kernel.nv
+    offsets = formulation.motor_offsets(q0, 0.0)
+    q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
+    applied = tau  # (what the events see: the drive elements' forces join tau, as in Python stepping)
+    if kernel.compiled.drives.elements:
+        applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
+    watch = ContactWatch(kernel, formulation, rest_speed, offsets, applied)
+    qd0 = watch.start(q0, qd0)
+    recorder = _Recorder(t_eval, lambda: watch.persistent)
+    if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
+        recorder.add(0.0, q0, qd0)
+        recorder.next = 1 if t_eval is not None else 0
+    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
+    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
+    t_out = None if t_eval is None else np.ascontiguousarray(t_eval, dtype=float)
+    y_out = None if t_eval is None else np.empty((len(t_out), 2 * n))
+    counts, restarts = np.zeros(3, dtype=np.int64), 0
+    t, q, qd, gaps = 0.0, q0, qd0, watch.gaps(q0, qd0).g
+    started = time.perf_counter()
+    with hooked(lib) as hook:
+        while t < t_end:
+            with ReducedRun(formulation, kernel, lib, q, qd, tau_arr, t0=t, contacts=watch.persistent,
+                            offsets=offsets) as segment:
+                if t == 0.0 and segment.ni == 0:
+                    max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
+                segment.watch_contacts(gaps, GAP_TOLERANCE)
+                state, y = np.array([t, 0.0]), segment.y0
+                i_out = np.array([recorder.next], dtype=np.int64)
+                status, steps_t, steps_y, y, f = dop853_segment(kernel, run_loop, hook, segment, "DOP853", state, y,
+                                                                np.empty_like(y), t_end, rtol, atol, max_step,
+                                                                tau_ptr, counts, t_out, i_out, y_out)
+                if t_out is not None:
+                    for j in range(recorder.next, int(i_out[0])):
+                        recorder.add(t_out[j], y_out[j, :n], y_out[j, n:])
+                    recorder.next = int(i_out[0])
+                for tj, row in zip(steps_t, steps_y):
+                    recorder.add(tj, row[:n], row[n:])
+                restarts += segment.restarts
+                if status == FINISHED:
+                    break
+                segment.sync()  # the Python workspace at the step's start, where the loop stopped
+                t_new, y_new, dense = segment.event_step(float(state[0]), y)
+                watch.locator = segment.locator(float(state[0]), y)  # the root finder's gaps and forces in C
+                try:
+                    t, restart, corrected, gaps = _contact_step(watch, segment.workspace, _EventStep(
+                        float(state[0]), t_new, y_new, dense), recorder, segment.gaps.copy())
+                finally:
+                    watch.locator = None
+                restarts += 1
+                if restart is None:  # (the loop's watch and Python's disagree: carry on from the step's end)
+                    q, qd = segment.workspace.full_state(t, y_new if corrected is None else corrected)
+                    continue
+                t, q, qd = restart
+    wall = time.perf_counter() - started
+    q = np.array(recorder.q).reshape(-1, kernel.nq)
+    qd = np.array(recorder.qd).reshape(-1, kernel.nv)
+    stats = {"method": "DOP853", "integrator": "compiled", "nfev": int(counts[0]), "njev": 0, "nlu": 0,
+             "steps": int(counts[1]), "rejected": int(counts[2]), "restarts": restarts, "status": 0,
+             "message": "The solver successfully reached the end of the integration interval.", "success": True,
+             "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
+    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, z=np.zeros((len(recorder.t), 0)),
+                   stats=stats, tau=tau, offsets=offsets, events=watch.events,
+                   persistent_contacts=[watch.names[i] for i in watch.persistent], closed_contacts=recorder.closed)
 
 
 def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:

@@ -376,6 +376,15 @@ class Formulation:
         """Configure the compiled library for one compiled run on this thread (and undo it)."""
         yield
 
+    #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
+    compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
+
+    def compiled_session(self, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau):
+        """For a formulation whose integration state is not ``[q, v, z]``: the object that drives
+        its compiled loop for one run from ``(q0, qd0)`` (``y0``, ``resume``, ``close``; see
+        ``formulations/lagrange_compiled.py``); None for the plain loop."""
+        return None
+
     def start(self, kernel, t0, q0, qd0, tau, contacts=()) -> Workspace:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
         cls = Workspace if self.constraints is None and not contacts else self.workspace_class

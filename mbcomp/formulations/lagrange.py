@@ -6,6 +6,7 @@ import numpy as np
 from ..errors import SimulationError, TrialStateError, format_state
 from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
+from .lagrange_c import c_lagrange
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
 CHART_LIMIT = 1.0
@@ -116,6 +117,13 @@ class LagrangeWorkspace(Workspace):
             return np.concatenate((self.chart.to_x(q)[self.ind], qd[self.ind]))
         if not len(self.dep):
             return None
+        return self.repartition(t, q, qd)
+
+    def repartition(self, t, q, qd):
+        """At the accepted state ``(t, q, qd)``: when the dependent block is ill-conditioned and
+        a clearly better choice exists, take it (and centre the chart at q) and return the
+        state in the new coordinates; else None.  ``SimulationError`` when the constraint
+        Jacobian lost rank (no independent coordinates exist there)."""
         cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.kernel.nv), self.offsets,
                                                 self.contacts)
         condition = self.condition(cv.J, self.rows, self.dep)
@@ -160,6 +168,47 @@ class LagrangeFormulation(Formulation):
 
     name = "lagrange"
     workspace_class = LagrangeWorkspace
+
+    @classmethod
+    def c_source(cls, nv: int, ng: int) -> str:
+        return c_lagrange(nv, ng)
+
+    @property
+    def compiled_methods(self) -> tuple[str, ...]:
+        """The compiled loops this formulation can step in: DOP853 only with constraints or
+        contacts (the reduced loop has no fixed-step variant)."""
+        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.topology.contacts else ("DOP853",)
+
+    @property
+    def compiled_contacts(self) -> bool:
+        """Whether the compiled loop can watch this model's contacts (the reduced loop is
+        compiled in and the constraints, if any, run in it)."""
+        return bool(getattr(self.compiled, "reduced_loop", False)) and self.compiled_loop() is None
+
+    def compiled_loop(self) -> str | None:
+        if self.constraints is None:
+            return None
+        topology = self.compiled.topology
+        if not topology.state_map.identity:
+            return "the lagrange formulation steps constrained models with ball or free joints in Python"
+        if self.compiled.drives.nz:
+            return "the lagrange formulation steps constrained models with drive states in Python"
+        for r in self.constraints.coordinate_rows:
+            if self.constraints.equations[r].speed is None:
+                return (f"motor {self.constraints.owner[r]!r} prescribes its position by a function of time, "
+                        f"which is evaluated in Python")
+        if not getattr(self.compiled, "reduced_loop", False):
+            return "the compiled library has no reduced loop for this model"
+        if self.nominal_rows is None:
+            return "no consistent configuration was found at compile time"
+        return None
+
+    def compiled_session(self, kernel, lib, q0, qd0, tau):
+        """The Python side of the compiled reduced loop (None without constraints)."""
+        if self.constraints is None:
+            return None
+        from .lagrange_compiled import ReducedRun
+        return ReducedRun(self, kernel, lib, q0, qd0, tau)
 
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None):
         if self.constraints is None and not contacts:

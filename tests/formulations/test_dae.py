@@ -147,7 +147,9 @@ def test_compiled_loop_hook_says_why_not():
     dae = fourbar().compile("dae")
     assert dae._formulation.compiled_loop() is None
     assert "projection" in fourbar().compile("dae", projection=True)._formulation.compiled_loop()
-    assert "lagrange" in fourbar().compile("lagrange")._formulation.compiled_loop()
+    assert fourbar().compile("lagrange")._formulation.compiled_loop() is None
+    position = mb.Motor("drive", "A", position=lambda t: 0.1 * t)
+    assert "position" in fourbar(motor=position).compile("lagrange")._formulation.compiled_loop()
     assert "motors" in fourbar(motor=mb.Motor("drive", "A", speed=2.0)).compile("dae")._formulation.compiled_loop()
 
 

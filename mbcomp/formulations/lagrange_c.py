@@ -1,0 +1,515 @@
+"""The lagrange formulation's C code: coordinate partitioning stepped in the compiled loop.
+
+The compiled DOP853 loop integrates the reduced state ``y = [q_i, qd_i]`` (the independent
+coordinates and their speeds); everything else follows in C, as in ``LagrangeWorkspace``:
+
+- the dependent coordinates by Newton on ``g(q, t) = 0`` (the rows chosen independent),
+  started from the last accepted state advanced by its speeds;
+- the dependent speeds from ``J_d qd_d = -(J_i qd_i + g_t)``;
+- the accelerations from ``(B^T M B) qdd_i = B^T (f + tau - M c)``, ``B = [I; -J_d^-1 J_i]``,
+  ``c = -J_d^-1 bias`` on the dependent rows;
+- after each accepted step, the condition of ``J_d`` (largest singular value of ``J``, or its
+  regular size, over the smallest of ``J_d``): above the limit the loop pauses and Python
+  chooses the partition afresh.
+
+Drive elements without states add their forces (the generated ``drives`` at time t).
+Motor rows (``q_k - offset - speed t``) are evaluated here, the geometric rows come from the
+generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
+and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
+numpy arrays that Python owns and configures per thread with ``lagrange_configure``.
+Only models whose coordinates are their own chart (no free rotations) use this code.
+
+Contacts: a contact held closed (persistent) is one more row (its gap).  With
+``lagrange_watch`` configured, the loop checks every accepted step for a free contact whose
+gap closes (the test of ``events.ContactWatch``) and a held contact whose normal force
+(from ``J^T lam = M qdd - f - tau`` on the chosen rows) would pull; such a step is not
+taken: the loop returns EVENT with the step's end state and dense output in the watch
+buffer, and Python locates and applies the event (``events.ContactWatch``).
+"""
+from __future__ import annotations
+
+# The loop's statuses: TRIAL_FAILED, a trial state without dependent coordinates (Newton
+# failed or the dependent block is singular; like ``TrialStateError``, the step is retried
+# from the last accepted state); PAUSED, after an accepted step for Python to look at the
+# partition.
+from ..integrators import EVENT, PAUSED, TRIAL_FAILED
+
+
+def c_lagrange(nv: int, ng: int) -> str:
+    """C source of the lagrange formulation's reduced right-hand side (``lagrange_rhs``),
+    full-state reconstruction (``lagrange_full``), per-step bookkeeping (``lagrange_accept``),
+    configuration (``lagrange_configure``) and prescribed motion without degrees of freedom
+    (``lagrange_prescribed``), for a model with ``nv`` speeds and ``ng`` geometric
+    constraint rows (offsets from the ``OutputLayout`` defines)."""
+    return _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
+
+
+_C = r"""
+#ifdef REDUCED_LOOP
+#include <stdlib.h>
+#include <string.h>
+#define LAG_TRIAL @TRIAL@
+#define LAG_PAUSED @PAUSED@
+#define LAG_EVENT @EVENT@
+#define LAG_NEWTON_TOL 1e-12
+#define LAG_NEWTON_ITER 25
+#define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
+static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
+static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
+static __thread const double *lag_speed, *lag_offset;
+static __thread double *lag_acc, *lag_info, lag_scale, lag_limit;
+static __thread double *lag_mem = 0;
+/* scratch (in lag_mem): constraint outputs, g, J (nc x NQ), g_t, bias, Jd LU, pivots,
+   X (nr x (ni + 1)), dynamics, M B (NQ x ni), reduced matrix, vectors, eigen work */
+static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag_X, *lag_dyn, *lag_MB,
+    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
+static __thread int *lag_piv;
+static double lag_u[1];
+/* drive elements without states (nz = 0, no callables): their forces join tau */
+static __thread int lag_drives = 0;
+static __thread double lag_dv[DRIVES_SIZE + 1];
+
+int lagrange_drives(int on) {
+    lag_drives = on;
+    return 0;
+}
+
+/* The drive elements' forces at (t, q, qd) into lag_dv (zero without drive elements). */
+static const double *lag_drive_forces(double t, const double *q, const double *qd, const double *p) {
+    if (!lag_drives) {
+        for (int i = 0; i < NQ; ++i) lag_dv[DRIVES_FORCES_OFF + i] = 0.0;
+    } else {
+        double u[1];
+        u[0] = t;
+        drives(q, qd, p, u, lag_dv);
+    }
+    return lag_dv + DRIVES_FORCES_OFF;
+}
+/* the contact watch: nk contacts, held[k] (1: a persistent row), gaps at the last accepted
+   step (updated), tolerance; ev: [t_new, y_new, f_new, F (7 rows)] of an event step */
+static __thread int lag_nk = 0;
+static __thread const long *lag_held;
+static __thread double *lag_gaps, *lag_ev, lag_gap_tol, lag_kc[CONTACTS_SIZE + 1];
+
+int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, double *ev) {
+    lag_nk = nk; lag_held = held; lag_gaps = gaps; lag_gap_tol = gap_tol; lag_ev = ev;
+    return 0;
+}
+
+/* Configure this thread's reduced loop (nc < 0: switch it off and free the scratch).
+   geo[r]: the generated constraint row of equation r, -1 for a motor row with coordinate
+   mq[r], speed index mv[r], speed speed[r] and start value offset[r], or -2 - k for the gap
+   of contact k (held closed).
+   rows (nr), dep (nr), ind (ni): the partition.  acc: [t, q, qd] of the last accepted
+   state (read and written).  info: [condition of the last accepted state]. */
+int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, const double *speed,
+                       const double *offset, int nr, const long *rows, const long *dep, int ni, const long *ind,
+                       double scale, double limit, double *acc, double *info) {
+    free(lag_mem);
+    lag_mem = 0;
+    lag_on = 0;
+    lag_nk = 0;
+    if (nc < 0) return 0;
+    const int n = NQ, m = nc > n ? nc : n;
+    const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
+        + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 4L * n + 8;
+    lag_mem = malloc(sizeof(double) * size);
+    if (!lag_mem) return -4;
+    double *w = lag_mem;
+    lag_c = w; w += CONSTRAINTS_SIZE;
+    lag_g = w; w += nc;
+    lag_J = w; w += (long)nc * n;
+    lag_gt = w; w += nc;
+    lag_bias = w; w += nc;
+    lag_lu = w; w += (long)nr * nr;
+    lag_piv = (int *)w; w += nr;
+    lag_X = w; w += (long)nr * (ni + 1);
+    lag_dyn = w; w += DYNAMICS_SIZE;
+    lag_MB = w; w += (long)n * ni;
+    lag_Mr = w; w += (long)ni * ni;
+    lag_h = w; w += n;
+    lag_v = w; w += n;
+    lag_eig = w; w += 2L * m * m + 6L * n + 8;
+    lag_q = w; w += 2L * n;
+    lag_qd = w; w += 2L * n;
+    lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
+    lag_nr = nr; lag_rows = rows; lag_dep = dep; lag_ni = ni; lag_ind = ind;
+    lag_scale = scale; lag_limit = limit; lag_acc = acc; lag_info = info;
+    lag_on = 1;
+    return 0;
+}
+
+/* g, J, g_t and bias of every equation at (q, qd, t). */
+static void lag_values(double t, const double *q, const double *qd, const double *p) {
+    constraints(q, qd, p, lag_u, lag_c);
+    if (lag_nk) contacts(q, qd, p, lag_u, lag_kc);
+    for (int r = 0; r < lag_nc; ++r) {
+        double *Jr = lag_J + (long)r * NQ;
+        const long j = lag_geo[r];
+        if (j <= -2) {  /* a contact held closed: its gap */
+            const long k = -2 - j;
+            lag_g[r] = lag_kc[CONTACTS_GAP_OFF + k];
+            for (int i = 0; i < NQ; ++i) Jr[i] = lag_kc[CONTACTS_JACOBIAN_OFF + k * NQ + i];
+            lag_gt[r] = 0.0;
+            lag_bias[r] = lag_kc[CONTACTS_BIAS_OFF + k];
+        } else if (j >= 0) {
+            lag_g[r] = lag_c[CONSTRAINTS_RESIDUAL_OFF + j];
+            for (int i = 0; i < NQ; ++i) Jr[i] = lag_c[CONSTRAINTS_JACOBIAN_OFF + j * NQ + i];
+            lag_gt[r] = 0.0;
+            lag_bias[r] = lag_c[CONSTRAINTS_BIAS_OFF + j];
+        } else {
+            for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
+            Jr[lag_mv[r]] = 1.0;
+            lag_g[r] = q[lag_mq[r]] - lag_offset[r] - lag_speed[r] * t;
+            lag_gt[r] = -lag_speed[r];
+            lag_bias[r] = 0.0;
+        }
+    }
+}
+
+/* LU factorisation with partial pivoting of the dependent block J[rows][:, dep] into lag_lu;
+   1 when it is exactly singular (as numpy's solve reports). */
+static int lag_factor(void) {
+    const int n = lag_nr;
+    double *A = lag_lu;
+    for (int a = 0; a < n; ++a)
+        for (int b = 0; b < n; ++b) A[a * n + b] = lag_J[lag_rows[a] * NQ + lag_dep[b]];
+    for (int k = 0; k < n; ++k) {
+        int piv = k;
+        double best = fabs(A[k * n + k]);
+        for (int i = k + 1; i < n; ++i) if (fabs(A[i * n + k]) > best) { best = fabs(A[i * n + k]); piv = i; }
+        lag_piv[k] = piv;
+        if (!(best > 0.0)) return 1;
+        if (piv != k)
+            for (int j = 0; j < n; ++j) { double s = A[k * n + j]; A[k * n + j] = A[piv * n + j]; A[piv * n + j] = s; }
+        for (int i = k + 1; i < n; ++i) {
+            const double l = A[i * n + k] / A[k * n + k];
+            A[i * n + k] = l;
+            for (int j = k + 1; j < n; ++j) A[i * n + j] -= l * A[k * n + j];
+        }
+    }
+    return 0;
+}
+
+/* b <- J_d^-1 b with the factors of lag_factor. */
+static void lag_solve(double *b) {
+    const int n = lag_nr;
+    const double *A = lag_lu;
+    for (int k = 0; k < n; ++k) if (lag_piv[k] != k) { double s = b[k]; b[k] = b[lag_piv[k]]; b[lag_piv[k]] = s; }
+    for (int i = 0; i < n; ++i) { double s = b[i]; for (int k = 0; k < i; ++k) s -= A[i * n + k] * b[k]; b[i] = s; }
+    for (int i = n - 1; i >= 0; --i) {
+        double s = b[i];
+        for (int k = i + 1; k < n; ++k) s -= A[i * n + k] * b[k];
+        b[i] = s / A[i * n + i];
+    }
+}
+
+/* Full q and qd (NQ each) at time t from the reduced state y = [q_i, qd_i]: Newton from the
+   last accepted state advanced by its speeds.  Leaves J (and the LU of J_d) at q.
+   Returns 0 or LAG_TRIAL. */
+int lagrange_full(double t, const double *y, double *q, double *qd, const double *p) {
+    const int nr = lag_nr, ni = lag_ni;
+    const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NQ;
+    double *s = lag_h;
+    for (int i = 0; i < NQ; ++i) { q[i] = qa[i] + va[i] * (t - ta); lag_v[i] = 0.0; }
+    for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+    int converged = 0;
+    for (int it = 0; it < LAG_NEWTON_ITER; ++it) {
+        lag_values(t, q, lag_v, p);
+        double gmax = 0.0;
+        for (int a = 0; a < nr; ++a) { const double e = fabs(lag_g[lag_rows[a]]); if (!(e <= gmax)) gmax = e; }
+        if (gmax < LAG_NEWTON_TOL) { converged = 1; break; }
+        if (lag_factor()) return LAG_TRIAL;
+        for (int a = 0; a < nr; ++a) s[a] = lag_g[lag_rows[a]];
+        lag_solve(s);
+        for (int a = 0; a < nr; ++a) q[lag_dep[a]] -= s[a];
+    }
+    if (!converged) return LAG_TRIAL;
+    for (int k = 0; k < ni; ++k) qd[lag_ind[k]] = y[ni + k];
+    if (nr) {
+        if (lag_factor()) return LAG_TRIAL;
+        for (int a = 0; a < nr; ++a) {
+            const double *Jr = lag_J + lag_rows[a] * NQ;
+            double v = lag_gt[lag_rows[a]];
+            for (int k = 0; k < ni; ++k) v += Jr[lag_ind[k]] * y[ni + k];
+            s[a] = -v;
+        }
+        lag_solve(s);
+        for (int a = 0; a < nr; ++a) qd[lag_dep[a]] = s[a];
+    }
+    return 0;
+}
+
+/* f = [qd_i, qdd_i] at (t, y): returns 0, 1 (reduced mass matrix not positive definite)
+   or LAG_TRIAL. */
+int lagrange_rhs(double t, const double *y, double *f, const double *p, const double *tau) {
+    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    double *q = lag_q, *qd = lag_qd;
+    int status = lagrange_full(t, y, q, qd, p);
+    if (status) return status;
+    lag_values(t, q, qd, p);  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    dynamics(q, qd, p, lag_u, lag_dyn);
+    const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+    const double *drive = lag_drive_forces(t, q, qd, p);
+    double *X = lag_X, *col = lag_v, *h = lag_h;
+    for (int k = 0; k <= ni; ++k) {  /* X = J_d^-1 [J_i, bias] (column k stored X[a * (ni + 1) + k]) */
+        for (int a = 0; a < nr; ++a)
+            col[a] = k < ni ? lag_J[lag_rows[a] * NQ + lag_ind[k]] : lag_bias[lag_rows[a]];
+        if (nr) lag_solve(col);
+        for (int a = 0; a < nr; ++a) X[a * (ni + 1) + k] = col[a];
+    }
+    /* h = f + tau - M c, with c = -X[:, ni] on the dependent speeds */
+    for (int i = 0; i < n; ++i) {
+        double s = force[i] + drive[i] + (tau ? tau[i] : 0.0);
+        for (int a = 0; a < nr; ++a) s += LAG_MIJ(M, i, lag_dep[a]) * X[a * (ni + 1) + ni];
+        h[i] = s;
+    }
+    /* M B: column l is M e_ind[l] - sum_a X[a, l] M e_dep[a] */
+    for (int l = 0; l < ni; ++l)
+        for (int i = 0; i < n; ++i) {
+            double s = LAG_MIJ(M, i, lag_ind[l]);
+            for (int a = 0; a < nr; ++a) s -= X[a * (ni + 1) + l] * LAG_MIJ(M, i, lag_dep[a]);
+            lag_MB[i * ni + l] = s;
+        }
+    double *Mr = lag_Mr, *r = f + ni, scale = 1e-300;
+    for (int k = 0; k < ni; ++k) {  /* B^T (M B) and B^T h */
+        for (int l = 0; l <= k; ++l) {
+            double s = lag_MB[lag_ind[k] * ni + l];
+            for (int a = 0; a < nr; ++a) s -= X[a * (ni + 1) + k] * lag_MB[lag_dep[a] * ni + l];
+            Mr[k * ni + l] = s;
+        }
+        double s = h[lag_ind[k]];
+        for (int a = 0; a < nr; ++a) s -= X[a * (ni + 1) + k] * h[lag_dep[a]];
+        r[k] = s;
+        if (fabs(Mr[k * ni + k]) > scale) scale = fabs(Mr[k * ni + k]);
+    }
+    for (int j = 0; j < ni; ++j) {  /* Cholesky, with the tree solve's singularity threshold */
+        double s = Mr[j * ni + j];
+        for (int k = 0; k < j; ++k) s -= Mr[j * ni + k] * Mr[j * ni + k];
+        if (!(s > 1e-13 * scale)) return 1;
+        const double d = sqrt(s);
+        Mr[j * ni + j] = d;
+        for (int i = j + 1; i < ni; ++i) {
+            double v = Mr[i * ni + j];
+            for (int k = 0; k < j; ++k) v -= Mr[i * ni + k] * Mr[j * ni + k];
+            Mr[i * ni + j] = v / d;
+        }
+    }
+    for (int i = 0; i < ni; ++i) { double s = r[i]; for (int k = 0; k < i; ++k) s -= Mr[i * ni + k] * r[k]; r[i] = s / Mr[i * ni + i]; }
+    for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
+    for (int k = 0; k < ni; ++k) f[k] = y[ni + k];
+    return 0;
+}
+
+/* Smallest and largest eigenvalue of the symmetric n x n matrix A (destroyed): cyclic Jacobi. */
+static void lag_eig_range(double *A, int n, double *lo, double *hi) {
+    for (int sweep = 0; sweep < 60; ++sweep) {
+        double off = 0.0, diag = 0.0;
+        for (int i = 0; i < n; ++i) {
+            diag += A[i * n + i] * A[i * n + i];
+            for (int j = 0; j < i; ++j) off += A[i * n + j] * A[i * n + j];
+        }
+        if (!(off > 1e-30 * diag)) break;
+        for (int a = 0; a < n; ++a)
+            for (int b = a + 1; b < n; ++b) {
+                const double apq = A[a * n + b];
+                if (apq == 0.0) continue;
+                const double theta = (A[b * n + b] - A[a * n + a]) / (2.0 * apq);
+                double tt = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
+                if (theta < 0.0) tt = -tt;
+                if (!isfinite(tt)) tt = 0.0;
+                const double c = 1.0 / sqrt(tt * tt + 1.0), s = tt * c;
+                for (int k = 0; k < n; ++k) {  /* columns a, b */
+                    const double x = A[k * n + a], y = A[k * n + b];
+                    A[k * n + a] = c * x - s * y;
+                    A[k * n + b] = s * x + c * y;
+                }
+                for (int k = 0; k < n; ++k) {  /* rows a, b */
+                    const double x = A[a * n + k], y = A[b * n + k];
+                    A[a * n + k] = c * x - s * y;
+                    A[b * n + k] = s * x + c * y;
+                }
+            }
+    }
+    double l = INFINITY, h = -INFINITY;
+    for (int i = 0; i < n; ++i) { if (A[i * n + i] < l) l = A[i * n + i]; if (A[i * n + i] > h) h = A[i * n + i]; }
+    *lo = l; *hi = h;
+}
+
+/* The dependent block's condition against the Jacobian's size (as LagrangeWorkspace.condition),
+   from J as lag_values left it. */
+static double lag_condition(void) {
+    const int nr = lag_nr, nc = lag_nc, n = NQ;
+    double lo, hi, *A = lag_eig;
+    for (int a = 0; a < nr; ++a)  /* J_d^T J_d */
+        for (int b = 0; b < nr; ++b) {
+            double s = 0.0;
+            for (int k = 0; k < nr; ++k) s += lag_J[lag_rows[k] * NQ + lag_dep[a]] * lag_J[lag_rows[k] * NQ + lag_dep[b]];
+            A[a * nr + b] = s;
+        }
+    lag_eig_range(A, nr, &lo, &hi);
+    const double smallest = lo > 0.0 ? sqrt(lo) : 0.0;
+    const int m = nc < n ? nc : n;
+    for (int a = 0; a < m; ++a)  /* the smaller of J J^T and J^T J */
+        for (int b = 0; b < m; ++b) {
+            double s = 0.0;
+            if (nc < n) for (int k = 0; k < n; ++k) s += lag_J[a * NQ + k] * lag_J[b * NQ + k];
+            else for (int k = 0; k < nc; ++k) s += lag_J[k * NQ + a] * lag_J[k * NQ + b];
+            A[a * m + b] = s;
+        }
+    lag_eig_range(A, m, &lo, &hi);
+    double largest = hi > 0.0 ? sqrt(hi) : 0.0;
+    if (lag_scale > largest) largest = lag_scale;
+    return smallest > 0.0 ? largest / smallest : INFINITY;
+}
+
+/* After an accepted step to (t, y): the full state becomes the accepted one (written to
+   out, NQ + NQ, when out is not NULL); returns LAG_PAUSED when the dependent block's
+   condition reached the limit (Python looks for a better partition), 0, or LAG_TRIAL. */
+int lagrange_accept(double t, const double *y, double *out, const double *p) {
+    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    int status = lagrange_full(t, y, q, qd, p);
+    if (status) return status;
+    lag_acc[0] = t;
+    memcpy(lag_acc + 1, q, sizeof(double) * NQ);
+    memcpy(lag_acc + 1 + NQ, qd, sizeof(double) * NQ);
+    if (out) { memcpy(out, q, sizeof(double) * NQ); memcpy(out + NQ, qd, sizeof(double) * NQ); }
+    if (!lag_nr) return 0;
+    const double condition = lag_condition();  /* J at q from lagrange_full */
+    lag_info[0] = condition;
+    return condition < lag_limit ? 0 : LAG_PAUSED;
+}
+
+/* The multipliers of the chosen rows at (t, y) (*lam: nr values in scratch), from
+   J_r^T lam = M qdd - f - tau (least squares): the held contacts' normal forces among them.
+   Returns 0, 1 (rows dependent: cannot happen for chosen rows) or LAG_TRIAL. */
+static int lag_held_forces(double t, const double *y, const double *p, const double *tau, double **lam_out) {
+    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
+    double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
+    int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
+    if (status) return status < 0 ? status : LAG_TRIAL;
+    const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+    const double *drive = lag_dv + DRIVES_FORCES_OFF;
+    for (int i = 0; i < n; ++i) qdd[i] = 0.0;
+    for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
+    for (int a = 0; a < nr; ++a) {
+        double v = -lag_X[a * (ni + 1) + ni];
+        for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[ni + k];
+        qdd[lag_dep[a]] = v;
+    }
+    for (int i = 0; i < n; ++i) {
+        double v = -force[i] - drive[i] - (tau ? tau[i] : 0.0);
+        for (int j = 0; j < n; ++j) v += LAG_MIJ(M, i, j) * qdd[j];
+        res[i] = v;
+    }
+    for (int a = 0; a < nr; ++a) {  /* Gram matrix J_r J_r^T (lower) and J_r res */
+        const double *Ja = lag_J + lag_rows[a] * NQ;
+        for (int b = 0; b <= a; ++b) {
+            const double *Jb = lag_J + lag_rows[b] * NQ;
+            double v = 0.0;
+            for (int i = 0; i < n; ++i) v += Ja[i] * Jb[i];
+            A[a * nr + b] = v;
+        }
+        double v = 0.0;
+        for (int i = 0; i < n; ++i) v += Ja[i] * res[i];
+        lam[a] = v;
+    }
+    for (int j = 0; j < nr; ++j) {
+        double v = A[j * nr + j];
+        for (int k = 0; k < j; ++k) v -= A[j * nr + k] * A[j * nr + k];
+        if (!(v > 0.0)) return 1;
+        const double d = sqrt(v);
+        A[j * nr + j] = d;
+        for (int i = j + 1; i < nr; ++i) {
+            double w = A[i * nr + j];
+            for (int k = 0; k < j; ++k) w -= A[i * nr + k] * A[j * nr + k];
+            A[i * nr + j] = w / d;
+        }
+    }
+    for (int i = 0; i < nr; ++i) { double v = lam[i]; for (int k = 0; k < i; ++k) v -= A[i * nr + k] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    for (int i = nr - 1; i >= 0; --i) { double v = lam[i]; for (int k = i + 1; k < nr; ++k) v -= A[k * nr + i] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    *lam_out = lam;
+    return 0;
+}
+
+/* The event step's dense output at time s (the loop's interpolant of y_old and the 7 rows
+   of F, ny entries, on [t_old, t_old + h]) into y. */
+static void lag_dense(double s, double t_old, double h, const double *y_old, const double *F, int ny, double *y) {
+    const double x = (s - t_old) / h;
+    for (int i = 0; i < ny; ++i) {
+        double v = 0.0;
+        for (int r = 6; r >= 0; --r) {
+            v += F[r * ny + i];
+            v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+        }
+        y[i] = v + y_old[i];
+    }
+}
+
+/* Locating an event on its step (Python's root finder calls these): the gap of contact k
+   (m), or the normal force (N) of the held contact whose row is `row`, at time s of the
+   event step; NaN when the state cannot be found there.  The loop must have stopped at
+   the step (the accepted state is its start). */
+double lagrange_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
+                       const double *p) {
+    double y[2 * NQ + 1];
+    lag_dense(s, t_old, h, y_old, F, ny, y);
+    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    if (lagrange_full(s, y, q, qd, p)) return NAN;
+    contacts(q, qd, p, lag_u, lag_kc);
+    return lag_kc[CONTACTS_GAP_OFF + k];
+}
+
+double lagrange_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
+                         const double *p, const double *tau) {
+    double y[2 * NQ + 1], *lam;
+    lag_dense(s, t_old, h, y_old, F, ny, y);
+    if (lag_held_forces(s, y, p, tau, &lam)) return NAN;
+    for (int a = 0; a < lag_nr; ++a) if (lag_rows[a] == row) return lam[a];
+    return 0.0;
+}
+
+/* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
+   contact's gap closed in the step or a held contact's force would pull at its end (the
+   step is an event step), 0 otherwise (the gaps become the accepted ones), or LAG_TRIAL. */
+int lagrange_event(double t, const double *y, const double *p, const double *tau) {
+    const int nr = lag_nr;
+    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    int status = lagrange_full(t, y, q, qd, p);
+    if (status) return status;
+    contacts(q, qd, p, lag_u, lag_kc);
+    const double *gap = lag_kc + CONTACTS_GAP_OFF;
+    int event = 0, held = 0;
+    for (int k = 0; k < lag_nk; ++k) {
+        if (lag_held[k]) { held = 1; continue; }
+        const double g0 = lag_gaps[k], g1 = gap[k];
+        if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -lag_gap_tol && -lag_gap_tol < g0)) event = 1;
+    }
+    if (!event && held && nr) {  /* the held contacts' forces */
+        double *lam;
+        status = lag_held_forces(t, y, p, tau, &lam);
+        if (status) return status;
+        for (int a = 0; a < nr; ++a)
+            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
+    }
+    if (!event) for (int k = 0; k < lag_nk; ++k) lag_gaps[k] = gap[k];
+    return event;
+}
+
+/* No degree of freedom: the full state at each of the n times t_out (rows of NQ + NQ in
+   out), each Newton continued from the previous one.  Returns 0, or LAG_TRIAL with
+   *done the rows written. */
+int lagrange_prescribed(const double *p, long n, const double *t_out, double *out, long *done) {
+    for (long k = 0; k < n; ++k) {
+        double *row = out + k * 2 * NQ;
+        int status = lagrange_full(t_out[k], lag_u, row, row + NQ, p);
+        if (status) return status;
+        lag_acc[0] = t_out[k];
+        memcpy(lag_acc + 1, row, sizeof(double) * 2 * NQ);
+        *done = k + 1;
+    }
+    return 0;
+}
+#endif
+"""

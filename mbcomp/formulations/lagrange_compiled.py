@@ -1,0 +1,260 @@
+"""The Python side of the lagrange formulation's compiled loop (``lagrange_c.py``).
+
+The compiled DOP853 loop steps the reduced state ``[q_i, qd_i]`` in C and returns to Python
+only where the scipy-stepped path would do something other than step:
+
+- ``PAUSED``: after an accepted step whose dependent block is ill-conditioned, the
+  ``LagrangeWorkspace`` decides (as in Python stepping) whether to choose the independent
+  coordinates afresh; a new choice restarts the integrator there (as a new scipy solver
+  would), no new choice resumes it unchanged;
+- ``TRIAL_FAILED``: a trial state had no dependent coordinates: back to the last accepted
+  state with a quarter of the step (``Workspace.retreat``), at most ``MAX_RETRIES`` times in
+  a row.
+
+A model without degrees of freedom (every coordinate driven or dependent) has nothing to
+integrate: ``prescribed`` evaluates the motion at the output times in C.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..errors import SimulationError
+from .lagrange import REPARTITION_CONDITION, LagrangeWorkspace
+from ..integrators import PAUSED, TRIAL_FAILED
+
+#: Trial failures in a row (without an accepted step between) before the run gives up.
+MAX_RETRIES = 10
+
+_VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
+
+
+def _ptr(array: np.ndarray) -> int:
+    return array.__array_interface__["data"][0]
+
+
+class ReducedRun:
+    """One compiled lagrange run of ``formulation`` on ``kernel`` from the consistent state
+    ``(q0, qd0)`` at t = 0 with constant generalised forces ``tau`` (None or nv values).
+
+    Owns the arrays the C code reads (partition, motor rows) and writes (``acc``: time,
+    coordinates and speeds of the last accepted state).  ``close()`` switches the loop off.
+    """
+
+    def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0,
+                 contacts: tuple = (), offsets: dict | None = None):
+        self.formulation, self.kernel, self.lib = formulation, kernel, lib
+        self.n = kernel.nv
+        constraints = formulation.constraints
+        topology = kernel.topology
+        self.contacts = tuple(contacts)
+        self.workspace = LagrangeWorkspace(formulation, kernel, t0, q0, qd0, tau, self.contacts)
+        if offsets is not None:  # after an event: the speed motors keep the run's start values
+            self.workspace.offsets = offsets
+        nm = 0 if constraints is None else constraints.nc
+        nc = nm + len(self.contacts)
+        self.geo = np.full(nc, -1, dtype=np.int64)
+        self.mq = np.zeros(nc, dtype=np.int64)
+        self.mv = np.zeros(nc, dtype=np.int64)
+        self.speed = np.zeros(nc)
+        self.offset = np.zeros(nc)
+        if constraints is not None:
+            self.geo[constraints.geometric_rows] = np.arange(len(constraints.geometric_rows))
+            for r in constraints.coordinate_rows:
+                joint = constraints.equations[r].joint
+                joint = joint if isinstance(joint, str) else joint.name
+                self.mq[r] = topology.q_slice[joint].start
+                self.mv[r] = topology.v_slice[joint].start
+                self.speed[r] = constraints.motor_speed(kernel, r)
+                self.offset[r] = self.workspace.offsets[r]
+        for j, k in enumerate(self.contacts):
+            self.geo[nm + j] = -2 - k
+        self.acc = np.concatenate(([t0], q0, qd0))
+        self.info = np.zeros(1)
+        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.retries, self.t_retry = 0, -np.inf
+        self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
+        configure = lib.lagrange_configure
+        configure.argtypes = [_INT] + [_VOID] * 5 + [_INT, _VOID, _VOID, _INT, _VOID, _DBL, _DBL, _VOID, _VOID]
+        configure.restype = ctypes.c_int
+        self.run = lib.dop853_reduced_run
+        self.gaps = self.event = self.held = None
+        self._configure()
+        drives = lib.lagrange_drives
+        drives.argtypes, drives.restype = [_INT], ctypes.c_int
+        drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
+
+    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
+        """Check every accepted step for contact events (see ``lagrange_c``): ``gaps`` of every
+        contact at the start (updated by the loop), the closed ones are this run's contacts."""
+        nk = len(gaps)
+        self.gap_tolerance = float(gap_tolerance)
+        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
+        self.held = np.zeros(nk, dtype=np.int64)
+        self.held[list(self.contacts)] = 1
+        self.event = np.zeros(1 + 9 * 2 * self.n)
+        watch = self.lib.lagrange_watch
+        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
+        watch.restype = ctypes.c_int
+        watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
+
+    def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
+        """The gaps and held contacts' forces on the event step the loop stopped at, in C
+        (for ``ContactWatch.locator``)."""
+        return _Locator(self, t_old, y_old)
+
+    def event_step(self, t_old: float, y_old: np.ndarray):
+        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its
+        dense output (scipy's DOP853 interpolant, from the loop's coefficients)."""
+        from scipy.integrate._ivp.rk import Dop853DenseOutput
+        ny = len(y_old)
+        t_new = float(self.event[0])
+        y_new = self.event[1:1 + ny].copy()
+        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
+        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
+
+    # -- configuration ---------------------------------------------------------------------------
+    def _configure(self) -> None:
+        ws = self.workspace
+        self.rows = np.ascontiguousarray(ws.rows, dtype=np.int64)
+        self.dep = np.ascontiguousarray(ws.dep, dtype=np.int64)
+        self.ind = np.ascontiguousarray(ws.ind, dtype=np.int64)
+        status = self.lib.lagrange_configure(
+            len(self.geo), _ptr(self.geo), _ptr(self.mq), _ptr(self.mv), _ptr(self.speed), _ptr(self.offset),
+            len(self.rows), _ptr(self.rows), _ptr(self.dep), len(self.ind), _ptr(self.ind),
+            float(self.formulation.jacobian_scale), float(REPARTITION_CONDITION), _ptr(self.acc), _ptr(self.info))
+        if status:
+            raise SimulationError("the compiled lagrange loop could not allocate its work space")
+        if self.gaps is not None:  # (configuring clears the contact watch)
+            self.lib.lagrange_watch(len(self.gaps), _ptr(self.held), _ptr(self.gaps), self.gap_tolerance,
+                                    _ptr(self.event))
+
+    def close(self) -> None:
+        self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
+        self.lib.lagrange_drives(0)
+
+    def __enter__(self) -> "ReducedRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- the state ---------------------------------------------------------------------------------
+    @property
+    def ni(self) -> int:
+        """Degrees of freedom in the current partition (the reduced state has 2 ni entries)."""
+        return len(self.workspace.ind)
+
+    @property
+    def y0(self) -> np.ndarray:
+        return np.ascontiguousarray(self.workspace.y0, dtype=float)
+
+    def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(t, q, qd)`` of the last accepted state (as the C loop left it)."""
+        n = self.n
+        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:].copy()
+
+    def sync(self) -> None:
+        """The Python workspace's accepted state becomes the loop's."""
+        ws = self.workspace
+        ws.t_accepted, ws.q_accepted, ws.qd_accepted = self.accepted()
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The reduced right-hand side at ``(t, y)`` from the C code."""
+        fn = self.lib.lagrange_rhs
+        fn.argtypes = [_DBL, _VOID, _VOID, _VOID, _VOID]
+        fn.restype = ctypes.c_int
+        f = np.empty_like(y)
+        status = fn(float(t), _ptr(y), _ptr(f), _ptr(self.kernel.p), None if self.tau is None else _ptr(self.tau))
+        if status:
+            raise SimulationError(f"no dependent coordinates at t = {t:.6g} s (the constraints "
+                                  f"{self.formulation.row_names(self.rows)} cannot be solved there)")
+        return f
+
+    # -- between compiled stretches --------------------------------------------------------------------
+    def resume(self, status: int, state: np.ndarray, y: np.ndarray, f: np.ndarray, counts: np.ndarray):
+        """Act on a ``PAUSED`` or ``TRIAL_FAILED`` return; the ``(y, f)`` to continue with
+        (``state`` is updated in place: a restart sets a new first step)."""
+        ws = self.workspace
+        self.sync()
+        if status == PAUSED:
+            t, q, qd = self.accepted()
+            y_new = ws.repartition(t, q, qd)
+            if y_new is None:
+                return y, f  # no clearly better choice: carry on with the same step size
+            self._configure()
+            self.restarts += 1
+            y = np.ascontiguousarray(y_new, dtype=float)
+            state[:] = (t, 0.0)  # a new start, as a new scipy solver would make
+            return y, np.empty_like(y)
+        if status != TRIAL_FAILED:
+            raise SimulationError(f"compiled lagrange loop: unexpected status {status}")
+        if state[0] > self.t_retry:
+            self.retries = 0
+        self.retries += 1
+        if self.retries > MAX_RETRIES:
+            raise SimulationError(f"dependent coordinates cannot be found near t = {state[0]:.6g} s: constraints "
+                                  f"{self.formulation.row_names(self.rows)}")
+        h = state[1] if state[1] > 0 else 1e-3
+        t_back, y_back = ws.retreat()
+        self.t_retry = t_back
+        self._configure()
+        self.restarts += 1
+        y = np.ascontiguousarray(y_back, dtype=float)
+        f = self.rhs(t_back, y)
+        counts[0] += 1
+        state[:] = (t_back, max(h / 4, 1e-12))
+        return y, f
+
+    def prescribed(self, t_end: float, t_eval, max_step: float):
+        """No degree of freedom: ``(times, rows of [q, qd], counts)`` at the output times
+        (``t_eval``, or as Python stepping chooses them), computed in C."""
+        if t_eval is None:
+            count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
+            t_eval = np.linspace(0.0, t_end, count + 1)
+        times = np.ascontiguousarray(t_eval, dtype=float)
+        out = np.empty((len(times), 2 * self.n))
+        done = np.zeros(1, dtype=np.int64)
+        fn = self.lib.lagrange_prescribed
+        fn.argtypes = [_VOID, _LONG, _VOID, _VOID, _VOID]
+        fn.restype = ctypes.c_int
+        if fn(_ptr(self.kernel.p), len(times), _ptr(times), _ptr(out), _ptr(done)):
+            t = times[int(done[0])]
+            raise SimulationError(f"the prescribed motion cannot be followed at t = {t:.6g} s: constraints "
+                                  f"{self.formulation.row_names(self.rows)} have no solution near the last one")
+        return times, out, {"nfev": 0, "steps": max(len(times) - 1, 0), "rejected": 0, "method": "prescribed"}
+
+
+class _Locator:
+    """``gap(s, i)`` and ``force(s, k)`` on the event step of a ``ReducedRun`` (its dense
+    output, the dependent coordinates by Newton from the step's start), computed in C."""
+
+    def __init__(self, run: ReducedRun, t_old: float, y_old: np.ndarray):
+        self.run, self.t_old = run, float(t_old)
+        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
+        ny = len(self.y_old)
+        self.h = float(run.event[0]) - self.t_old
+        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
+        self.nm = 0 if run.formulation.constraints is None else run.formulation.constraints.nc
+        lib = run.lib
+        self._gap, self._force = lib.lagrange_gap_at, lib.lagrange_force_at
+        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
+        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
+        self._gap.restype = self._force.restype = _DBL
+        self.args = (self.t_old, self.h, _ptr(self.y_old), _ptr(self.F), ny)
+        self.p = _ptr(run.kernel.p)
+        self.tau = None if run.tau is None else _ptr(run.tau)
+
+    def _checked(self, value: float, s: float, what: str) -> float:
+        if value != value:
+            raise SimulationError(f"the {what} cannot be evaluated at t = {s:.6g} s (no dependent coordinates "
+                                  f"near the step's start)")
+        return value
+
+    def gap(self, s: float, i: int) -> float:
+        return self._checked(self._gap(float(s), *self.args, int(i), self.p), s, "gap")
+
+    def force(self, s: float, k: int) -> float:
+        value = self._force(float(s), *self.args, self.nm + int(k), self.p, self.tau)
+        return self._checked(value, s, "contact force")
