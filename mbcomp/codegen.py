@@ -258,6 +258,10 @@ def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: d
             if s in block_of and s not in shared:
                 shared[s] = len(shared)
     names = _names(prog, "c")
+    # Slots in definition order, not in the (hash-seeded) order of the symbol sets: the same
+    # program always prints the same source.
+    position = {symbol: k for k, (symbol, _) in enumerate(needed)}
+    shared = {s: i for i, s in enumerate(sorted(shared, key=position.__getitem__))}
     names.update({s: f"w[{i}]" for s, i in shared.items()})
     printer = Printer(names, "c")
     parts = []
