@@ -374,9 +374,12 @@ def test_compiled_stepping_equals_scipy_stepping(name, formulation):
     t_eval = np.linspace(0.0, 0.3, 7)
     runs = [system.simulate(0.3, q0, qd0, t_eval=t_eval, rtol=1e-10, atol=1e-12, integrator=way)
             for way in ("compiled", "scipy")]
-    assert [r.stats["integrator"] for r in runs] == ["compiled", "scipy"]
     compiled, stepped = runs
-    assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"]
+    # a kinematic run (motors fix every coordinate) has nothing to integrate in scipy
+    assert [compiled.stats["integrator"], stepped.stats["integrator"]] == \
+        ["compiled", "none" if system.ndof == 0 else "scipy"]
+    if not system.topology.contacts:  # at contact events the compiled loop restarts its steps
+        assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"]
     assert compiled.extra_states == stepped.extra_states == tuple(system.extra_states)
     columns = [("q", compiled.q, stepped.q), ("qd", compiled.qd, stepped.qd)]
     columns += [(state, compiled[state], stepped[state]) for state in system.extra_states]
