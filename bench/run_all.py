@@ -191,7 +191,11 @@ def run_compile(sizes, rounds, log=print):
                       "were not measured (see `bench/chain_compile.py` for the in-process cold/cached times).")
     import compile_startup
     log(f"compile and start-up, N = {list(sizes)} (fresh processes)")
-    rows = compile_startup.run(list(sizes), rounds)
+    import inspect
+    if "trees" in inspect.signature(compile_startup.run).parameters:
+        rows = compile_startup.run(list(sizes), rounds, [None])      # None: the mbcomp imported here
+    else:
+        rows = compile_startup.run(list(sizes), rounds)
     return rows, ("Each figure a median over rounds of fresh processes (`compile_startup.py`); peak RSS is the "
                   "Python process plus its largest child (the C compiler), an upper bound of the two together.")
 
