@@ -10,9 +10,10 @@ import numpy as np
 from . import cache, codegen
 from .backend import C_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CFunctions, PythonFunctions, c_compiler, c_functions
 from .components._values import name_of
-from .equations import KINEMATICS_PER_BODY, build_program, input_layout, parameter_layout, parameter_values
+from .equations import build_program, input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
 from .errors import ModelError
+from .layout import OutputLayout
 from .flatten import flatten
 from .params import ParameterSpec
 
@@ -39,7 +40,10 @@ class CompiledModel:
     """What compilation produces and every ``System`` of the same structure shares:
     topology, layouts, generated functions (and, lazily, the symbolic program)."""
 
-    def __init__(self, model, *, cache: bool, backend: str):
+    def __init__(self, model, *, cache: bool, backend: str, c_snippets: tuple = ()):
+        """``c_snippets``: callables ``(nv, ng) -> str`` giving the C code the formulations
+        add to the library (every registered formulation's, so that one library serves all)."""
+        self.c_snippets = tuple(c_snippets)
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
         self.flat_model = model
@@ -54,17 +58,17 @@ class CompiledModel:
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
+        #: Where each output quantity sits in the generated functions' packed outputs.
+        self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
+                                             len(self.topology.contacts), self.drives.nz)
         #: Everything about the model that decides the generated code (part of the cache key).
-        self.description = structure_description(model, self.topology, self.layout, self.inputs, self.drives)
+        self.description = (structure_description(model, self.topology, self.layout, self.inputs, self.drives)
+                            + "\nlayout|" + self.output_layout.description())
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
         started = time.perf_counter()
         self.cache_hit = False
-        nq, nv, nb = self.topology.nq, self.topology.nv, len(self.topology.bodies)
-        ng = len(self.geometric_rows)
-        self.sizes = {"nq": nq, "nv": nv, "dynamics": nv * (nv + 1) // 2 + nv, "energy": 2,
-                      "kinematics": nb * KINEMATICS_PER_BODY + 6 * nv, "constraints": ng * (nv + 2),
-                      "contacts": len(self.topology.contacts) * (nv + 2), "drives": nv + self.drives.nz}
+        self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
         self.functions = self._load(cache, backend)
         self.compile_time = time.perf_counter() - started
 
@@ -84,8 +88,17 @@ class CompiledModel:
         if self._program is None:
             equations = [] if self.constraint_set is None else self.constraint_set.equations
             self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives)
+            self._check_layout(self._program)
             self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
         return self._program
+
+    def _check_layout(self, program) -> None:
+        """The program's outputs must fill the output layout exactly (C and Python read them by it)."""
+        for function, names in FUNCTIONS.items():
+            written = sum(len(program.outputs[name]) for name in names)
+            if written != self.output_layout.size(function):
+                raise ModelError(f"Model {self.model_name!r}", f"internal error: {function} writes {written} values, "
+                                 f"its layout has {self.output_layout.size(function)}")
 
     def _load(self, cache: bool, backend: str):
         if backend not in ("auto", "c", "python"):
@@ -99,10 +112,13 @@ class CompiledModel:
         return self._load_python(cache)
 
     def _c_templates(self) -> str:
-        """The hand-written C emitted with every model (accelerations, dae solve, integrators)."""
+        """The hand-written C emitted with every model: the output layout's offsets, the tree
+        accelerations, the formulations' code and the integrators."""
         from .integrators import c_integrators
-        nv = self.topology.nv  # the mass matrix and the accelerations are in speed space
-        return (codegen.c_accelerations(nv) + codegen.c_dae_accelerations(nv, len(self.geometric_rows))
+        nv, ng = self.topology.nv, len(self.geometric_rows)  # the mass matrix and accelerations are in speed space
+        return (self.output_layout.c_defines() + codegen.c_accelerations(nv)
+                + "".join(snippet(nv, ng) for snippet in self.c_snippets)
+                + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
                 + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
 
     def _load_c(self, use_cache: bool):

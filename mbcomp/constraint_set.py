@@ -85,7 +85,7 @@ class ConstraintSet:
         self.geometric_rows = [r for r in range(self.nc) if r not in set(self.coordinate_rows)]
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, system, q: np.ndarray, qd: np.ndarray, t: float,
+    def evaluate(self, kernel, q: np.ndarray, qd: np.ndarray, t: float,
                  motor_offsets: dict | None = None) -> ConstraintValues:
         """Residuals, Jacobian (nc, nv: over the speeds), explicit time rates and acceleration bias.
 
@@ -96,16 +96,12 @@ class ConstraintSet:
         g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nv)), np.zeros(nc), np.zeros(nc)
         rows = self.geometric_rows
         if rows:
-            ng = len(rows)
-            out = system._call("constraints", q, qd)
-            g[rows] = out[:ng]
-            J[rows] = out[ng: ng + ng * nv].reshape(ng, nv)
-            bias[rows] = out[ng + ng * nv:]
+            g[rows], J[rows], bias[rows] = kernel.constraints(q, qd)
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
             J[r, self.topology.v_slice[name_of(eq.joint)].start] = 1.0  # a 1-DOF screw joint
-            speed = self.motor_speed(system, r)
+            speed = self.motor_speed(kernel, r)
             if speed is not None and motor_offsets is not None and r in motor_offsets:
                 g[r] = q[k] - motor_offsets[r] - speed * t
                 g_t[r] = -speed
@@ -122,18 +118,18 @@ class ConstraintSet:
                 bias[r] = -s2
         return ConstraintValues(g, J, g_t, bias)
 
-    def residual_series(self, system, t: np.ndarray, q: np.ndarray, motor_offsets: dict | None = None) -> np.ndarray:
+    def residual_series(self, kernel, t: np.ndarray, q: np.ndarray, motor_offsets: dict | None = None) -> np.ndarray:
         """Residuals ``g`` at many samples, (m, nc): the geometric rows from one call of the
         generated code, motor rows in numpy (NaN for speed motors without start values)."""
         m = len(q)
         G = np.zeros((m, self.nc))
         rows = self.geometric_rows
         if rows and m:
-            G[:, rows] = system.evaluate_series("constraints", q, what="constraint_violation")[:, :len(rows)]
+            G[:, rows] = kernel.evaluate_series("constraints", q)[:, :len(rows)]
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
-            speed = self.motor_speed(system, r)
+            speed = self.motor_speed(kernel, r)
             if speed is not None:
                 G[:, r] = q[:, k] - motor_offsets[r] - speed * t if motor_offsets and r in motor_offsets else np.nan
                 continue
@@ -143,13 +139,13 @@ class ConstraintSet:
                 raise SimulationError(f"position(t) failed: {exc}", self.groups_by_row(r)) from None
         return G
 
-    def motor_speed(self, system, r: int) -> float | None:
+    def motor_speed(self, kernel, r: int) -> float | None:
         """The speed of the speed motor of row ``r`` with the System's parameter values (a
         run-time change of ``motor.speed`` takes effect), None for other rows."""
         eq = self.equations[r]
         if not isinstance(eq, CoordinateEquation) or eq.speed is None:
             return None
-        return float(system.parameter(f"{self.owner[r]}.speed", eq.speed))
+        return float(kernel.parameters.get(f"{self.owner[r]}.speed", eq.speed))
 
     def groups_by_row(self, r: int):
         for name, comp, _ in self.groups:

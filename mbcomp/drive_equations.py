@@ -1,6 +1,6 @@
 """Drive elements in the generated program: their generalised forces and state rates.
 
-The generated function ``drives(q, qd, p, u)`` returns ``[tau_drive (nq), z_rates (nz)]``
+The generated function ``drives(q, qd, p, u)`` returns ``[tau_drive (nv), z_rates (nz)]``
 where ``u = [t, z (nz), callable values]``: the time, the states of the drive elements
 (motor currents, PID integrals) in ``DriveLayout.states`` order, then the values of the
 Python callables the model uses (evaluated outside the generated code, in
@@ -147,7 +147,8 @@ class DriveContext:
 
 
 def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
-    """Outputs ``"drive_forces"`` (nv, speed space) and ``"state_rates"`` (nz) of the program."""
+    """Outputs ``"drive_forces"`` (nv: generalised forces on the speeds) and ``"state_rates"``
+    (nz) of the program."""
     nv = kin.topology.nv
     if layout is None:
         prog.du = [sp.Symbol("du0")]
@@ -160,7 +161,7 @@ def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
     rates = []
     for comp in layout.elements:
         for joint, value in comp.drive_loads(ctx):
-            k = kin.topology.v_slice[name_of(joint)].start  # 1-DOF joints: the speed of the coordinate
+            k = kin.topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed
             forces[k] = forces[k] + value
         element_rates = comp.state_rates(ctx)
         if len(element_rates) != len(comp.state_names()):

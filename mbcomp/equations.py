@@ -327,7 +327,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
         elif isinstance(eq, CoordinateGap):  # on a 1-DOF screw joint: its speed is its rate
             k = kin.topology.q_slice[name_of(eq.joint)].start
-            kv = kin.topology.v_slice[name_of(eq.joint)].start
+            kv = kin.topology.v_slice[name_of(eq.joint)].start  # a 1-DOF screw joint: its speed
             g = eq.sign * (prog.q[k] - kin.layout.symbols(eq.bound))
             row = [sp.Integer(eq.sign if i == kv else 0) for i in range(nv)]
             bias = sp.Integer(0)
@@ -458,7 +458,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         forces.append(prog.let(generalized[i] - dot(kin.S[i], wrench[body.name])))
     for element in topology.forces:  # reflected rotor inertias of drives (drivetrain.py)
         for joint, value in element.armature(kin) if hasattr(element, "armature") else ():
-            i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed
+            i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
             M[i, i] = prog.let(M[i, i] + value)
             kinetic += value * prog.qd[i] ** 2 / 2
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
@@ -476,9 +476,6 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     drive_outputs(prog, kin, drives)
     prog.kin = kin
     return prog
-
-
-KINEMATICS_PER_BODY = 9 + 3 + 6 + 6
 
 
 def _ball_segment(prog: Program, kin: Kinematics, quat: list, k0: int, R, pos, V, A):

@@ -55,6 +55,12 @@ class SimulationError(RuntimeError):
         self.component = component
 
 
+class TrialStateError(SimulationError):
+    """A workspace cannot evaluate a trial state of the integrator (e.g. Newton for dependent
+    coordinates fails far from the last accepted state): the step is retried shorter from
+    the state ``Workspace.retreat()`` returns."""
+
+
 def format_state(values) -> str:
     """A coordinate vector for messages: 6 significant digits, small values kept visible."""
     return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"

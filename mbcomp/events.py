@@ -6,7 +6,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .errors import SimulationError
-from .impact import GAP_TOLERANCE, contact_values, solve_impact
+from .impact import GAP_TOLERANCE, solve_impact
 from .result import Event
 
 
@@ -14,14 +14,15 @@ class ContactWatch:
     """The contact state of one simulation: which contacts are persistent (closed and
     held as constraints), the events so far, and how to find the next one."""
 
-    def __init__(self, system, rest_speed: float, offsets, tau):
-        self.system, self.rest_speed, self.offsets, self.tau = system, rest_speed, offsets, tau
-        self.names = [c.name for c in system.topology.contacts]
+    def __init__(self, kernel, formulation, rest_speed: float, offsets, tau):
+        self.kernel, self.formulation = kernel, formulation
+        self.rest_speed, self.offsets, self.tau = rest_speed, offsets, tau
+        self.names = [c.name for c in kernel.topology.contacts]
         self.persistent: tuple = ()
         self.events: list = []
 
     def gaps(self, q, qd):
-        return contact_values(self.system, q, qd)
+        return self.kernel.contacts(q, qd)
 
     def start(self, q, qd):
         """Check the initial state; close contacts resting on their surface; returns the
@@ -30,13 +31,13 @@ class ContactWatch:
         for i, gap in enumerate(values.g):
             if gap < -GAP_TOLERANCE:
                 raise SimulationError(f"initial state penetrates the contact by {-gap:.3g} m (gap {gap:.3g} m); "
-                                      f"move the body out of contact", self.system.topology.contacts[i])
+                                      f"move the body out of contact", self.kernel.topology.contacts[i])
         speed = values.J @ qd
         closed = [i for i in range(len(self.names)) if values.g[i] < GAP_TOLERANCE]
         resting = [i for i in closed if abs(speed[i]) < self.rest_speed]
         if resting:
             self.persistent = tuple(resting)
-            qd = solve_impact(self.system, 0.0, q, qd, [], offsets=self.offsets, persistent=self.persistent).qd
+            qd = solve_impact(self.kernel, self.formulation, 0.0, q, qd, [], offsets=self.offsets, persistent=self.persistent).qd
             self.release(0.0, q, qd)
         if any(speed[i] < 0 for i in closed if i not in resting):
             qd, _ = self.impact(0.0, q, qd)
@@ -61,8 +62,8 @@ class ContactWatch:
 
     def contact_forces(self, t, q, qd):
         """Normal forces (N) of the persistent contacts at a state (positive pushing)."""
-        system = self.system
-        _, lam = system._formulation.solve(system, t, q, qd, system._tau(self.tau, t, q, qd), self.offsets,
+        kernel = self.kernel
+        _, lam = self.formulation.solve(kernel, t, q, qd, kernel.tau(self.tau, t, q, qd), self.offsets,
                                            self.persistent)
         return lam[len(lam) - len(self.persistent):]
 
@@ -96,11 +97,11 @@ class ContactWatch:
                   and values.g[i] < GAP_TOLERANCE + 1e-7 and speed[i] < 0]
         if not active:
             return qd, False
-        result = solve_impact(self.system, t, q, qd, active, offsets=self.offsets, persistent=self.persistent)
+        result = solve_impact(self.kernel, self.formulation, t, q, qd, active, offsets=self.offsets, persistent=self.persistent)
         after = self.gaps(q, result.qd).J @ result.qd
         resting = [i for i in result.closed if abs(after[i]) < self.rest_speed and i not in self.persistent]
         if resting:
-            result = solve_impact(self.system, t, q, qd, active, restitution={i: 0.0 for i in resting},
+            result = solve_impact(self.kernel, self.formulation, t, q, qd, active, restitution={i: 0.0 for i in resting},
                                   offsets=self.offsets, persistent=self.persistent)
         self.persistent = tuple(sorted((set(self.persistent) & set(result.closed)) | set(resting)))
         for name, impulse in result.impulses.items():

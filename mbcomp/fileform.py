@@ -419,6 +419,13 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         return Expression(text, ("num", float(read)), owner)  # a constant of t
     if option == "rotation":
         return read_rotation(r, label, key, value)
+    if option == "axis":  # "x", "-y" or a 3-vector
+        return r.axis(label, key, value)
+    if option == "axes":  # a list of axes ("x", "-y" or 3-vectors)
+        if not isinstance(value, list) or not value:
+            return r.problem(label, key, f"must be a list of axes, got {type_name(value)}")
+        axes = [r.axis(label, f"{key}[{i}]", v) for i, v in enumerate(value)]
+        return BAD if any(a is BAD for a in axes) else tuple(axes)
     raise TypeError(f"{cls.__name__}.file_keys names {key!r}, which is not a reference, parameter or option")
 
 
@@ -525,6 +532,10 @@ def component_table(comp: Component) -> tuple[str, dict]:
                 table[key] = input_value(value, owner, key)
             elif option == "rotation":
                 table[key] = [floats(row) for row in value]
+            elif option == "axes":
+                table[key] = [axis_value(axis) for axis in value]
+            elif option == "axis":
+                table[key] = axis_value(value)
             else:
                 table[key] = value
     return cls.section, table

@@ -23,17 +23,14 @@ class Impact:
     closed: tuple = ()  #: indices of the contacts that carry an impulse (the final active set)
 
 
-def contact_values(system, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
+def contact_values(kernel, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
     """Gaps (m), gap Jacobian (nk, nv), and gap acceleration bias of every contact."""
-    nk, nv = len(system.topology.contacts), system.nv
-    out = system._call("contacts", q, qd)
-    return ConstraintValues(out[:nk].copy(), out[nk: nk + nk * nv].reshape(nk, nv), np.zeros(nk),
-                            out[nk + nk * nv:].copy())
+    return kernel.contacts(q, qd)
 
 
-def contact_indices(system, contacts) -> list[int]:
+def contact_indices(kernel, contacts) -> list[int]:
     """Indices of contacts given by name or object (all contacts for None)."""
-    names = [c.name for c in system.topology.contacts]
+    names = [c.name for c in kernel.topology.contacts]
     if contacts is None:
         return list(range(len(names)))
     if isinstance(contacts, str) or hasattr(contacts, "name"):
@@ -47,13 +44,13 @@ def contact_indices(system, contacts) -> list[int]:
     return indices
 
 
-def restitution_of(system, index: int) -> float:
+def restitution_of(kernel, index: int) -> float:
     """The contact's restitution as currently bound (a parameter, so it can be rebound)."""
-    contact = system.topology.contacts[index]
-    return float(system._parameters[getattr(contact, "restitution_key", f"{contact.name}.restitution")])
+    contact = kernel.topology.contacts[index]
+    return float(kernel.parameters[getattr(contact, "restitution_key", f"{contact.name}.restitution")])
 
 
-def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[int], restitution=None,
+def solve_impact(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, active: list[int], restitution=None,
                  offsets=None, persistent=()) -> Impact:
     """Newton's impact law on the ``active`` contacts, consistent with every bilateral
     constraint, with complementarity on every contact involved::
@@ -65,8 +62,7 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
     released and the impact solved again.  ``restitution``: one value for every contact,
     or ``{contact index: e}``; by default each contact's own.
     """
-    formulation = system._formulation
-    contacts = system.topology.contacts
+    contacts = kernel.topology.contacts
     if restitution is not None and not isinstance(restitution, dict) and not 0.0 <= float(restitution) <= 1.0:
         raise ModelError("impact", f"restitution must lie in [0, 1], got {restitution}")
     persistent = set(persistent)
@@ -75,13 +71,13 @@ def solve_impact(system, t: float, q: np.ndarray, qd: np.ndarray, active: list[i
         if i in persistent:
             return 0.0
         if isinstance(restitution, dict):
-            return float(restitution.get(i, restitution_of(system, i)))
-        return restitution_of(system, i) if restitution is None else float(restitution)
+            return float(restitution.get(i, restitution_of(kernel, i)))
+        return restitution_of(kernel, i) if restitution is None else float(restitution)
 
-    M, _ = system._dynamics(t, q, np.zeros_like(qd))
-    Minv = formulation._inverse(formulation._factor(system, M, q))
-    bilateral = formulation.constraint_values(system, t, q, np.zeros_like(qd), offsets)
-    gaps = contact_values(system, q, qd)
+    M, _ = kernel.dynamics(t, q, np.zeros_like(qd))
+    Minv = kernel.inverse(kernel.factor(M, q))
+    bilateral = formulation.constraint_values(kernel, t, q, np.zeros_like(qd), offsets)
+    gaps = contact_values(kernel, q, qd)
     approach = gaps.J @ qd
     involved = sorted(set(active) | persistent)
     nb = bilateral.J.shape[0]

@@ -45,7 +45,7 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
         f"#define HAS_DRIVES {int(bool(drives))}",
         "#define NY (NMECH + NZ)",
         f"#define NQUAT {state_map.quat_q.size}",
-        f"#define NWORK ({nv * (nv + 1) // 2 + nv} > NDAEWORK ? {nv * (nv + 1) // 2 + nv} : NDAEWORK)",
+        "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
         _array("DOP_A", A), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
         _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D),
     ]
@@ -389,28 +389,22 @@ from .errors import ModelError, SimulationError  # noqa: E402
 COMPILED_METHODS = ("DOP853", "RK4")
 
 
-def why_not_compiled(system, method, tau) -> str | None:
-    """Why the compiled loop cannot run this simulation (None when it can)."""
-    topology = system.topology
+def why_not_compiled(kernel, formulation, method, tau) -> str | None:
+    """Why the compiled loop cannot run this simulation (None when it can); the formulation
+    says whether its way of handling constraints runs in compiled code."""
+    topology = kernel.topology
     if method not in COMPILED_METHODS:
         return f"method {method!r} has no compiled loop (compiled: {', '.join(COMPILED_METHODS)})"
-    if system.backend != "c":
+    if kernel.backend != "c":
         return "the model was compiled without a C compiler (backend 'python')"
-    if topology.cut_joints or topology.constraints:
-        formulation = system._formulation
-        if formulation.name != "dae":
-            return "the lagrange formulation of a constrained model steps in Python (use formulation='dae')"
-        if formulation.projection:
-            return "projection=True steps in Python"
-        if formulation.constraints.coordinate_rows:
-            return "motors step in Python"
-        if formulation.nominal_rows is None:
-            return "no consistent configuration was found at compile time"
+    reason = formulation.compiled_loop()
+    if reason is not None:
+        return reason
     if topology.contacts:
         return "the model has contacts"
-    if system._compiled.n_inputs:
+    if kernel.n_inputs:
         return "the model has callable forces or torques"
-    if system._compiled.drives.callables:
+    if kernel.compiled.drives.callables:
         return "the model's drives or signals use Python callables"
     if callable(tau):
         return "tau is a callable"
@@ -535,58 +529,59 @@ def _bind(lib):
     return run, rk4
 
 
-def compiled_jacobian(system, tau):
+def compiled_jacobian(kernel, tau):
     """``jac(t, y)`` for scipy's implicit methods, computed in compiled code (forward
     differences of the compiled right-hand side: one call instead of 2 nq Python calls)."""
-    lib = system._compiled.functions.lib
+    lib = kernel.compiled.functions.lib
     fn = lib.rhs_jacobian
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
-    n2 = system.nq + system.nv + len(system.extra_states)
+    n2 = kernel.nq + kernel.nv + kernel.compiled.drives.nz
     tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    p = system._p
+    p = kernel.p
 
     def jac(t, y):
         y = np.ascontiguousarray(y, dtype=float)
         out = np.empty((n2, n2))
         status = fn(p.ctypes.data, tau_ptr, float(t), y.ctypes.data, out.ctypes.data)
         if status:
-            _fail(system, status, t, y, "Jacobian")
+            _fail(kernel, status, t, y, "Jacobian")
         return out
 
     jac.tau = tau_arr  # keep the buffer alive with the closure
     return jac
 
 
-def _diagnose(system, t: float, y: np.ndarray, method: str) -> None:
-    """Evaluate the accelerations at the state the compiled loop stopped at through the
+def _diagnose(kernel, t: float, y: np.ndarray, method: str) -> None:
+    """Evaluate the tree accelerations at the state the compiled loop stopped at through the
     checked Python path, which names the cause (a zero-length spring, a singular joint)."""
-    n = system.nq
+    n = kernel.nq
     if not np.all(np.isfinite(y)):
         return
     when = f"at t = {t:.6g} s" if np.isfinite(t) else "during the run"
+    q, qd = y[:n], y[n:]
     try:
-        system.accelerations(y[:n], y[n:], t if np.isfinite(t) else 0.0)
+        kernel.tree_solve(*kernel.checked_dynamics(t if np.isfinite(t) else 0.0, q, qd), q)
     except SimulationError as exc:
         raise SimulationError(f"compiled {method} stopped {when}: {exc}") from None
     except ModelError:
         pass
 
 
-def _fail(system, status: int, t: float, y: np.ndarray, method: str):
-    n = system.nq
+def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
+    n = kernel.nq
     if status == RANK_LOST:
         raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
     if status == STEP_TOO_SMALL:
         raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
                               f"spacing between numbers")
     if status in (SINGULAR, NOT_FINITE):
-        _diagnose(system, t, y, method)
+        _diagnose(kernel, t, y, method)
     if status == SINGULAR:
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == COLLAPSED:
-        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], system.coords))
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
@@ -631,42 +626,30 @@ class RankLost(Exception):
     """The compiled dae path met a singular position: the caller falls back to Python stepping."""
 
 
-def run_compiled(system, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
+def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
                  atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None):
-    """Integrate a tree model, or a dae model whose constraints are all geometric, entirely in
-    compiled code; returns ``(t, y, stats, wall)``."""
-    lib = system._compiled.functions.lib
-    formulation = system._formulation
-    if formulation.constraints is None:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
-    configure = lib.dae_configure
-    configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
-    rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
-    alpha, beta = formulation.baumgarte
-    configure(len(rows), rows.ctypes.data, alpha, beta, formulation.schur_scale,
-              formulation.singular_tolerance)  # this thread only
-    try:
-        return _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
-    finally:
-        configure(-1, None, 0.0, 0.0, 0.0, 0.0)
+    """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
+    entirely in compiled code; returns ``(t, y, stats, wall)``."""
+    lib = kernel.compiled.functions.lib
+    with formulation.compiled_setup(lib):  # e.g. the dae rows and gains, for this thread only
+        return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
 
 
-def _run(system, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     hook = _Hook()
     hook.install(lib)
     try:
-        return _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
     finally:
         hook.remove(lib)
 
 
-def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
+def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None):
     run, rk4 = _bind(lib)
-    ny = system.nq + system.nv
-    p = system._p
-    tau_arr = None if tau is None else np.ascontiguousarray(system._tau(tau, 0.0, q0, qd0), dtype=float)
+    p = kernel.p
+    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    z0 = np.zeros(len(system.extra_states)) if z0 is None else np.asarray(z0, dtype=float)
+    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else np.asarray(z0, dtype=float)
     y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
     ny = y.size
     started = time.perf_counter()
@@ -683,10 +666,10 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if status == STOPPED:
             hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(system, status, counts[1] * dt, out[counts[1]], method)
+            _fail(kernel, status, counts[1] * dt, out[counts[1]], method)
         t = np.arange(steps + 1) * dt
         if t_eval is not None:
-            out, t = _hermite(system, t, out, t_eval, tau_arr), np.asarray(t_eval)
+            out, t = _hermite(kernel, t, out, t_eval, tau_arr), np.asarray(t_eval)
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
@@ -706,7 +689,7 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if status == STOPPED:
             hook.stopped(state[0], method)
         if status:
-            _fail(system, status, state[0], y, method)
+            _fail(kernel, status, state[0], y, method)
         times, values = t_out, y_out
     else:
         chunks_t, chunks_y = [np.zeros(1)], [y[None, :].copy()]
@@ -726,18 +709,18 @@ def _run_hooked(system, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
             if status == STOPPED:
                 hook.stopped(state[0], method)
             if status:
-                _fail(system, status, state[0], y, method)
+                _fail(kernel, status, state[0], y, method)
             break
         times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     return times, values, stats, time.perf_counter() - started
 
 
-def _hermite(system, t, y, t_eval, tau):
+def _hermite(kernel, t, y, t_eval, tau):
     """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
     the steps that bracket a requested time)."""
-    n = system.nq
-    state_map, nv = system.topology.state_map, system.nv
+    n = kernel.nq
+    state_map, nv = kernel.topology.state_map, kernel.nv
     t_eval = np.asarray(t_eval, dtype=float)
     idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
     needed = np.unique(np.concatenate((idx, idx + 1)))
@@ -745,10 +728,10 @@ def _hermite(system, t, y, t_eval, tau):
     def rate(i):
         q, qd, z = y[i, :n], y[i, n:n + nv], y[i, n + nv:]
         tau_i, rates = tau, z[:0]
-        if system.has_drives:
-            drive, rates = system.drive_outputs(t[i], q, qd, z)
+        if kernel.compiled.drives.elements:
+            drive, rates = kernel.drive_outputs(t[i], q, qd, z)
             tau_i = drive if tau is None else tau + drive
-        return np.concatenate((state_map.qdot(q, qd), system._tree_accelerations(t[i], q, qd, tau_i), rates))
+        return np.concatenate((state_map.qdot(q, qd), kernel.tree_accelerations(t[i], q, qd, tau_i), rates))
 
     f = {i: rate(i) for i in needed}
     f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])

@@ -552,6 +552,8 @@ def _read_parameters(r: Reader, table: Any) -> None:
 
 
 def _read_initial(r: Reader, table: dict, coords: dict | None, speeds: dict | None = None) -> dict:
+    """``[initial]``: ``q`` by coordinate name, ``qd`` by coordinate (its rate) or by speed
+    name (a ball's angular velocity components)."""
     initial: dict[str, dict[str, float]] = {"q": {}, "qd": {}}
     r.keys("initial", table, ("q", "qd"))
     known = coords

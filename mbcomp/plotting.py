@@ -7,6 +7,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .layout import body_fields
+
 __all__ = ["plot_result", "animate_result", "render_frame", "work_precision_plot"]
 
 PLOT_KINDS = ("q", "qd", "energy", "drift", "reactions")
@@ -360,9 +362,10 @@ class _Scene:
 
     def _poses_fast(self, q: np.ndarray):
         """The same from one evaluation of the generated kinematics (no accelerations)."""
-        per_body = self.system._kinematics(q, np.zeros_like(q))[0]
-        rotations = np.concatenate([np.eye(3)[None], per_body[:, :9].reshape(-1, 3, 3)])
-        origins = np.concatenate([np.zeros((1, 3)), per_body[:, 9:12]])
+        kernel = self.system.kernel
+        per_body = body_fields(kernel.kinematics(q, np.zeros(kernel.nv))[0])
+        rotations = np.concatenate([np.eye(3)[None], per_body["rotation"]])
+        origins = np.concatenate([np.zeros((1, 3)), per_body["origin"]])
         return rotations, origins
 
     def poses(self, q: np.ndarray):

@@ -44,11 +44,11 @@ class Result:
     ``t`` (m,) s; ``q`` (m, nq) in ``coords`` order; ``qd`` (m, nv) in ``speeds`` order (a
     screw coordinate's speed is its rate; a ball has 4 coordinates, 3 speeds);
     ``res["name"]`` a coordinate's or a speed's series; ``stats`` holds the solver
-    counters and wall time.  Everything the derived
-    series need is recorded here: the parameter values (``parameters``), the speed
-    motors' start values (``offsets``) and the contacts held closed at each sample
-    (``closed_contacts``), so ``energy()``, ``reactions`` and ``constraint_violation()``
-    give the same numbers whichever System of the same model computes them.
+    counters and wall time.  Everything the derived series need is recorded here: the
+    parameter values (``parameters``), the speed motors' start values (``offsets``) and
+    the contacts held closed at each sample (``closed_contacts``), so ``energy()``,
+    ``reactions`` and ``constraint_violation()`` give the same numbers whichever System
+    of the same model computes them.
 
     ``system`` is the System that produced the result; it is left out when the result is
     pickled (``with_system`` binds one again).
@@ -82,7 +82,7 @@ class Result:
             if not self.coords:
                 self.coords = tuple(self.system.coords)
             if not self.speeds:
-                self.speeds = tuple(getattr(self.system, "speeds", self.system.coords))
+                self.speeds = tuple(getattr(self.system, "speeds", self.coords))
             if not self.parameters:
                 self.parameters = self.system.parameters
             if not self.formulation:

@@ -9,9 +9,8 @@ from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.ivp import METHODS
 
 from . import checks
-from .errors import ModelError, SimulationError
+from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
-from .formulations.lagrange import TrialStateError
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
 from .integrators import (CollapseWatch, RankLost, collapse_message, compiled_jacobian, poll_step_hooks, run_compiled,
@@ -117,31 +116,31 @@ class _Recorder:
                 self.next += 1
 
 
-def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853", rtol: float = 1e-8,
+def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-             dt: float | None = None, x0: Any = None) -> Result:
-    """Integrate ``system`` from ``(q0, qd0)`` at t = 0 to ``t_end``; see ``System.simulate``."""
+             dt: float | None = None, z0: np.ndarray | None = None) -> Result:
+    """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds; ``z0`` the
+    drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
+    ``System.simulate``.  The Result carries no System (the caller binds one)."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
-    q0 = system.state_vector(q0, "q0")
-    qd0 = system._velocity(qd0)
-    z0 = system.extra_state_vector(x0)
+    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     if tau is not None and not callable(tau):
-        system._tau(tau, 0.0, q0, qd0)
+        kernel.tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
         raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
     if dt is not None:  # fixed steps: every step is stored
         checks.output_size(t_end / dt + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
-    reason = why_not_compiled(system, method, tau) if integrator != "scipy" else "integrator='scipy'"
+    reason = why_not_compiled(kernel, formulation, method, tau) if integrator != "scipy" else "integrator='scipy'"
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
     compiled = None
     if reason is None:
-        q_start, qd_start = system._formulation.assemble(system, q0, qd0, 0.0)
+        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0)
 
         def run():
-            return run_compiled(system, t_end, q_start, qd_start, method=method, rtol=rtol, atol=atol,
-                                t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
+            return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
+                                atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
         try:
             if progress:
                 # The compiled loop's step hook reports the time reached; the bar only reads it
@@ -161,26 +160,25 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
                                       f"use integrator='scipy', which handles it") from None
     if compiled is not None:
         times, values, counts, wall = compiled
-        n = system.nq
+        n = kernel.nq
         stats = {"method": method, "integrator": "compiled", **counts, "njev": 0, "nlu": 0, "restarts": 0,
                  "status": 0, "message": "The solver successfully reached the end of the integration interval.",
-                 "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
-        nv = system.nv
-        return Result(system=system, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                      qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
+                 "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
+        nv = kernel.nv
+        return _result(kernel, formulation, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
+                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau)
     if integrator == "compiled" and reason is not None:
         raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
     cls = solver_class(method)
-    formulation = system._formulation
     drive = None
-    if system.has_drives:  # drive elements: their forces join tau, their states y
-        drive = tau = DriveTorque(system, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
+    if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
+        drive = tau = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
     offsets = formulation.motor_offsets(q0, 0.0)
-    q0, qd0 = formulation.assemble(system, q0, qd0, 0.0, offsets)
-    watch = ContactWatch(system, rest_speed, offsets, tau) if system.topology.contacts else None
+    q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
+    watch = ContactWatch(kernel, formulation, rest_speed, offsets, tau) if kernel.topology.contacts else None
     if watch is not None:
         qd0 = watch.start(q0, qd0)
-    workspace = formulation.start(system, 0.0, q0, qd0, tau, watch.persistent if watch else ())
+    workspace = formulation.start(kernel, 0.0, q0, qd0, tau, watch.persistent if watch else ())
     if drive is not None:
         workspace = DriveWorkspace(workspace, drive)
     if watch is not None and workspace.y0.size == 0:
@@ -198,8 +196,8 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
 
     options = {}
     if (getattr(cls, "__name__", "") in IMPLICIT_METHODS and formulation.constraints is None
-            and why_not_compiled(system, "DOP853", tau) is None):
-        options["jac"] = compiled_jacobian(system, None if tau is None else system._tau(tau, 0.0, q0, qd0))
+            and why_not_compiled(kernel, formulation, "DOP853", tau) is None):
+        options["jac"] = compiled_jacobian(kernel, None if tau is None else kernel.tau(tau, 0.0, q0, qd0))
 
     def make_solver(t0, y0, first_step=None):
         return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, first_step=first_step, **options)
@@ -210,7 +208,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
 
     started = time.perf_counter()
     if workspace.y0.size == 0 and watch is None:
-        return _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started)
+        return _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started)
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
@@ -252,7 +250,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             if collapse.collapsed(t):
                 q_now, qd_now = workspace.full_state(t, solver.y)
                 raise SimulationError(collapse_message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
-                                                       system.coords, collapse.window, collapse.projected))
+                                                       kernel.topology.speeds, collapse.window, collapse.projected))
             if restart is None and solver.status == "finished":
                 break
             if restart is None:
@@ -266,7 +264,7 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
             t_restart, q_r, qd_r = restart
             if t_restart >= t_end:
                 break
-            workspace = formulation.start(system, t_restart, q_r, qd_r, tau, watch.persistent)
+            workspace = formulation.start(kernel, t_restart, q_r, qd_r, tau, watch.persistent)
             if drive is not None:
                 workspace = DriveWorkspace(workspace, drive)
             workspace.offsets = offsets
@@ -277,17 +275,17 @@ def simulate(system, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "D
         bar.close()
     add_counts(solver)
     wall = time.perf_counter() - started
-    q = np.array(recorder.q).reshape(-1, system.nq)
-    qd = np.array(recorder.qd).reshape(-1, system.nv)
+    q = np.array(recorder.q).reshape(-1, kernel.nq)
+    qd = np.array(recorder.qd).reshape(-1, kernel.nv)
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
     stats = {"method": getattr(cls, "__name__", str(method)), "integrator": "scipy", **counts, "status": 0,
              "message": "The solver successfully reached the end of the integration interval.",
-             "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": system.formulation}
+             "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
     events = watch.events if watch else []
     z = np.array(recorder.z).reshape(len(recorder.t), -1)
-    return Result(system=system, t=np.array(recorder.t), q=q, qd=qd, z=z, stats=stats,
-                  tau=tau if drive is None else drive.tau, offsets=offsets,
+    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, z=z, stats=stats,
+                   tau=tau if drive is None else drive.tau, offsets=offsets,
                   events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
                   closed_contacts=recorder.closed)
 
@@ -326,7 +324,7 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
     return te, (te, q, qd), None, watch.gaps(q, qd).g
 
 
-def _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:
+def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:
     """No degree of freedom left (every coordinate driven or dependent): nothing to
     integrate; the motion follows from the constraints at each output time (Newton,
     continued from the previous time)."""
@@ -341,6 +339,14 @@ def _prescribed_motion(system, workspace, t_end, t_eval, max_step, q0, qd0, tau,
         qds.append(qd)
     stats = {"method": "prescribed", "integrator": "none", "nfev": 0, "njev": 0, "nlu": 0, "steps": len(t_eval) - 1,
              "restarts": 0, "status": 0, "message": "No degree of freedom: the motion follows from the constraints.",
-             "success": True, "wall_time": time.perf_counter() - started, "formulation": system.formulation}
-    return Result(system=system, t=np.asarray(t_eval, dtype=float), q=np.array(qs), qd=np.array(qds), stats=stats,
+             "success": True, "wall_time": time.perf_counter() - started, "formulation": formulation.name}
+    return _result(kernel, formulation, t=np.asarray(t_eval, dtype=float), q=np.array(qs), qd=np.array(qds), stats=stats,
                   tau=tau, offsets=offsets)
+
+
+def _result(kernel, formulation, **data) -> Result:
+    """A Result recording what the run used (names, parameter values, formulation)."""
+    topology = kernel.topology
+    return Result(system=None, coords=tuple(topology.coords), speeds=tuple(topology.speeds),
+                  parameters=dict(kernel.parameters), formulation=formulation.name,
+                  extra_states=tuple(kernel.compiled.drives.states), **data)

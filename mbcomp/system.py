@@ -6,12 +6,12 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .components import Spherical
-from .constraint_set import cross
 from .components._values import name_of
-from .equations import KINEMATICS_PER_BODY
 from . import checks
-from .errors import format_state, ModelError, SimulationError, describe
+from .constraint_set import cross
+from .errors import ModelError
+from .kernel import Kernel
+from .layout import body_fields
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 from .params import validate
 
@@ -62,8 +62,8 @@ class System:
         object.__setattr__(self, "_compiled", compiled)
         object.__setattr__(self, "_formulation", formulation)
         object.__setattr__(self, "_parameters", dict(parameters))
-        object.__setattr__(self, "_p", compiled.layout.pack(parameters))
-        object.__setattr__(self, "_p_pointer", None)  # bound on first compiled call
+        object.__setattr__(self, "_kernel", Kernel(compiled, parameters))
+        object.__setattr__(self, "_p", self._kernel.p)
 
     def __setattr__(self, name, value):
         raise AttributeError("System is immutable: use with_parameters() for new parameter values")
@@ -141,7 +141,7 @@ class System:
         """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
         ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
         from .integrators import why_not_compiled
-        reason = why_not_compiled(self, method, tau)
+        reason = why_not_compiled(self._kernel, self._formulation, method, tau)
         return "compiled" if reason is None else f"python: {reason}"
 
     @property
@@ -153,18 +153,12 @@ class System:
         """``(tau_drive, z_rates)``: the drive elements' generalised forces (nv, speed space)
         and the rates of their states (nz) at time ``t`` (s), with states ``z`` in
         ``extra_states`` order (raw arrays, unchecked: the simulation's hot path)."""
-        drives = self._compiled.drives
-        out = self._call("drives", q, qd, drives.inputs(t, z, q, qd))
-        total = float(out.sum())
-        if total - total != 0.0:
-            raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
-                                  f"{format_state(q)}, states {format_state(z)}")
-        return out[: self.nv], out[self.nv:]
+        return self._kernel.drive_outputs(t, q, qd, z)
 
     def _applied(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray, states: Any = None):
         """``tau`` plus the drive elements' generalised forces (their states from ``states``:
         a dict by name or an array in ``extra_states`` order; 0 when not given)."""
-        tau = self._tau(tau, t, q, qd)
+        tau = self._kernel.tau(tau, t, q, qd)
         if not self._compiled.drives.elements:
             return tau
         if states is None or isinstance(states, Mapping):
@@ -199,6 +193,12 @@ class System:
     @property
     def topology(self):
         return self._compiled.topology
+
+    @property
+    def kernel(self) -> Kernel:
+        """The numeric core under this System (raw arrays in, no checks): generated-function
+        calls, tree solve, diagnosis; for analyses and extensions built on the System."""
+        return self._kernel
 
     @property
     def name(self) -> str:
@@ -307,117 +307,18 @@ class System:
     def _velocity(self, qd: Any) -> np.ndarray:
         return np.zeros(self.nv) if qd is None else self.speed_vector(qd, "qd")
 
-    def _inputs(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if not self._compiled.n_inputs:
-            return self._compiled.no_inputs
-        u = np.zeros(self._compiled.n_inputs)
-        for name, (start, size) in self._compiled.inputs.items():
-            u[start:start + size] = self.topology.components[name].evaluate_input(t, q, qd, size)
-        return u
-
-    def _tau(self, tau: Any, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray | None:
-        if tau is None:
-            return None
-        if callable(tau):
-            from .components.forces import checked_output
-            return checked_output("tau", tau(t, q, qd), self.nv)
-        try:
-            arr = np.asarray(tau, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}") from None
-        if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
-            raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
-        return arr
-
-    # -- tree quantities (raw, unchecked inputs) -------------------------------------------------
-    def _call(self, name: str, q, qd, u=None) -> np.ndarray:
-        if u is None:
-            u = np.zeros(self._compiled.n_inputs)
-        return self._compiled.functions(name, q, qd, self._p, u)
-
-    def _dynamics(self, t, q, qd, tau=None):
-        """Tree mass matrix and generalised forces ``f_bar`` (+ tau): ``M qdd = f`` (speed space)."""
-        n = self.nv
-        out = self._call("dynamics", q, qd, self._inputs(t, q, qd))
-        M = np.empty((n, n))
-        rows, cols = self._compiled.tril
-        M[rows, cols] = out[: n * (n + 1) // 2]
-        M[cols, rows] = M[rows, cols]
-        f = out[n * (n + 1) // 2:]
-        if tau is not None:
-            f = f + tau
-        return M, f
-
-    def _diagnose(self, q: np.ndarray) -> str:
-        """Name the components that can make the tree mass matrix singular at ``q``."""
-        hints = []
-        for joint in self.topology.tree_joints:
-            if isinstance(joint, Spherical) and len(joint.sequence) == 3:
-                middle = q[self.topology.q_slice[joint.name]][1]
-                a1, a3 = joint.sequence[0], joint.sequence[2]
-                value = np.sin(middle) if a1 == a3 else np.cos(middle)
-                if abs(value) < 1e-6:
-                    hints.append(f"{describe(joint)} is at its Euler-angle singularity "
-                                 f"({joint.coords[1]} = {middle:.6g} rad: first and last axes align)")
-        return "; ".join(hints) if hints else "check for massless bodies or bodies without inertia on rotating joints"
-
-    def _check_finite(self, values: np.ndarray, what: str, q: np.ndarray) -> np.ndarray:
-        if not np.all(np.isfinite(values)):
-            springs = []
-            for comp in self.topology.forces:
-                if comp.refs.get("a") == "attachment":  # two-point elements (springs, dampers)
-                    pa = self._point_position(comp.body_a, self._parameters[f"{comp.name}.point_a"], q)
-                    pb = self._point_position(comp.body_b, self._parameters[f"{comp.name}.point_b"], q)
-                    if np.linalg.norm(pb - pa) < 1e-12:
-                        springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
-            reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
-            raise SimulationError(f"{what} is not finite at q = {format_state(q)}: {reason}")
-        return values
-
-    def _tree_accelerations(self, t, q, qd, tau) -> np.ndarray:
-        """Unconstrained tree accelerations (in compiled code when the backend has it)."""
-        functions = self._compiled.functions
-        if functions.accelerations is None:
-            M, f = self._dynamics(t, q, qd, tau)
-            self._check_finite(M, "mass matrix", q)
-            self._check_finite(f, "generalised forces", q)
-            return self._solve_tree(M, f, q)
-        u = self._inputs(t, q, qd) if self._compiled.n_inputs else self._compiled.no_inputs
-        if self._p_pointer is None:
-            object.__setattr__(self, "_p_pointer", functions.bind_parameters(self._p))
-        status, out = functions.accelerations(q, qd, self._p_pointer, u, tau)
-        total = float(out.sum())
-        if status or total - total != 0.0:  # NaN or inf somewhere
-            M, f = self._dynamics(t, q, qd, tau)
-            self._check_finite(M, "mass matrix", q)
-            self._check_finite(f, "generalised forces", q)
-            return self._solve_tree(M, f, q)  # raises with a diagnosis
-        return out
-
-    def _solve_tree(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """``M^-1 f`` by Cholesky, or a ``SimulationError`` naming why M is singular."""
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            L = None
-        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
-        if L is None or np.min(np.diag(L)) ** 2 < 1e-13 * scale:
-            raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {self._diagnose(q)}")
-        y = np.linalg.solve(L, f)
-        return np.linalg.solve(L.T, y)
-
     # -- public API -------------------------------------------------------------------------------
     def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv, nv) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by speed type)."""
         q = self.state_vector(q)
-        M, _ = self._dynamics(t, q, np.zeros(self.nv))
-        return self._check_finite(M, "mass matrix", q)
+        M, _ = self._kernel.dynamics(t, q, np.zeros(self.nv))
+        return self._kernel.check_finite(M, "mass matrix", q)
 
     def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
         """(nv,) accelerations (rates of the speeds), consistent with every constraint (drive
         elements act with their ``states``, by name; 0 when not given)."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self, t, q, qd, self._applied(tau, t, q, qd, states))
+        return self._formulation.accelerations(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states))
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                   contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
@@ -428,34 +329,35 @@ class System:
         from .impact import contact_indices
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
-            else tuple(contact_indices(self, contacts)) if contacts else ()
-        return self._formulation.reactions(self, t, q, qd, self._applied(tau, t, q, qd, states), offsets, closed)
+            else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
+        return self._formulation.reactions(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
+                                           closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv,) generalised forces that, applied, hold the system at rest at ``q``
         (minus the gravity, spring and applied generalised forces at zero speed)."""
         q = self.state_vector(q)
         qd = np.zeros(self.nv)
-        _, f = self._dynamics(t, q, qd)
-        return self._check_finite(-f, "holding forces", q)
+        _, f = self._kernel.dynamics(t, q, qd)
+        return self._kernel.check_finite(-f, "holding forces", q)
 
     def energy(self, q: Any, qd: Any, t: float = 0.0) -> Energy:
         """Kinetic and potential energy (J); the potential counts gravity and springs."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        kinetic, potential = self._call("energy", q, qd)
+        kinetic, potential = self._kernel.call("energy", q, qd)
         return Energy(float(kinetic), float(potential))
 
     def evaluate_series(self, name: str, q: Any, qd: Any = None, what: str = "evaluate_series") -> np.ndarray:
         """The generated function ``name`` ("energy", "constraints", "kinematics", ...) at many
-        states (rows of ``q``, ``qd``; zero speeds when None) in one call: (m, size)."""
+        states (rows of ``q`` (m, nq), ``qd`` (m, nv); zero speeds when None) in one call: (m, size)."""
         q = np.asarray(q, dtype=float)
-        qd = np.zeros_like(q) if qd is None else np.asarray(qd, dtype=float)
-        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq:
-            raise ModelError(what, f"q and qd must be (m, {self.nq}) arrays of states, got shapes "
-                             f"{q.shape} and {qd.shape}")
+        qd = np.zeros((len(q), self.nv)) if qd is None else np.asarray(qd, dtype=float)
+        if q.ndim != 2 or qd.ndim != 2 or len(q) != len(qd) or q.shape[1] != self.nq or qd.shape[1] != self.nv:
+            raise ModelError(what, f"q and qd must be (m, {self.nq}) and (m, {self.nv}) arrays of states, got "
+                             f"shapes {q.shape} and {qd.shape}")
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             raise ModelError(what, "the states must be finite")
-        return self._compiled.functions.many(name, q, qd, self._p, np.zeros(self._compiled.n_inputs))
+        return self._kernel.evaluate_series(name, q, qd)
 
     def energy_series(self, q: Any, qd: Any) -> Energy:
         """Kinetic and potential energy (J) at many states (rows of ``q``, ``qd``): arrays of
@@ -467,14 +369,7 @@ class System:
         """max |g(q, t)| at many samples (``t`` (m,), rows of ``q``): the geometric rows
         from one call of the generated code."""
         t = np.asarray(t, dtype=float).reshape(-1)
-        return self._formulation.constraint_violation_series(self, t, np.asarray(q, dtype=float), offsets)
-
-    def _kinematics(self, q, qd):
-        out = self._call("kinematics", q, qd)
-        nb = len(self.topology.bodies)
-        per_body = out[: nb * KINEMATICS_PER_BODY].reshape(nb, KINEMATICS_PER_BODY)
-        columns = out[nb * KINEMATICS_PER_BODY:].reshape(self.nv, 6)
-        return per_body, columns
+        return self._formulation.constraint_violation_series(self._kernel, t, np.asarray(q, dtype=float), offsets)
 
     def body_state(self, body: Any, q: Any, qd: Any = None, t: float = 0.0, point: Any = None,
                    tau: Any = None) -> BodyState:
@@ -492,9 +387,9 @@ class System:
         if comp is self.topology.ground:
             zero = np.zeros(3)
             return BodyState(local.copy(), zero, np.eye(3), zero.copy(), lambda: (np.zeros(3), np.zeros(3)))
-        per_body, columns = self._kinematics(q, qd)
-        row = per_body[self.topology.body_index(comp)]
-        R, origin, V, A_bias = row[:9].reshape(3, 3), row[9:12], row[12:18], row[18:24]
+        per_body, columns = self._kernel.kinematics(q, qd)
+        row = body_fields(per_body[self.topology.body_index(comp)])
+        R, origin, V, A_bias = row["rotation"], row["origin"], row["velocity"], row["bias"]
         w, v0 = V[:3].copy(), V[3:]
         position = origin + R @ local
         velocity = v0 + cross(w, position)
@@ -508,30 +403,21 @@ class System:
 
         return BodyState(position, velocity, R, w, accelerations)
 
-    def _point_position(self, body: Any, local: Any, q: np.ndarray) -> np.ndarray:
-        """World position of a body point from the kinematics alone (no dynamics)."""
-        comp = self.topology.resolve(body)
-        local = np.asarray(local, dtype=float)
-        if comp is self.topology.ground:
-            return local
-        row = self._kinematics(q, np.zeros(self.nv))[0][self.topology.body_index(comp)]
-        return row[9:12] + row[:9].reshape(3, 3) @ local
-
     def motion_columns(self, q: Any) -> np.ndarray:
         """(nv, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` of the speeds (the columns of T)."""
-        return self._kinematics(self.state_vector(q), np.zeros(self.nv))[1]
+        return self._kernel.kinematics(self.state_vector(q), np.zeros(self.nv))[1]
 
     def assemble(self, q: Any, qd: Any = None, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(q, qd)`` moved onto the constraints: positions by Newton (minimum-norm steps from
         the guess), speeds by mass-orthogonal projection.  ``SimulationError`` naming the
         constraints that cannot be met."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.assemble(self, q, qd, t)
+        return self._formulation.assemble(self._kernel, q, qd, t)
 
     def constraint_violation(self, q: Any, t: float = 0.0, offsets: dict | None = None) -> float:
         """max |g(q, t)| over the position-level constraint equations (``offsets``: the start
         values of speed motors, as a ``Result`` records them)."""
-        return self._formulation.constraint_violation(self, t, self.state_vector(q), offsets)
+        return self._formulation.constraint_violation(self._kernel, t, self.state_vector(q), offsets)
 
     def simulate(self, t_end: float, q0: Any, qd0: Any = None, *, method: Any = "DOP853",
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
@@ -552,9 +438,11 @@ class System:
         """
         from .simulate import simulate
         system = self.with_parameters(parameters)
-        return simulate(system, t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
-                        tau=tau, progress=progress, max_step=max_step, rest_speed=rest_speed,
-                        integrator=integrator, dt=dt, x0=x0)
+        q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
+        result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
+                          atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
+                          rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0))
+        return result.with_system(system)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every
@@ -563,19 +451,18 @@ class System:
         Returns ``.qd`` after the impact, ``.impulses`` ``{contact: N s}`` (positive pushes
         apart) and ``.energy_loss`` (J).  ``restitution`` overrides the contacts' own.
         """
-        from .impact import GAP_TOLERANCE, contact_indices, contact_values, solve_impact
+        from .impact import GAP_TOLERANCE, contact_indices, solve_impact
         q, qd = self.state_vector(q), self._velocity(qd)
-        indices = contact_indices(self, contacts)
+        indices = contact_indices(self._kernel, contacts)
         if contacts is None:
-            values = contact_values(self, q, qd)
+            values = self._kernel.contacts(q, qd)
             indices = [i for i in indices if values.g[i] < GAP_TOLERANCE and values.J[i] @ qd < 0]
-        return solve_impact(self, t, q, qd, indices, restitution)
+        return solve_impact(self._kernel, self._formulation, t, q, qd, indices, restitution)
 
     def gaps(self, q: Any) -> dict[str, float]:
         """``{contact: gap}`` (m), negative when penetrated."""
-        from .impact import contact_values
         q = self.state_vector(q)
-        values = contact_values(self, q, np.zeros(self.nv))
+        values = self._kernel.contacts(q, np.zeros(self.nv))
         return {c.name: float(g) for c, g in zip(self.topology.contacts, values.g)}
 
     # -- analysis (mbcomp.analysis) ----------------------------------------------------------
@@ -583,8 +470,7 @@ class System:
         """``(M, f)``: tree mass matrix and generalised forces (gravity, springs, applied forces,
         velocity terms) with ``M qdd = f + tau + J^T lam``; constraints are not applied."""
         q, qd = self.state_vector(q), self._velocity(qd)
-        M, f = self._dynamics(t, q, qd)
-        return self._check_finite(M, "mass matrix", q), self._check_finite(f, "generalised forces", q)
+        return self._kernel.checked_dynamics(t, q, qd)
 
     def constraint_values(self, q: Any, qd: Any = None, t: float = 0.0):
         """Every constraint equation at a state: ``.g`` (residuals), ``.J`` (Jacobian, one column
@@ -592,7 +478,7 @@ class System:
         Rows are in ``constraint_rows`` order; a speed motor holds its present position."""
         q, qd = self.state_vector(q), self._velocity(qd)
         offsets = self._formulation.motor_offsets(q, t)
-        return self._formulation.constraint_values(self, t, q, qd, offsets)
+        return self._formulation.constraint_values(self._kernel, t, q, qd, offsets)
 
     @property
     def constraint_rows(self) -> list[str]:
@@ -663,11 +549,13 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
                   **options: Any) -> System:
     """Model -> System (see ``Model.compile``)."""
     from .compiler import CompiledModel
-    from .formulations import get_formulation
+    from .formulations import FORMULATIONS, get_formulation
     from .formulations.base import analyse
     formulation_class = get_formulation(formulation)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
-    compiled = CompiledModel(model, cache=cache, backend=backend)
+    # The library carries every registered formulation's C code: one library serves them all.
+    snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
+    compiled = CompiledModel(model, cache=cache, backend=backend, c_snippets=snippets)
     # How to rebuild this System elsewhere (pickling for process pools and clusters).
     derivation = getattr(model, "derivation", None)
     # How to rebuild this System elsewhere (pickling for process pools and clusters); a
@@ -678,9 +566,9 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     parameters = dict(compiled.default_parameters)
     if derivation is not None:
         parameters.update(derivation.values())  # sub-model parameters, by path
-    system = System(compiled, formulation_class(compiled, **options), parameters)
-    analyse(system._formulation, system)
-    return system
+    formulation = formulation_class(compiled, **options)
+    info = analyse(formulation, Kernel(compiled, parameters))
+    return System(compiled, formulation.with_info(info), parameters)
 
 
 def rebuild_system(model, formulation, options, backend, parameters) -> System:

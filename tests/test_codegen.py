@@ -149,7 +149,8 @@ class TestGeneratedPrograms:
             pytest.skip("no C compiler")
         program = compiled.program
         python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
-        source = codegen.c_source(program, FUNCTIONS, chunk=chunk) + codegen.c_accelerations(compiled.topology.nq)
+        source = (codegen.c_source(program, FUNCTIONS, chunk=chunk) + compiled.output_layout.c_defines()
+                  + codegen.c_accelerations(compiled.topology.nq))
         c = c_functions(source, compiled.sizes)
         for seed in range(3):
             args = _random_inputs(compiled, p, seed)
@@ -165,7 +166,7 @@ class TestGeneratedPrograms:
             pytest.skip("no C compiler")
         program, nq = compiled.program, compiled.topology.nq
         python = PythonFunctions(codegen.python_source(program, FUNCTIONS), "test")
-        source = codegen.c_source(program, FUNCTIONS) + codegen.c_accelerations(nq)
+        source = codegen.c_source(program, FUNCTIONS) + compiled.output_layout.c_defines() + codegen.c_accelerations(nq)
         c = c_functions(source, compiled.sizes)
         rng = np.random.default_rng(3)
         for seed in range(3):
@@ -189,7 +190,8 @@ class TestGeneratedPrograms:
         b = m.add(mb.Body("b", mass=1.0, com=(0.1, 0.2, -0.5), inertia=(0.1, 0.2, 0.25)))
         m.add(mb.Spherical("wrist", m.ground, b, sequence="zxz"))
         compiled = m.compile(backend="python", cache=False)._compiled
-        source = codegen.c_source(compiled.program, FUNCTIONS) + codegen.c_accelerations(3)
+        source = (codegen.c_source(compiled.program, FUNCTIONS) + compiled.output_layout.c_defines()
+                  + codegen.c_accelerations(3))
         c = c_functions(source, compiled.sizes)
         p = compiled.layout.pack(compiled.default_parameters)
         pointer = c.bind_parameters(p)

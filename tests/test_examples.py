@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pytest
 
+from mbcomp.components.base import KINDS
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 DOCS = sorted((ROOT / "docs").glob("*.md"))
@@ -100,6 +102,7 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
     monkeypatch.setenv("MPLBACKEND", "Agg")
     (tmp_path / "library").symlink_to(ROOT / "library", target_is_directory=True)
     namespace: dict = {"__name__": f"docs_{page.stem}"}
+    kinds = dict(KINDS)  # a page may define a component kind (docs/architecture.md): not for later tests
     try:
         for line, source in blocks:
             if is_skipped(source):
@@ -111,6 +114,8 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
                 raise AssertionError(f"{page.name}, block at line {line} failed: {type(exc).__name__}: {exc}\n"
                                      f"{source}") from exc
     finally:
+        KINDS.clear()
+        KINDS.update(kinds)
         if "matplotlib.pyplot" in sys.modules:
             sys.modules["matplotlib.pyplot"].close("all")
 

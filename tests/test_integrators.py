@@ -100,7 +100,7 @@ class TestWhenCompiledLoopsApply:
 
 def test_compiled_jacobian_matches_finite_differences_of_the_accelerations(chain):
     from mbcomp.integrators import compiled_jacobian
-    jac = compiled_jacobian(chain, None)
+    jac = compiled_jacobian(chain.kernel, None)
     q, qd = np.array([0.3, -0.2, 0.5, 0.1]), np.array([1.0, 0.0, -2.0, 0.5])
     y = np.concatenate((q, qd))
     J = jac(0.0, y)
@@ -139,22 +139,15 @@ class TestCompiledDae:
     def test_compiled_kkt_solve_matches_the_python_one_off_the_constraints(self, loop):
         """Baumgarte terms included: at a state that violates the loop by ~1e-2."""
         import ctypes
-        lib = loop._compiled.functions.lib
-        formulation = loop._formulation
-        rows = np.ascontiguousarray(formulation.nominal_rows, dtype=np.int64)
-        lib.dae_configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
-        lib.dae_configure(len(rows), rows.ctypes.data, *formulation.baumgarte, formulation.schur_scale,
-                          formulation.singular_tolerance)
-        try:
+        lib = loop.kernel.compiled.functions.lib
+        with loop._formulation.compiled_setup(lib):
             q, qd = loop.assemble([1.0, -0.5, 1.5], [1.0, 0.0, 0.0])
             q = q + 0.01
             out, work, u = np.empty(3), np.empty(4096), np.zeros(1)
             pointer = lambda a: ctypes.c_void_p(a.ctypes.data)
             lib.dae_accelerations.restype = ctypes.c_int
-            status = lib.dae_accelerations(pointer(q), pointer(qd), pointer(loop._p), pointer(u), None,
+            status = lib.dae_accelerations(pointer(q), pointer(qd), pointer(loop.kernel.p), pointer(u), None,
                                            pointer(out), pointer(work))
-        finally:
-            lib.dae_configure(-1, None, 0.0, 0.0, 0.0, 0.0)
         assert status == 0
         np.testing.assert_allclose(out, loop.accelerations(q, qd), rtol=1e-10, atol=1e-10)
 

@@ -473,6 +473,14 @@ def _axis_letter(spec: Any) -> str | None:
     """``"x"`` for an axis given as ``"x"`` (or ``"+x"``), else None."""
     if isinstance(spec, str) and spec.strip().lower().lstrip("+") in AXIS_NAMES:
         return spec.strip().lower().lstrip("+")
+    if not isinstance(spec, str):  # a 3-vector along a coordinate axis (as a file gives it back)
+        try:
+            values = np.asarray(spec, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            return None
+        for letter in "xyz":
+            if np.array_equal(values, np.asarray(AXIS_NAMES[letter], dtype=float)):
+                return letter
     return None
 
 

@@ -1,6 +1,9 @@
 """The Formulation interface shared by ``lagrange`` and ``dae``, and the machinery both use."""
 from __future__ import annotations
 
+import copy
+from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -50,6 +53,20 @@ def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 
     return np.sort(piv[:rank])
 
 
+@dataclass(frozen=True)
+class FormulationInfo:
+    """What ``analyse`` finds about a model's constraints at a consistent configuration:
+    degrees of freedom, the rank and independent rows of the constraint Jacobian, its size
+    and the Schur complement's where the mechanism is regular, the redundant equations."""
+
+    ndof: int
+    nominal_rank: int | None = None
+    nominal_rows: np.ndarray | None = None  #: read-only
+    jacobian_scale: float = 0.0
+    schur_scale: float = 0.0
+    redundant: tuple[str, ...] = ()
+
+
 class Workspace:
     """Per-simulation state of a formulation (buffers, partitions, warm starts).
 
@@ -60,17 +77,17 @@ class Workspace:
     The plain workspace's state is ``[q, qd]`` (nq + nv), its rate ``[q'(q, qd), qdd]``.
     """
 
-    def __init__(self, formulation, system, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts=()):
-        self.formulation, self.system, self.tau = formulation, system, tau
+    def __init__(self, formulation, kernel, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts=()):
+        self.formulation, self.kernel, self.tau = formulation, kernel, tau
         self.contacts = tuple(contacts)
-        self.n = system.nq
-        self.state_map = system.topology.state_map
+        self.n = kernel.nq
+        self.state_map = kernel.topology.state_map
         self.offsets = formulation.motor_offsets(q0, t0)
         self.y0 = np.concatenate((q0, qd0))
 
     def rhs(self, t, y):
         q, qd = y[: self.n], y[self.n:]
-        qdd = self.formulation.accelerations(self.system, t, q, qd, self.system._tau(self.tau, t, q, qd),
+        qdd = self.formulation.accelerations(self.kernel, t, q, qd, self.kernel.tau(self.tau, t, q, qd),
                                              offsets=self.offsets, contacts=self.contacts)
         return np.concatenate((self.state_map.qdot(q, qd), qdd))
 
@@ -80,6 +97,11 @@ class Workspace:
 
     def after_step(self, t, y):
         return None
+
+    def retreat(self):
+        """``(t, y)`` of the last accepted state, to retry a step from after a
+        ``TrialStateError``; a workspace that raises one overrides this."""
+        raise SimulationError(f"{type(self).__name__} cannot go back to its last accepted state")
 
     def normalize(self, y) -> None:
         if not self.state_map.identity:
@@ -114,19 +136,19 @@ class Formulation:
         self.compiled = compiled
         self.options = options
         self.constraints = compiled.constraint_set
+        self.info = FormulationInfo(ndof=compiled.topology.nv)  # until analyse() has run
 
     # -- numeric pieces -----------------------------------------------------------------------
-    def constraint_values(self, system, t, q, qd, offsets=None, contacts=()):
+    def constraint_values(self, kernel, t, q, qd, offsets=None, contacts=()):
         """Constraint equations at a state, with the gap rows of closed (persistent)
         ``contacts`` appended after the model's own."""
         nv = len(qd)
         if self.constraints is not None:
-            cv = self.constraints.evaluate(system, q, qd, t, offsets)
+            cv = self.constraints.evaluate(kernel, q, qd, t, offsets)
         else:
             cv = ConstraintValues(np.zeros(0), np.zeros((0, nv)), np.zeros(0), np.zeros(0))
         if contacts:
-            from ..impact import contact_values
-            ck = contact_values(system, q, qd)
+            ck = kernel.contacts(q, qd)
             idx = list(contacts)
             cv = ConstraintValues(np.concatenate((cv.g, ck.g[idx])), np.vstack((cv.J, ck.J[idx])),
                                   np.concatenate((cv.g_t, ck.g_t[idx])), np.concatenate((cv.bias, ck.bias[idx])))
@@ -149,30 +171,7 @@ class Formulation:
                 offsets[r] = q0[k] - eq.speed * t0
         return offsets
 
-    def _factor(self, system, M, q):
-        """Cholesky factor L of M (lower), or ``SimulationError`` naming why M is singular."""
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            L = None
-        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
-        if L is None or (M.size and np.min(np.diag(L)) ** 2 < 1e-13 * scale):
-            raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {system._diagnose(q)}")
-        return L
-
-    @staticmethod
-    def _inverse(L):
-        """M^-1 from its Cholesky factor (small dense matrices: cheaper than repeated solves)."""
-        Linv = np.linalg.inv(L)
-        return Linv.T @ Linv
-
-    def _tree(self, system, t, q, qd, tau):
-        M, f = system._dynamics(t, q, qd, tau)
-        system._check_finite(M, "mass matrix", q)
-        system._check_finite(f, "generalised forces", q)
-        return M, f
-
-    def solve_constrained(self, system, M, f, J, rhs, q, t, contacts=(), qd=None):
+    def solve_constrained(self, kernel, M, f, J, rhs, q, t, contacts=(), qd=None):
         """``(qdd, lam)`` of the KKT system on independent rows of ``J`` (lam 0 elsewhere).
 
         Fast path: the rows found independent when the model was analysed, accepted when
@@ -180,7 +179,7 @@ class Formulation:
         otherwise (contacts, redundancy changing, a singular position) the rows come
         from a pivoted QR and a dead point at rest is reported.
         """
-        Minv = self._inverse(self._factor(system, M, q))
+        Minv = kernel.inverse(kernel.factor(M, q))
         Minv_f = Minv @ f
         lam = np.zeros(J.shape[0])
         rows = self.nominal_rows if not contacts and self.nominal_rows is not None else None
@@ -222,10 +221,36 @@ class Formulation:
                 f"mechanism at rest: a dead point/bifurcation where the motion is not determined; constraints "
                 f"involved: {self.row_names(lost, contacts)}")
 
-    nominal_rank: int | None = None
-    nominal_rows: np.ndarray | None = None
-    jacobian_scale: float = 0.0
-    schur_scale: float = 0.0
+    # -- what analyse() found (FormulationInfo) --------------------------------------------------------
+    @property
+    def ndof(self) -> int:
+        return self.info.ndof
+
+    @property
+    def redundant(self) -> tuple[str, ...]:
+        return self.info.redundant
+
+    @property
+    def nominal_rank(self) -> int | None:
+        return self.info.nominal_rank
+
+    @property
+    def nominal_rows(self) -> np.ndarray | None:
+        return self.info.nominal_rows
+
+    @property
+    def jacobian_scale(self) -> float:
+        return self.info.jacobian_scale
+
+    @property
+    def schur_scale(self) -> float:
+        return self.info.schur_scale
+
+    def with_info(self, info: "FormulationInfo") -> "Formulation":
+        """A copy of this formulation using what ``analyse`` found (this one is unchanged)."""
+        new = copy.copy(self)
+        new.info = info
+        return new
 
     def rows_of(self, J: np.ndarray) -> np.ndarray:
         """Independent rows of a constraint Jacobian of this model (see ``independent_rows``)."""
@@ -241,42 +266,42 @@ class Formulation:
         return mask
 
     # -- the public operations ---------------------------------------------------------------------
-    def accelerations(self, system, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
-        return self.solve(system, t, q, qd, tau, offsets, contacts=contacts)[0]
+    def accelerations(self, kernel, t, q, qd, tau, offsets=None, contacts=()) -> np.ndarray:
+        return self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[0]
 
-    def reactions(self, system, t, q, qd, tau, offsets=None, contacts=()) -> dict[str, np.ndarray]:
+    def reactions(self, kernel, t, q, qd, tau, offsets=None, contacts=()) -> dict[str, np.ndarray]:
         """Multipliers by constraint name, then each closed contact's normal force (N)."""
         if self.constraints is None and not contacts:
             return {}
-        lam = self.solve(system, t, q, qd, tau, offsets, contacts=contacts)[1]
+        lam = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1]
         nc = 0 if self.constraints is None else self.constraints.nc
         out = {} if self.constraints is None else self.constraints.split_reactions(lam[:nc])
-        names = [c.name for c in system.topology.contacts]
+        names = [c.name for c in kernel.topology.contacts]
         out.update({names[i]: float(value) for i, value in zip(contacts, lam[nc:])})
         return out
 
-    def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
+    def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
-        return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
+        return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
 
-    def assemble(self, system, q: np.ndarray, qd: np.ndarray, t: float = 0.0, offsets=None):
+    def assemble(self, kernel, q: np.ndarray, qd: np.ndarray, t: float = 0.0, offsets=None):
         """Positions onto ``g = 0`` (Newton, minimum-norm steps), speeds onto ``gdot = 0``
         (mass-orthogonal projection).  ``SimulationError`` naming the constraints that fail."""
         if self.constraints is None:
             return q.copy(), qd.copy()
         zero = np.zeros_like(qd)
-        state_map = system.topology.state_map
+        state_map = kernel.topology.state_map
         base = q.copy()
 
         def position(x):  # x: a step in speed space from the guess (the coordinates themselves for screws)
             return x if state_map.identity else state_map.integrate(base, x)
 
         def residual(x):
-            g = self.constraint_values(system, t, position(x), zero, offsets).g
+            g = self.constraint_values(kernel, t, position(x), zero, offsets).g
             return np.where(np.isfinite(g), g, 0.0)
 
         def jacobian(x):
-            cv = self.constraint_values(system, t, position(x), zero, offsets)
+            cv = self.constraint_values(kernel, t, position(x), zero, offsets)
             return np.where(np.isfinite(cv.g)[:, None], cv.J, 0.0)
 
         q = q.copy()
@@ -289,13 +314,13 @@ class Formulation:
                                                     method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=400)
             q = position(solution.x)
         for _ in range(20):  # Newton polish with minimum-norm steps
-            cv = self.constraint_values(system, t, q, zero, offsets)
+            cv = self.constraint_values(kernel, t, q, zero, offsets)
             rows = np.isfinite(cv.g)
             if float(np.max(np.abs(cv.g[rows]), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
             step, *_ = np.linalg.lstsq(cv.J[rows], -cv.g[rows], rcond=1e-10)
             q = state_map.integrate(q, step)
-        cv = self.constraint_values(system, t, q, zero, offsets)
+        cv = self.constraint_values(kernel, t, q, zero, offsets)
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
         if float(np.max(np.abs(g), initial=0.0)) > 1e-9:
             worst = np.argsort(-np.abs(g))
@@ -304,39 +329,57 @@ class Formulation:
                                     f"{format_state(q)} (largest residual {np.max(np.abs(g)):.3g})")
             error.residual = float(np.max(np.abs(g)))
             raise error
-        return q, self.project_velocity(system, q, qd, t, offsets)
+        return q, self.project_velocity(kernel, q, qd, t, offsets)
 
-    def project_velocity(self, system, q, qd, t=0.0, offsets=None):
+    def project_velocity(self, kernel, q, qd, t=0.0, offsets=None):
         """The speeds closest to ``qd`` in the kinetic-energy norm with ``J qd + g_t = 0``."""
-        cv = self.constraint_values(system, t, q, np.zeros_like(qd), offsets)
+        cv = self.constraint_values(kernel, t, q, np.zeros_like(qd), offsets)
         rows = self.rows_of(cv.J)
         if rows.size == 0:
             return qd.copy()
         J = cv.J[rows]
         violation = J @ qd + cv.g_t[rows]
-        M, _ = system._dynamics(t, q, np.zeros_like(qd))
-        Minv_JT = self._inverse(self._factor(system, M, q)) @ J.T
+        M, _ = kernel.dynamics(t, q, np.zeros_like(qd))
+        Minv_JT = kernel.inverse(kernel.factor(M, q)) @ J.T
         correction = Minv_JT @ np.linalg.solve(J @ Minv_JT, violation)
         return qd - correction
 
-    def constraint_violation(self, system, t: float, q: np.ndarray, offsets=None) -> float:
+    def constraint_violation(self, kernel, t: float, q: np.ndarray, offsets=None) -> float:
         """max |g(q, t)| over the position-level constraint equations."""
         if self.constraints is None:
             return 0.0
-        g = self.constraint_values(system, t, q, np.zeros(system.nv), offsets).g
+        g = self.constraint_values(kernel, t, q, np.zeros(kernel.nv), offsets).g
         return float(np.max(np.abs(g[np.isfinite(g)]), initial=0.0))
 
-    def constraint_violation_series(self, system, t: np.ndarray, q: np.ndarray, offsets=None) -> np.ndarray:
+    def constraint_violation_series(self, kernel, t: np.ndarray, q: np.ndarray, offsets=None) -> np.ndarray:
         """``constraint_violation`` at every sample (rows of ``q``), vectorised."""
         if self.constraints is None:
             return np.zeros(len(q))
-        G = self.constraints.residual_series(system, t, q, offsets)
+        G = self.constraints.residual_series(kernel, t, q, offsets)
         return np.max(np.where(np.isfinite(G), np.abs(G), 0.0), axis=1, initial=0.0)
 
-    def start(self, system, t0, q0, qd0, tau, contacts=()) -> Workspace:
+    # -- hooks for the compiled code ------------------------------------------------------------------
+    @classmethod
+    def c_source(cls, nv: int, ng: int) -> str:
+        """C code this formulation adds to every compiled model (``nv`` speeds, ``ng``
+        geometric constraint rows); the compiled integrators call what it defines."""
+        return ""
+
+    def compiled_loop(self) -> str | None:
+        """Why this formulation cannot step in the compiled integrators (None when it can)."""
+        if self.constraints is None:
+            return None
+        return f"the {self.name} formulation of a constrained model steps in Python (use formulation='dae')"
+
+    @contextmanager
+    def compiled_setup(self, lib):
+        """Configure the compiled library for one compiled run on this thread (and undo it)."""
+        yield
+
+    def start(self, kernel, t0, q0, qd0, tau, contacts=()) -> Workspace:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
         cls = Workspace if self.constraints is None and not contacts else self.workspace_class
-        return cls(self, system, t0, q0, qd0, tau, contacts)
+        return cls(self, kernel, t0, q0, qd0, tau, contacts)
 
 
 def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray) -> None:
@@ -367,19 +410,19 @@ def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray
                                f"already fixed by {' and '.join(names)} (at {-implied:.6g}); remove one of them")
 
 
-def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
-    """Find a consistent configuration and from it the rank of the constraints:
-    sets ``ndof``, ``nominal_rank`` and ``redundant`` (labels of dependent equations).
+def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationInfo:
+    """Find a consistent configuration and from it the rank of the constraints: the
+    degrees of freedom, the independent rows and the redundant equations (by label).
+    Changes nothing (``formulation.with_info`` makes the formulation that uses the result).
 
     Raises ``ModelError`` when no configuration satisfies the constraints (they
     conflict, or leave fewer than zero degrees of freedom).
     """
-    nq, nv = system.nq, system.nv
-    formulation.ndof, formulation.redundant = nv, []
+    nq, nv = kernel.nq, kernel.nv
     if formulation.constraints is None:
-        return
+        return FormulationInfo(ndof=nv)
     rng = np.random.default_rng(seed)
-    state_map = system.topology.state_map
+    state_map = kernel.topology.state_map
     guesses = [state_map.neutral()] + [rng.uniform(-1.0, 1.0, nq) for _ in range(tries - 1)]
     guesses = [state_map.normalize(g) for g in guesses]
     last_error, best = None, None
@@ -387,14 +430,14 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
     consistent = 0
     for guess in guesses:
         try:
-            q, _ = formulation.assemble(system, guess, np.zeros(nv))
+            q, _ = formulation.assemble(kernel, guess, np.zeros(nv))
         except SimulationError as exc:
             residual = getattr(exc, "residual", np.inf)
             if residual < closest:
                 closest, last_error = residual, exc
             continue
         consistent += 1
-        values = formulation.constraint_values(system, 0.0, q, np.zeros(nv))
+        values = formulation.constraint_values(kernel, 0.0, q, np.zeros(nv))
         J = values.J
         rows = independent_rows(J, prefer=formulation.preferred_rows(J.shape[0]))
         _check_drivers(formulation, J, values.g_t, rows)
@@ -410,15 +453,17 @@ def analyse(formulation, system, tries: int = 6, seed: int = 0) -> None:
                                f"conflict, or remove more freedom than the {nv} speeds have); from "
                                f"{len(guesses)} starting guesses, the closest: {last_error}")
     rows, nc, scale, q_best = best
+    schur_scale = 0.0
     if rows.size:
         # Size of the Schur complement's Cholesky pivots where the mechanism is regular: the
         # fast path in solve_constrained must not accept rows whose pivots all collapsed.
-        J = formulation.constraint_values(system, 0.0, q_best, np.zeros(nv)).J[rows]
-        M, _ = system._dynamics(0.0, q_best, np.zeros(nv))
+        J = formulation.constraint_values(kernel, 0.0, q_best, np.zeros(nv)).J[rows]
+        M, _ = kernel.dynamics(0.0, q_best, np.zeros(nv))
         A = J @ np.linalg.solve(M, J.T)
-        formulation.schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
-    formulation.nominal_rank = int(rows.size)
-    formulation.nominal_rows = rows
-    formulation.jacobian_scale = scale
-    formulation.ndof = nv - int(rows.size)
-    formulation.redundant = [formulation.constraints.labels[r] for r in range(nc) if r not in set(rows.tolist())]
+        schur_scale = float(np.sqrt(np.max(np.abs(np.diag(A)))))
+    rows = np.array(rows, dtype=int)
+    rows.flags.writeable = False
+    return FormulationInfo(ndof=nv - int(rows.size), nominal_rank=int(rows.size), nominal_rows=rows,
+                           jacobian_scale=scale, schur_scale=schur_scale,
+                           redundant=tuple(formulation.constraints.labels[r] for r in range(nc)
+                                           if r not in set(rows.tolist())))

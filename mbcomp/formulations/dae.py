@@ -1,10 +1,14 @@
 """Constraints kept with Lagrange multipliers, Baumgarte stabilised (optionally projected)."""
 from __future__ import annotations
 
+import ctypes
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..errors import ModelError
 from .base import Formulation, Workspace
+from .dae_c import c_dae_accelerations
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
@@ -24,10 +28,10 @@ class DaeWorkspace(Workspace):
         if not self.formulation.projection:
             return None
         q, qd = y[: self.n], y[self.n:]
-        drift = self.formulation.constraint_violation(self.system, t, q, self.offsets)
+        drift = self.formulation.constraint_violation(self.kernel, t, q, self.offsets)
         if drift < 1e-10:
             return None
-        q2, qd2 = self.formulation.assemble(self.system, q, qd, t, self.offsets)
+        q2, qd2 = self.formulation.assemble(self.kernel, q, qd, t, self.offsets)
         return np.concatenate((q2, qd2))
 
 
@@ -59,13 +63,46 @@ class DaeFormulation(Formulation):
         self.projection = bool(options.get("projection", False))
         self.singular_tolerance = SINGULAR_TOLERANCE
 
-    def solve(self, system, t, q, qd, tau, offsets=None, contacts=()):
+    @classmethod
+    def c_source(cls, nv: int, ng: int) -> str:
+        return c_dae_accelerations(nv, ng)
+
+    def compiled_loop(self) -> str | None:
+        if self.constraints is None:
+            return None
+        if self.projection:
+            return "projection=True steps in Python"
+        if self.constraints.coordinate_rows:
+            return "motors step in Python"
+        if self.nominal_rows is None:
+            return "no consistent configuration was found at compile time"
+        return None
+
+    @contextmanager
+    def compiled_setup(self, lib):
+        """The compiled right-hand side solves the KKT system on the rows found independent
+        at compile time, with this formulation's Baumgarte gains (set per thread)."""
+        if self.constraints is None:
+            yield
+            return
+        configure = lib.dae_configure
+        configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4
+        rows = np.ascontiguousarray(self.nominal_rows, dtype=np.int64)
+        alpha, beta = self.baumgarte
+        configure(len(rows), rows.ctypes.data, alpha, beta, self.schur_scale,
+                  self.singular_tolerance)
+        try:
+            yield
+        finally:
+            configure(-1, None, 0.0, 0.0, 0.0, 0.0)
+
+    def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         if self.constraints is None and not contacts:
-            return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
-        M, f = self._tree(system, t, q, qd, tau)
-        cv = self.constraint_values(system, t, q, qd, offsets, contacts)
+            return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
+        M, f = kernel.checked_dynamics(t, q, qd, tau)
+        cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         alpha, beta = self.baumgarte
         gdot = cv.J @ qd + cv.g_t
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
-        return self.solve_constrained(system, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t,
+        return self.solve_constrained(kernel, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t,
                                       contacts, qd)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ..errors import SimulationError, format_state
+from ..errors import SimulationError, TrialStateError, format_state
 from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 
@@ -28,18 +28,13 @@ def partition(J: np.ndarray):
     return dep, ind
 
 
-class TrialStateError(SimulationError):
-    """The dependent coordinates cannot be found for a trial state of the integrator
-    (Newton fails far from the last accepted state): the step is to be retried shorter."""
-
-
 class LagrangeWorkspace(Workspace):
     """State ``[x_ind, qd_ind]``: the independent chart coordinates (``statemap.Chart``: the
     coordinates themselves for screw joints, a rotation vector from a base orientation for
     a ball) and their speeds; the dependent ones by warm-started Newton."""
 
-    def __init__(self, formulation, system, t0, q0, qd0, tau, contacts=()):
-        super().__init__(formulation, system, t0, q0, qd0, tau, contacts)
+    def __init__(self, formulation, kernel, t0, q0, qd0, tau, contacts=()):
+        super().__init__(formulation, kernel, t0, q0, qd0, tau, contacts)
         # Newton starts from the last accepted state, advanced by its speeds: stage values of
         # rejected steps must not carry the iteration onto another assembly branch.
         self.t_accepted, self.q_accepted, self.qd_accepted = t0, q0.copy(), qd0.copy()
@@ -50,7 +45,7 @@ class LagrangeWorkspace(Workspace):
     def choose(self, t, q):
         """Partition the speeds at ``q`` (and centre the chart there)."""
         self.chart = Chart(self.state_map, q)
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros(self.system.nv), self.offsets,
+        cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.kernel.nv), self.offsets,
                                                 self.contacts)
         self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts)
         self.rows = self.formulation.rows_of(cv.J)
@@ -63,9 +58,9 @@ class LagrangeWorkspace(Workspace):
         x = chart.to_x(self.state_map.integrate(self.q_accepted, self.qd_accepted * (t - self.t_accepted)))
         x[self.ind] = xi
         q = chart.to_q(x)
-        zero = np.zeros(self.system.nv)
+        zero = np.zeros(self.kernel.nv)
         for _ in range(25):
-            cv = self.formulation.constraint_values(self.system, t, q, zero, self.offsets, self.contacts)
+            cv = self.formulation.constraint_values(self.kernel, t, q, zero, self.offsets, self.contacts)
             g = cv.g[self.rows]
             if float(np.max(np.abs(g), initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
@@ -93,7 +88,7 @@ class LagrangeWorkspace(Workspace):
         k = len(self.ind)
         xi, qdi = y[:k], y[k:]
         q, cv, x = self.dependent(t, xi)
-        qd = np.zeros(self.system.nv)
+        qd = np.zeros(self.kernel.nv)
         qd[self.ind] = qdi
         if len(self.dep):
             J = cv.J[self.rows]
@@ -108,8 +103,8 @@ class LagrangeWorkspace(Workspace):
 
     def rhs(self, t, y):
         q, qd, x = self._full_state(t, y)
-        tau = self.system._tau(self.tau, t, q, qd)
-        qdd, _ = self.formulation.solve(self.system, t, q, qd, tau, self.offsets, self.contacts,
+        tau = self.kernel.tau(self.tau, t, q, qd)
+        qdd, _ = self.formulation.solve(self.kernel, t, q, qd, tau, self.offsets, self.contacts,
                                         (self.rows, self.dep, self.ind))
         return np.concatenate((self.chart.rate(x, qd)[self.ind], qdd[self.ind]))
 
@@ -121,7 +116,7 @@ class LagrangeWorkspace(Workspace):
             return np.concatenate((self.chart.to_x(q)[self.ind], qd[self.ind]))
         if not len(self.dep):
             return None
-        cv = self.formulation.constraint_values(self.system, t, q, np.zeros(self.system.nv), self.offsets,
+        cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.kernel.nv), self.offsets,
                                                 self.contacts)
         condition = self.condition(cv.J, self.rows, self.dep)
         if condition < REPARTITION_CONDITION:
@@ -166,11 +161,11 @@ class LagrangeFormulation(Formulation):
     name = "lagrange"
     workspace_class = LagrangeWorkspace
 
-    def solve(self, system, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None):
+    def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None):
         if self.constraints is None and not contacts:
-            return system._tree_accelerations(t, q, qd, tau), np.zeros(0)
-        M, f = self._tree(system, t, q, qd, tau)
-        cv = self.constraint_values(system, t, q, qd, offsets, contacts)
+            return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
+        M, f = kernel.checked_dynamics(t, q, qd, tau)
+        cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         if partition_hint is None:
             self.check_dead_point(cv.J, qd, t, q, contacts)
             rows = self.rows_of(cv.J)
@@ -179,7 +174,7 @@ class LagrangeFormulation(Formulation):
             rows, dep, ind = partition_hint
         lam = np.zeros(cv.J.shape[0])
         if rows.size == 0:
-            return system._solve_tree(M, f, q), lam
+            return kernel.tree_solve(M, f, q), lam
         J = cv.J[rows]
         Jd = J[:, dep]
         try:
@@ -194,7 +189,7 @@ class LagrangeFormulation(Formulation):
         c[dep] = -X[:, -1]
         if len(ind):
             Mr = B.T @ M @ B
-            qdd_i = self._inverse(self._factor(system, Mr, q)) @ (B.T @ (f - M @ c))
+            qdd_i = kernel.inverse(kernel.factor(Mr, q)) @ (B.T @ (f - M @ c))
             qdd = B @ qdd_i + c
         else:
             qdd = c

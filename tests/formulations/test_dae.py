@@ -139,3 +139,34 @@ class TestProjection:
         q, qd = s.assemble([1.0, -0.5, 1.5], [1.0, 0, 0])
         res = s.simulate(5.0, q, qd, rtol=1e-6, atol=1e-8)
         assert np.max(res.constraint_violation()) < 1e-9
+
+
+def test_compiled_loop_hook_says_why_not():
+    """Each formulation says whether it can step in the compiled integrators, and why not."""
+    from conftest import fourbar
+    dae = fourbar().compile("dae")
+    assert dae._formulation.compiled_loop() is None
+    assert "projection" in fourbar().compile("dae", projection=True)._formulation.compiled_loop()
+    assert "lagrange" in fourbar().compile("lagrange")._formulation.compiled_loop()
+    assert "motors" in fourbar(motor=mb.Motor("drive", "A", speed=2.0)).compile("dae")._formulation.compiled_loop()
+
+
+def test_analyse_returns_its_findings_and_changes_nothing():
+    """analyse() is a pure study of the constraints: a frozen FormulationInfo."""
+    import dataclasses
+    from mbcomp.formulations import DaeFormulation
+    from mbcomp.formulations.base import FormulationInfo, analyse
+    from mbcomp.kernel import Kernel
+    system = fourbar().compile("dae")
+    compiled = system.kernel.compiled
+    fresh = DaeFormulation(compiled)
+    before = dict(vars(fresh))
+    info = analyse(fresh, Kernel(compiled, compiled.default_parameters))
+    assert vars(fresh) == before and fresh.ndof == 3  # untouched: still the unanalysed tree's count
+    assert isinstance(info, FormulationInfo) and info.ndof == 1 == system.ndof  # a four-bar has 1 DOF
+    # a planar loop closed by a revolute: 5 equations, only the 2 in-plane ones independent
+    assert info.nominal_rank == 2 and info.redundant == ("C.z", "C.t1", "C.t2")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        info.ndof = 2
+    with pytest.raises(ValueError):
+        info.nominal_rows[0] = 3
