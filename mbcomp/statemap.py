@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ModelError
+from .rotations import quat_log
 
 
 @dataclass(frozen=True)
@@ -169,7 +170,7 @@ class Chart:
         for qi, vi in zip(m.quat_q, m.quat_v):
             a = self.base[qi:qi + 4] / np.linalg.norm(self.base[qi:qi + 4])
             b = q[qi:qi + 4] / np.linalg.norm(q[qi:qi + 4])
-            x[vi:vi + 3] = _log(_multiply(a * np.array([1.0, -1.0, -1.0, -1.0]), b))
+            x[vi:vi + 3] = quat_log(_multiply(a * np.array([1.0, -1.0, -1.0, -1.0]), b))
         return x
 
     def largest_rotation(self, x: np.ndarray) -> float:
@@ -198,15 +199,6 @@ class Chart:
         for vi in m.quat_v:
             out[vi:vi + 3] = np.linalg.solve(_right_jacobian(x[vi:vi + 3]), v[vi:vi + 3])
         return out
-
-
-def _log(q: np.ndarray) -> np.ndarray:
-    if q[0] < 0:
-        q = -q
-    n = float(np.linalg.norm(q[1:]))
-    if n < 1e-12:
-        return 2 * q[1:] / max(q[0], 1e-300)
-    return 2 * np.arctan2(n, q[0]) * q[1:] / n
 
 
 def _right_jacobian(phi: np.ndarray) -> np.ndarray:

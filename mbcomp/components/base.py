@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from ..errors import ModelError
+from ..errors import ModelError, describe
 from ..params import ParameterSpec, validate
 
 KINDS: dict[str, type] = {}
@@ -20,6 +20,15 @@ def kinds_in(section: str) -> dict[str, type]:
     """``{kind: class}`` of the classes with a file form (``file_keys``) in model file
     section ``section`` ("joints", ...), in registration order."""
     return {k: c for k, c in KINDS.items() if c.section == section and c.file_keys}
+
+
+def one_dof_joint_problems(component: Any, joint: Any) -> list[str]:
+    """Problems of an element that acts on one joint coordinate (torsion springs, drives,
+    friction): ``joint`` must have exactly one."""
+    if joint.n_coords != 1:
+        return [f"{describe(component)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} "
+                f"has {joint.n_coords}"]
+    return []
 
 
 class FrozenComponentError(ModelError, AttributeError):

@@ -16,9 +16,9 @@ from typing import Any
 
 import sympy as sp
 
-from ..errors import ModelError, describe
+from ..errors import ModelError
 from ..params import ParameterSpec, in_range, nonnegative, positive
-from .base import Component, ForceElement
+from .base import Component, ForceElement, one_dof_joint_problems
 from .signals import SignalOwner
 
 
@@ -36,10 +36,7 @@ class _OnJoint(ForceElement):
 
     def check(self, resolved: dict) -> list[str]:
         """Problems against the resolved references: only 1-DOF joints."""
-        joint = resolved["joint"]
-        if joint.n_coords != 1:
-            return [f"{describe(self)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}"]
-        return []
+        return one_dof_joint_problems(self, resolved["joint"])
 
     def _loads(self, kin):
         return []

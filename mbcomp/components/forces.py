@@ -14,7 +14,7 @@ import sympy as sp
 
 from ..errors import ModelError, describe
 from ..params import ParameterSpec, nonnegative
-from .base import ForceElement
+from .base import ForceElement, one_dof_joint_problems
 from .signals import SignalOwner
 from .frame import Frame, split_frame
 
@@ -323,10 +323,7 @@ class TorsionSpring(ForceElement):
 
     def check(self, resolved: dict) -> list[str]:
         """Problems against the resolved references (``{"joint": Joint}``); sets nothing."""
-        joint = resolved["joint"]
-        if joint.n_coords != 1:
-            return [f"{describe(self)}: needs a 1-DOF joint, {type(joint).__name__} {joint.name!r} has {joint.n_coords}"]
-        return []
+        return one_dof_joint_problems(self, resolved["joint"])
 
     def is_conservative(self) -> bool:
         return self.damping == 0
