@@ -96,10 +96,13 @@ def _sweep(system, cases: list, client: Any, threads: int | None, bar: ProgressB
                     pool.shutdown(wait=True, cancel_futures=True)
                     raise
     else:
-        # Cases go to the workers in chunks (a few per worker): scheduling a task costs
-        # milliseconds, more than a short compiled simulation.
-        workers = max(len(client.scheduler_info().get("workers", {})), 1)
-        size = max(1, -(-len(cases) // (4 * workers)))
+        # Cases go to the workers in chunks (a few per worker thread): scheduling a task
+        # costs milliseconds, more than a short compiled simulation.
+        try:
+            slots = sum(client.nthreads().values())
+        except (AttributeError, TypeError):
+            slots = len(client.scheduler_info().get("workers", {}))
+        size = max(1, -(-len(cases) // (4 * max(slots, 1))))
         chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
         remote = client.scatter(system, broadcast=True, hash=False)
         futures = [client.submit(_run_many, remote, chunk, pure=False) for chunk in chunks]

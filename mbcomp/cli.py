@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import shutil
 import sys
 from pathlib import Path
@@ -327,24 +328,39 @@ def numeric_equations(system, simplify: bool = False):
         speed = symbols.get(f"\\dot{{{coord}}}")
         if speed is not None:
             values[speed] = sp.Symbol(f"{coord}'")
-    M, f = M.xreplace(values).applyfunc(_canonical), f.xreplace(values).applyfunc(_canonical)
+    # Quaternions are unit length (the integrators normalise them): the rotation's 1/|q|^2
+    # is 1 and w^2 = 1 - x^2 - y^2 - z^2, so the printed equations are polynomials whose
+    # expansion stays small (without this, expanding a Ball joint's equations takes minutes).
+    units = []
+    for start in system.topology.state_map.quat_q:
+        quat = [symbols.get(system.coords[start + k]) for k in range(4)]
+        if all(s is not None for s in quat):
+            w, x, y, z = quat
+            values[w * w + x * x + y * y + z * z] = sp.Integer(1)
+            units.append((w, 1 - x * x - y * y - z * z))
+    canonical = functools.partial(_canonical, units=tuple(units))
+    M, f = M.xreplace(values).applyfunc(canonical), f.xreplace(values).applyfunc(canonical)
     if simplify:
         M, f = M.applyfunc(sp.trigsimp), f.applyfunc(sp.trigsimp)
     return M, f
 
 
-def _canonical(expr):
+def _canonical(expr, units: tuple = ()):
     """Expanded, with every sin(x)**2 written as 1 - cos(x)**2: a cheap canonical form in
-    which sin^2 + cos^2 terms cancel (trigsimp gives the same result 30 times slower)."""
+    which sin^2 + cos^2 terms cancel (trigsimp gives the same result 30 times slower).
+    ``units``: ``(w, 1 - x^2 - y^2 - z^2)`` of each unit quaternion, w^2 rewritten likewise."""
     import sympy as sp
+    squares = {w: rest for w, rest in units}
 
-    def is_even_sine_power(e):
-        return e.is_Pow and isinstance(e.base, sp.sin) and e.exp.is_Integer and e.exp >= 2
+    def is_even_power(e):
+        return (e.is_Pow and e.exp.is_Integer and e.exp >= 2
+                and (isinstance(e.base, sp.sin) or e.base in squares))
 
     def rewrite(e):
-        x, n = e.base.args[0], int(e.exp)
-        return (1 - sp.cos(x) ** 2) ** (n // 2) * sp.sin(x) ** (n % 2)
-    return sp.expand(sp.expand(expr).replace(is_even_sine_power, rewrite))
+        n = int(e.exp)
+        square = squares[e.base] if e.base in squares else 1 - sp.cos(e.base.args[0]) ** 2
+        return square ** (n // 2) * e.base ** (n % 2)
+    return sp.expand(sp.expand(expr).replace(is_even_power, rewrite))
 
 
 def cmd_info(args: argparse.Namespace) -> int:

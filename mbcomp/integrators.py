@@ -343,19 +343,42 @@ done:
     return status;
 }
 
-/* Classical RK4 with fixed step dt for n steps from t0; y_out gets n + 1 rows (y0 first). */
-int rk4_run(const double *p, const double *tau, double t0, const double *y0, double dt, long n,
-            double *y_out, long *counts) {
+/* Rows of y_out for the output times t_out[*j ..] before t_b (all of them when last), by
+   cubic Hermite interpolation between the steps (t_a, ya, fa) and (t_b, yb, fb). */
+static void hermite_rows(double t_a, double t_b, const double *ya, const double *fa, const double *yb,
+                         const double *fb, const double *t_out, long n_out, long *j, int last, double *y_out) {
+    const double h = t_b - t_a;
+    for (; *j < n_out && (last || t_out[*j] < t_b); ++*j) {
+        const double s = (t_out[*j] - t_a) / h, s2 = s * s, s3 = s2 * s;
+        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
+        double *out = y_out + *j * NY;
+        for (int i = 0; i < NY; ++i) out[i] = h00 * ya[i] + h10 * h * fa[i] + h01 * yb[i] + h11 * h * fb[i];
+        normalize_state(out);
+    }
+}
+
+/* Classical RK4 with fixed step dt for n steps from t0.  y: the start state in, the state
+   reached out (on failure: the state at step counts[1]).  Output only where asked: with
+   t_out == NULL every step's state goes to y_out (n + 1 rows, y0 first); else y_out gets one
+   row per output time t_out[0 .. n_out) (increasing, within [t0, t0 + n dt]) by cubic
+   Hermite interpolation between the two steps around it, whose rates the steps compute
+   anyway (one more evaluation, not counted in nfev, for the rate at the last step). */
+int rk4_run(const double *p, const double *tau, double t0, double *y, double dt, long n,
+            const double *t_out, long n_out, double *y_out, long *counts) {
     double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
+    double *next = malloc(sizeof(double) * NY), *f_next = malloc(sizeof(double) * NY);
     double *work = malloc(sizeof(double) * NWORK);
-    int status = 0;
-    if (!k || !stage || !work) { status = -4; goto done; }
-    memcpy(y_out, y0, sizeof(double) * NY);
+    double *const y_start = y;
+    int status = 0, have_f = 0;  /* have_f: f_next holds the rate at y (computed for output) */
+    long j = 0;  /* the next output time */
+    if (!k || !stage || !next || !f_next || !work) { status = -4; goto done; }
     for (long s = 0; s < n; ++s) {
-        const double *y = y_out + s * NY;
-        double *next = y_out + (s + 1) * NY, t = t0 + s * dt;
+        const double t = t0 + s * dt, t_new = t0 + (s + 1) * dt;
         if (hook_says_stop(t)) { status = -6; goto done; }
-        RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
+        if (have_f) memcpy(k, f_next, sizeof(double) * NY);
+        else RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
+        have_f = 0;
+        if (!t_out) memcpy(y_out + s * NY, y, sizeof(double) * NY);
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
@@ -367,10 +390,22 @@ int rk4_run(const double *p, const double *tau, double t0, const double *y0, dou
         normalize_state(next);
         counts[0] += 4;
         counts[1] += 1;
-        if (!all_finite(next, NY)) { status = -3; goto done; }
+        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1; next: at step s */
+        if (!all_finite(y, NY)) { status = -3; goto done; }
+        const int last = s == n - 1;
+        if (t_out && j < n_out && (last || t_out[j] < t_new)) {  /* outputs between the two steps */
+            RHS_OR_FAIL(rhs(t_new, y, f_next, p, tau, work));
+            have_f = 1;
+            hermite_rows(t, t_new, next, k, y, f_next, t_out, n_out, &j, last, y_out);
+        }
     }
+    if (!t_out) memcpy(y_out + n * NY, y, sizeof(double) * NY);
 done:
-    free(k); free(stage); free(work);
+    if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
+        memcpy(y_start, y, sizeof(double) * NY);
+        next = y;
+    }
+    free(k); free(stage); free(next); free(f_next); free(work);
     return status;
 }
 """.replace("FINISHED_CODE", "0")
@@ -524,7 +559,7 @@ def _bind(lib):
                     void, void]
     run.restype = ctypes.c_int
     rk4 = lib.rk4_run
-    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, void]
+    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, lng, void, void]
     rk4.restype = ctypes.c_int
     return run, rk4
 
@@ -659,17 +694,21 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         steps = int(round(t_end / dt))
         if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
             raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
-        out = np.empty((steps + 1, ny))
         counts = np.zeros(3, dtype=np.int64)
-        status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, out.ctypes.data,
-                     counts.ctypes.data)
+        if t_eval is None:  # every step
+            out = np.empty((steps + 1, ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
+                         counts.ctypes.data)
+            t = np.arange(steps + 1) * dt
+        else:  # only at the requested times (Hermite between the steps around each)
+            t = np.ascontiguousarray(t_eval, dtype=float)
+            out = np.empty((len(t), ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, t.ctypes.data, len(t),
+                         out.ctypes.data, counts.ctypes.data)
         if status == STOPPED:
             hook.stopped(counts[1] * dt, method)
         if status:
-            _fail(kernel, status, counts[1] * dt, out[counts[1]], method)
-        t = np.arange(steps + 1) * dt
-        if t_eval is not None:
-            out, t = _hermite(kernel, t, out, t_eval, tau_arr), np.asarray(t_eval)
+            _fail(kernel, status, counts[1] * dt, y, method)
         stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
         return t, out, stats, time.perf_counter() - started
     state = np.array([0.0, 0.0])
@@ -714,31 +753,3 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         times, values = np.concatenate(chunks_t), np.concatenate(chunks_y)
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     return times, values, stats, time.perf_counter() - started
-
-
-def _hermite(kernel, t, y, t_eval, tau):
-    """Cubic Hermite interpolation of fixed-step output at ``t_eval`` (derivatives only at
-    the steps that bracket a requested time)."""
-    n = kernel.nq
-    state_map, nv = kernel.topology.state_map, kernel.nv
-    t_eval = np.asarray(t_eval, dtype=float)
-    idx = np.clip(np.searchsorted(t, t_eval, side="right") - 1, 0, len(t) - 2)
-    needed = np.unique(np.concatenate((idx, idx + 1)))
-
-    def rate(i):
-        q, qd, z = y[i, :n], y[i, n:n + nv], y[i, n + nv:]
-        tau_i, rates = tau, z[:0]
-        if kernel.compiled.drives.elements:
-            drive, rates = kernel.drive_outputs(t[i], q, qd, z)
-            tau_i = drive if tau is None else tau + drive
-        return np.concatenate((state_map.qdot(q, qd), kernel.tree_accelerations(t[i], q, qd, tau_i), rates))
-
-    f = {i: rate(i) for i in needed}
-    f0, f1 = np.array([f[i] for i in idx]), np.array([f[i] for i in idx + 1])
-    h = (t[idx + 1] - t[idx])[:, None]
-    s = (t_eval - t[idx])[:, None] / h
-    h00, h10, h01, h11 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s, -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    out = h00 * y[idx] + h10 * h * f0 + h01 * y[idx + 1] + h11 * h * f1
-    if not state_map.identity:
-        out[:, :n] = state_map.normalize(out[:, :n])
-    return out

@@ -41,6 +41,7 @@ class Kernel:
         self.n_inputs = compiled.n_inputs
         self.layout = compiled.output_layout
         self._pointer = None  # the parameter vector's ctypes pointer, bound on first compiled call
+        self._fast = None     # fast_calls(), built on first use
 
     def with_parameters(self, parameters: Mapping[str, Any]) -> "Kernel":
         return Kernel(self.compiled, parameters)
@@ -147,6 +148,21 @@ class Kernel:
             raise SimulationError(f"drive forces or state rates are not finite at t = {t:.6g} s, q = "
                                   f"{format_state(q)}, states {format_state(z)}")
         return out["forces"], out["rates"]
+
+    def fast_calls(self):
+        """Direct calls of the compiled ``accelerations``, mass matrix and body kinematics on
+        the caller's own arrays (``mbcomp.fastcall``: each returns None where the inputs or
+        the result need a checked path), or None where they do not apply: the Python backend,
+        or callable inputs (their values depend on t).  Built on first use, then shared."""
+        fast = self._fast
+        if fast is None:
+            if self.backend != "c" or self.n_inputs:
+                fast = False
+            else:
+                from .fastcall import calls
+                fast = calls(self.compiled.functions, self.layout, self.p, self.nq, self.nv)
+            self._fast = fast
+        return fast or None
 
     # -- the tree solve ----------------------------------------------------------------------------
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from .components._values import name_of
 from . import checks
 from .constraint_set import cross
 from .errors import ModelError
+from .fastcall import DECLINE
 from .kernel import Kernel
 from .layout import body_fields
 from .result import Energy  # noqa: F401 - its old home; mbcomp.Energy
@@ -64,6 +65,7 @@ class System:
         object.__setattr__(self, "_parameters", dict(parameters))
         object.__setattr__(self, "_kernel", Kernel(compiled, parameters))
         object.__setattr__(self, "_p", self._kernel.p)
+        object.__setattr__(self, "_fast", None)  # (calls, tree calls, body points): _bind_fast()
 
     def __setattr__(self, name, value):
         raise AttributeError("System is immutable: use with_parameters() for new parameter values")
@@ -307,16 +309,42 @@ class System:
     def _velocity(self, qd: Any) -> np.ndarray:
         return np.zeros(self.nv) if qd is None else self.speed_vector(qd, "qd")
 
+    # -- the fast path of the evaluation calls ------------------------------------------------------
+    def _bind_fast(self) -> tuple:
+        """``(calls, tree, points)``: the kernel's fast calls where the coordinates need no
+        normalising (no quaternions; else a stand-in that always declines), the same for the
+        accelerations and reactions where the formulation adds nothing to the tree's (no
+        constraints, no drive elements), and a dict of body points (``body_state``).  Every
+        call returns None for inputs it does not take, and the checked path runs."""
+        fast = self._fast
+        if fast is None:
+            calls = self._kernel.fast_calls() if self.topology.state_map.identity else None
+            calls = calls or DECLINE
+            tree = calls if self._formulation.constraints is None and not self._compiled.drives.elements else DECLINE
+            fast = (calls, tree, {})
+            object.__setattr__(self, "_fast", fast)
+        return fast
+
     # -- public API -------------------------------------------------------------------------------
     def mass_matrix(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv, nv) tree mass matrix ``M_bar = T^T M T`` (kg, kg m, kg m^2 by speed type)."""
+        M = (self._fast or self._bind_fast())[0].mass_matrix(q)
+        if M is not None:
+            return M
         q = self.state_vector(q)
         M, _ = self._kernel.dynamics(t, q, np.zeros(self.nv))
         return self._kernel.check_finite(M, "mass matrix", q)
 
     def accelerations(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> np.ndarray:
         """(nv,) accelerations (rates of the speeds), consistent with every constraint (drive
-        elements act with their ``states``, by name; 0 when not given)."""
+        elements act with their ``states``, by name; 0 when not given).
+
+        A float64 ndarray of the right length takes a direct call of the compiled code
+        (``mbcomp.fastcall``); anything else is converted and checked."""
+        if tau is None and states is None:
+            qdd = (self._fast or self._bind_fast())[1].accelerations(q, qd)
+            if qdd is not None:
+                return qdd
         q, qd = self.state_vector(q), self._velocity(qd)
         return self._formulation.accelerations(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states))
 
@@ -326,6 +354,9 @@ class System:
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
         and the normal force (N) of each contact in ``contacts`` held closed."""
+        if tau is None and states is None and offsets is None and not contacts and \
+                (self._fast or self._bind_fast())[1].check(q, qd):
+            return {}  # a tree without drive elements and no contact held closed: no reactions
         from .impact import contact_indices
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
@@ -375,7 +406,20 @@ class System:
                    tau: Any = None) -> BodyState:
         """Position, velocity, acceleration of the COM (or body ``point``, m, body frame),
         rotation, angular velocity and acceleration, all in the world frame."""
-        name = name_of(body)
+        calls, _, points = self._fast or self._bind_fast()
+        name = body if type(body) is str else name_of(body)
+        known = points.get(name) if point is None else None
+        if known is not None:  # a body seen before: one direct call of the compiled kinematics
+            out = calls.body(q, qd, known[0], known[1])
+            if out is not None:
+                position, velocity, R, w, kin = out
+                layout, index, idx = self._kernel.layout, known[0], known[2]
+
+                def deferred():  # decode the kinematics only when an acceleration is asked for
+                    bodies, columns = layout.unpack("kinematics", kin).values()
+                    return self._point_accelerations(body_fields(bodies[index])["bias"], columns, idx, position,
+                                                     velocity, w, q, qd, t, tau)()
+                return BodyState(position, velocity, R, w, deferred)
         if name not in self.topology.components or not hasattr(self.topology.components[name], "mass"):
             raise ModelError(f"body {name!r}", "is not a body of this model")
         q, qd = self.state_vector(q), self._velocity(qd)
@@ -387,21 +431,26 @@ class System:
         if comp is self.topology.ground:
             zero = np.zeros(3)
             return BodyState(local.copy(), zero, np.eye(3), zero.copy(), lambda: (np.zeros(3), np.zeros(3)))
+        index, idx = self.topology.body_index(comp), self.topology.speed_indices_of_body(comp)
+        if point is None:
+            points[name] = (index, np.array(local, dtype=float), idx)  # its COM, for the next call
         per_body, columns = self._kernel.kinematics(q, qd)
-        row = body_fields(per_body[self.topology.body_index(comp)])
+        row = body_fields(per_body[index])
         R, origin, V, A_bias = row["rotation"], row["origin"], row["velocity"], row["bias"]
         w, v0 = V[:3].copy(), V[3:]
         position = origin + R @ local
         velocity = v0 + cross(w, position)
+        return BodyState(position, velocity, R, w,
+                         self._point_accelerations(A_bias, columns, idx, position, velocity, w, q, qd, t, tau))
 
+    def _point_accelerations(self, A_bias, columns, idx, position, velocity, w, q, qd, t, tau):
+        """The deferred ``(acceleration, angular acceleration)`` of a body point (BodyState)."""
         def accelerations():
             qdd = self.accelerations(q, qd, t, tau)
-            idx = self.topology.speed_indices_of_body(comp)
             A = A_bias + columns[idx].T @ qdd[idx]
             alpha, a0 = A[:3], A[3:]
             return a0 + cross(alpha, position) + cross(w, velocity), alpha.copy()
-
-        return BodyState(position, velocity, R, w, accelerations)
+        return accelerations
 
     def motion_columns(self, q: Any) -> np.ndarray:
         """(nv, 6) world-frame motion columns ``S_k = (w_k, v0_k)`` of the speeds (the columns of T)."""

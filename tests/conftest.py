@@ -11,8 +11,15 @@ import mbcomp as mb
 
 @pytest.fixture(autouse=True, scope="session")
 def _private_cache(tmp_path_factory):
-    """Generated code goes to a temporary cache, never the user's."""
-    path = tmp_path_factory.mktemp("mbcomp-cache")
+    """Generated code goes to a temporary cache, never the user's: one directory for the
+    whole run, shared by the parallel workers (pytest-xdist) and the subprocesses the tests
+    start, so each model is compiled once per run.  The cache's writes are atomic and its
+    entries signed, so concurrent workers are safe.  The cache's own tests use their own
+    directories (tests/test_cache.py) and so still see cold builds."""
+    base = tmp_path_factory.getbasetemp()
+    worker = os.environ.get("PYTEST_XDIST_WORKER")   # gw0, gw1, ... under xdist (base is per worker)
+    path = (base.parent if worker else base) / "mbcomp-cache"
+    path.mkdir(mode=0o700, exist_ok=True)
     old = os.environ.get("MBCOMP_CACHE_DIR")
     os.environ["MBCOMP_CACHE_DIR"] = str(path)
     yield path

@@ -36,6 +36,7 @@ def model_param(key: tuple, slow: bool = False):
     """A pytest parameter with a readable id, e.g. ``seed1003-5bodies-tree``."""
     seed, n_bodies, branched = key
     marks = [pytest.mark.slow] if slow else []
+    marks.append(pytest.mark.xdist_group(f"oracle-{seed}"))  # parallel runs derive each model once
     return pytest.param(key, id=f"seed{seed}-{n_bodies}bodies-{'tree' if branched else 'chain'}", marks=marks)
 
 

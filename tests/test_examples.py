@@ -72,7 +72,12 @@ def run_example(script: Path, cwd: Path, cache: Path) -> subprocess.CompletedPro
 @pytest.fixture(scope="module")
 def example_runs(tmp_path_factory, cache_dir):
     """The example scripts, run one after another on a background thread while the docs
-    blocks execute in this process: ``{script: (future, working directory)}``."""
+    blocks execute in this process: ``{script: (future, working directory)}``.  Empty under
+    pytest-xdist, whose parallel workers share the tests out (each example test then runs
+    its own script; a background thread per worker would run every script twice)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        yield {}
+        return
     pool = ThreadPoolExecutor(max_workers=1)
     runs = {}
     for script in EXAMPLES:
@@ -121,9 +126,13 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
 
 
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.stem for p in EXAMPLES])
-def test_example_runs(script, example_runs):
-    future, cwd = example_runs[script]
-    proc = future.result()
+def test_example_runs(script, example_runs, tmp_path_factory, cache_dir):
+    if script in example_runs:
+        future, cwd = example_runs[script]
+        proc = future.result()
+    else:
+        cwd = tmp_path_factory.mktemp(f"example-{script.stem}")
+        proc = run_example(script, cwd, cache_dir)
     assert proc.returncode == 0, (f"{script.name} failed (exit {proc.returncode})\n"
                                   f"--- stdout ---\n{proc.stdout}\n--- stderr ---\n{proc.stderr}")
     assert proc.stdout.strip(), f"{script.name} printed nothing"

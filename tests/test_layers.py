@@ -25,6 +25,7 @@ LAYERS = {
     "urdf": 3, "drive_equations": 3,
     # 4 generated code: printers, C templates, compilers, cache
     "codegen": 4, "backend": 4, "cache": 4, "integrators": 4, "formulations.dae_c": 4,
+    "fastcall": 4,
     # 5 the compiled model and its numeric kernel
     "compiler": 5, "kernel": 5,
     # 6 formulations: how constraints and contacts enter
@@ -40,6 +41,7 @@ LAYERS = {
 }
 #: Same-layer imports that are allowed (a package's own modules may always import each other).
 SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen"), ("backend", "cache"),
+              ("fastcall", "backend"), ("fastcall", "cache"),
               ("formulations.base", "impact"), ("simulate", "events"), ("model", "components"),
               ("compose", "components"), ("compose", "model"), ("model", "compose"), ("io", "topology"), ("io", "fileform"),
               ("equations", "drive_equations"), ("simulate", "drive_runtime"), ("servo", "components"),

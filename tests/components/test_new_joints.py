@@ -211,6 +211,8 @@ def test_cli_info_and_run_on_the_ball_top(capsys, tmp_path):
     assert "pivot: ball, ground -> top" in out
     assert "speeds       pivot_wx, pivot_wy, pivot_wz (3;" in out
     assert "M[2,2]" in out and "f[2]" in out and "M[3," not in out
+    # Unit quaternions make M the constant inertia about the pivot: I1 + m h^2, I3.
+    assert "M[0,0] = 0.00029\n" in out and "M[2,2] = 0.0002\n" in out and "M[0,1]" not in out
     csv = tmp_path / "top.csv"
     assert cli_main(["run", "spinning_top", "--t-end", "0.05", "--out", str(csv)]) == 0
     out = capsys.readouterr().out
