@@ -26,13 +26,14 @@ def chain_initial_state(n: int):
 
 
 def write_csv(rows: list[dict], name: str):
-    """Write benchmark rows to bench/results/<name> (columns from the first row)."""
+    """Write benchmark rows to bench/results/<name> (columns: every key, in first-seen
+    order; floats with 6 significant digits)."""
     import csv
     from pathlib import Path
     out = Path(__file__).resolve().parent / "results" / name
     out.parent.mkdir(exist_ok=True)
     with open(out, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(k for row in rows for k in row)))
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
     return out

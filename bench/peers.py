@@ -11,7 +11,18 @@ The chain (see ``models.pendulum_chain`` for the mbcomp model): link i a uniform
 long axis along the local -z, hanging from a fixed point; revolute i about x, y, x, y, ...
 (in the parent frame, which at q = 0 is the child frame); gravity -9.81 along z.
 
-Usage: python bench/peers.py [--sympy-n10]
+Peers and their fastest settings (each a compiled loop where the tool has one):
+
+* MuJoCo: RK4 with step dt, run as ``mj_step`` in a Python loop, as one ``mj_step(m, d,
+  nstep)`` call, or through ``mujoco.rollout`` (MuJoCo's C loop; many initial states on a
+  thread pool);
+* Pinocchio: ``pin.aba`` as the right-hand side of scipy's ``solve_ivp`` (DOP853), of
+  ``scipy.integrate.ode`` with Hairer's Fortran ``dop853`` and of ``odeint`` (Fortran LSODA);
+* Exudyn: its C++ ``ObjectKinematicTree`` (minimal coordinates) under its C++ solvers, the
+  adaptive ``DOPRI5`` and the fixed-step ``RK67``/``RK44`` (the "fast" module, no range checks);
+* sympy.physics.mechanics: Kane's equations, lambdified (slow; not in the default set).
+
+Usage: python bench/peers.py [--sympy-n10] [N ...]
     builds every available peer for N = 5 and 10 (sympy: N = 5 only, N = 10 with the flag:
     the derivation takes ~100 s) and asserts that its accelerations agree with mbcomp's to
     1e-10 at random states.
@@ -40,7 +51,10 @@ def _axis(i: int) -> str:
 def available() -> dict[str, bool]:
     """``{peer: importable}`` for mujoco, pinocchio and sympy.physics.mechanics."""
     found = {}
-    for name, module in (("mujoco", "mujoco"), ("pinocchio", "pinocchio"), ("sympy", "sympy.physics.mechanics")):
+    for name, module in (("mujoco", "mujoco"), ("pinocchio", "pinocchio"), ("exudyn", "exudyn"),
+                         ("sympy", "sympy.physics.mechanics")):
+        if name == "exudyn":
+            sys.exudynFast = True   # Exudyn's fastest module (no range checks); read at its import
         try:
             __import__(module)
             found[name] = True
@@ -115,24 +129,76 @@ class MujocoChain:
 
     def simulate(self, t_end, q0, qd0, *, dt, loop="python"):
         """RK4 with step dt; ``loop="python"``: one ``mj_step`` call per step (what a user
-        does to look at the state between steps); ``"nstep"``: a single ``mj_step(m, d, nstep)``."""
-        mujoco, model = self.mujoco, self.model
-        steps = int(round(t_end / dt))
-        if abs(steps * dt - t_end) > 1e-9 * t_end:
-            raise ValueError(f"t_end = {t_end} is not a whole number of steps dt = {dt}")
-        model.opt.timestep = dt
-        data = mujoco.MjData(model)
-        data.qpos[:] = q0
-        data.qvel[:] = qd0
-        if loop == "python":
-            step = mujoco.mj_step
-            for _ in range(steps):
-                step(model, data)
-        else:
-            mujoco.mj_step(model, data, nstep=steps)
-        if abs(data.time - t_end) > 1e-6:
-            raise RuntimeError(f"MuJoCo ended at t = {data.time}")
-        return data.qpos.copy()
+        does to look at the state between steps); ``"nstep"``: a single ``mj_step(m, d, nstep)``;
+        ``"rollout"``: ``mujoco.rollout`` (see ``mujoco_rollout``)."""
+        if loop == "rollout":
+            return mujoco_rollout(self.model, [self.data], t_end, np.atleast_2d(q0), np.atleast_2d(qd0), dt=dt)[0]
+        return mujoco_step(self.model, t_end, q0, qd0, dt=dt, loop=loop)
+
+
+def mujoco_steps(t_end: float, dt: float) -> int:
+    """The whole number of steps dt in t_end (ValueError when it is not one)."""
+    steps = int(round(t_end / dt))
+    if steps < 1 or abs(steps * dt - t_end) > 1e-9 * t_end:
+        raise ValueError(f"t_end = {t_end} is not a whole number of steps dt = {dt}")
+    return steps
+
+
+def mujoco_step(model, t_end, q0, qd0, *, dt, loop="nstep"):
+    """q(t_end) from ``mj_step`` (a Python loop, or one ``nstep`` call) with step ``dt``;
+    RuntimeError when MuJoCo reset the state (its reaction to a diverging step)."""
+    import mujoco
+    steps = mujoco_steps(t_end, dt)
+    model.opt.timestep = dt
+    data = mujoco.MjData(model)
+    data.qpos[:] = q0
+    data.qvel[:] = qd0
+    if loop == "python":
+        step = mujoco.mj_step
+        for _ in range(steps):
+            step(model, data)
+    else:
+        mujoco.mj_step(model, data, nstep=steps)
+    if abs(data.time - t_end) > 1e-6 * max(1.0, t_end) or data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        raise RuntimeError(f"MuJoCo diverged (ended at t = {data.time})")
+    return data.qpos.copy()
+
+
+#: Steps per ``rollout`` call: rollout returns the state after every step, so long runs go
+#: in pieces (each piece starts from the last state of the one before) into one buffer.
+ROLLOUT_CHUNK = 2000
+
+
+def mujoco_rollout(model, datas, t_end, q0s, qd0s, *, dt, chunk: int = ROLLOUT_CHUNK):
+    """Final positions ``(batch, nq)`` of one run per row of ``q0s``/``qd0s`` with
+    ``mujoco.rollout`` (MuJoCo's C loop; the rows go to a thread pool of ``len(datas)``
+    threads).  RuntimeError when a run did not reach ``t_end`` (MuJoCo resets a diverging
+    state)."""
+    import mujoco
+    from mujoco import rollout
+    steps = mujoco_steps(t_end, dt)
+    model.opt.timestep = dt
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(model, spec)
+    batch = len(q0s)
+    data = datas[0]
+    state = np.empty((batch, nstate))
+    for i in range(batch):
+        mujoco.mj_resetData(model, data)
+        data.qpos[:] = q0s[i]
+        data.qvel[:] = qd0s[i]
+        mujoco.mj_getState(model, data, state[i], spec)
+    out = np.empty((batch, min(chunk, steps), nstate))
+    done = 0
+    while done < steps:
+        nstep = min(chunk, steps - done)
+        buffer = out[:, :nstep] if nstep == out.shape[1] else np.empty((batch, nstep, nstate))
+        rollout.rollout(model, datas if len(datas) > 1 else data, state, nstep=nstep, state=buffer)
+        state = buffer[:, -1].copy()
+        done += nstep
+    if np.any(np.abs(state[:, 0] - t_end) > 1e-6 * max(1.0, t_end)) or not np.all(np.isfinite(state)):
+        raise RuntimeError(f"MuJoCo rollout diverged (a run ended at t = {state[:, 0].min()})")
+    return state[:, 1:1 + model.nq].copy()
 
 
 # -- Pinocchio ------------------------------------------------------------------------------------
@@ -164,19 +230,145 @@ class PinocchioChain:
     def accelerations(self, q, qd):
         return self.pin.aba(self.model, self.data, np.asarray(q, float), np.asarray(qd, float), np.zeros(self.n)).copy()
 
-    def simulate(self, t_end, q0, qd0, *, tol):
+    def simulate(self, t_end, q0, qd0, *, tol, solver="solve_ivp"):
+        """q(t_end) with rtol = atol = ``tol``; ``solver``: ``"solve_ivp"`` (DOP853 in
+        Python), ``"dop853"`` (``scipy.integrate.ode``: Hairer's Fortran DOP853) or
+        ``"lsoda"`` (``odeint``: Fortran LSODA)."""
         pin, model, n = self.pin, self.model, self.n
         data = model.createData()
         tau = np.zeros(n)
         aba = pin.aba
+        y0 = np.concatenate((q0, qd0))
 
         def rhs(t, y):
             return np.concatenate((y[n:], aba(model, data, y[:n], y[n:], tau)))
 
-        sol = solve_ivp(rhs, (0.0, t_end), np.concatenate((q0, qd0)), method="DOP853", rtol=tol, atol=tol)
-        if sol.status != 0:
-            raise RuntimeError(sol.message)
-        return sol.y[:n, -1].copy()
+        if solver == "solve_ivp":
+            sol = solve_ivp(rhs, (0.0, t_end), y0, method="DOP853", rtol=tol, atol=tol)
+            if sol.status != 0:
+                raise RuntimeError(sol.message)
+            return sol.y[:n, -1].copy()
+        if solver == "dop853":
+            from scipy.integrate import ode
+            integrator = ode(rhs).set_integrator("dop853", rtol=tol, atol=tol, nsteps=10 ** 8)
+            integrator.set_initial_value(y0, 0.0)
+            y = integrator.integrate(t_end)
+            if not integrator.successful():
+                raise RuntimeError(f"dop853 failed (code {integrator.get_return_code()})")
+            return y[:n].copy()
+        if solver == "lsoda":
+            from scipy.integrate import odeint
+            y, info = odeint(rhs, y0, (0.0, t_end), rtol=tol, atol=tol, mxstep=10 ** 8, tfirst=True,
+                             full_output=True)
+            if info["message"] != "Integration successful.":
+                raise RuntimeError(info["message"])
+            return y[-1, :n].copy()
+        raise ValueError(f"unknown solver {solver!r}")
+
+
+# -- Exudyn ---------------------------------------------------------------------------------------
+class ExudynChain:
+    """Exudyn's ``ObjectKinematicTree`` (minimal coordinates, C++) on a ``NodeGenericODE2``;
+    ``simulate`` runs ``SolveDynamic`` with one of Exudyn's C++ explicit solvers (no solution
+    files, no sensors)."""
+
+    name = "exudyn"
+
+    def __init__(self, n: int, q0=None, qd0=None):
+        available()                     # sets sys.exudynFast before the first import
+        import exudyn as exu
+        self.exu = exu
+        self.n = n
+        started = time.perf_counter()
+        self.mbs = self._build(np.zeros(n) if q0 is None else q0, np.zeros(n) if qd0 is None else qd0)
+        self.build_time = time.perf_counter() - started
+
+    def _build(self, q0, qd0):
+        exu = self.exu
+        from exudyn.itemInterface import NodeGenericODE2, ObjectKinematicTree
+        n = self.n
+        self._container = exu.SystemContainer()     # the MainSystem lives as long as its container
+        mbs = self._container.AddSystem()
+        node = mbs.AddNode(NodeGenericODE2(referenceCoordinates=[0.0] * n, initialCoordinates=list(map(float, q0)),
+                                           initialCoordinates_t=list(map(float, qd0)), numberOfODE2Coordinates=n))
+        joints = [exu.JointType.RevoluteX if _axis(i) == "x" else exu.JointType.RevoluteY for i in range(n)]
+        mbs.AddObject(ObjectKinematicTree(
+            nodeNumber=node, jointTypes=joints, linkParents=list(range(-1, n - 1)),
+            jointTransformations=exu.Matrix3DList([np.eye(3)] * n),
+            jointOffsets=exu.Vector3DList([[0.0, 0.0, 0.0]] + [[0.0, 0.0, -LENGTH]] * (n - 1)),
+            linkInertiasCOM=exu.Matrix3DList([np.diag([I_TRANSVERSE, I_TRANSVERSE, I_AXIAL])] * n),
+            linkCOMs=exu.Vector3DList([[0.0, 0.0, -LENGTH / 2]] * n), linkMasses=[MASS] * n,
+            gravity=[0.0, 0.0, -GRAVITY]))
+        mbs.Assemble()
+        return mbs
+
+    def _settings(self, t_end, solver, tol, steps):
+        exu = self.exu
+        settings = exu.SimulationSettings()
+        ti = settings.timeIntegration
+        ti.endTime = float(t_end)
+        ti.verboseMode = 0
+        ti.solverType = getattr(exu.DynamicSolverType, solver)
+        if tol is not None:
+            ti.automaticStepSize = True
+            ti.numberOfSteps = 10
+            ti.absoluteTolerance = ti.relativeTolerance = float(tol)
+            ti.minimumStepSize = 1e-12
+        else:
+            ti.automaticStepSize = False
+            ti.numberOfSteps = int(steps)
+        settings.solution.file.write = False
+        settings.solution.sensors.active = False
+        settings.show.computationTime = False
+        settings.show.statistics = False
+        return settings
+
+    def accelerations(self, q, qd):
+        exu = self.exu
+        mbs = ExudynChain(self.n, q, qd).mbs
+        solver = exu.MainSolverExplicit()
+        settings = self._settings(1.0, "RK44", None, 1)
+        solver.InitializeSolver(mbs, settings)
+        solver.ComputeODE2RHS(mbs)
+        rhs = np.array(solver.GetSystemResidual())[:self.n]
+        solver.ComputeMassMatrix(mbs)
+        mass = np.array(solver.GetSystemMassMatrix())[:self.n, :self.n]
+        return np.linalg.solve(mass, rhs)
+
+    def prepare(self, q0, qd0):
+        """Rebuild the system with this initial state (outside the timed runs)."""
+        self.mbs = self._build(q0, qd0)
+        self._q0 = np.array(q0, float)
+
+    def simulate(self, t_end, q0, qd0, *, solver="DOPRI5", tol=None, steps=None):
+        """q(t_end): ``tol`` for the adaptive ``DOPRI5`` (rtol = atol), ``steps`` for the
+        fixed-step ``RK44``/``RK67``.  The initial state is the one of ``prepare``."""
+        if not np.array_equal(np.asarray(q0, float), getattr(self, "_q0", None)) or np.any(qd0):
+            self.prepare(q0, qd0)
+        settings = self._settings(t_end, solver, tol, steps)
+        with _quiet():
+            self.exu.SolveDynamic(self.mbs, settings, solverType=settings.timeIntegration.solverType)
+        data = self.mbs.systemData
+        if abs(data.GetTime() - t_end) > 1e-6 * max(1.0, t_end):
+            raise RuntimeError(f"Exudyn stopped at t = {data.GetTime()}")
+        q = np.array(data.GetODE2Coordinates())
+        if not np.all(np.isfinite(q)):
+            raise RuntimeError("Exudyn diverged")
+        return q
+
+
+class _quiet:
+    """Silence Exudyn's deprecation warnings and prints during a run."""
+
+    def __enter__(self):
+        import warnings
+        self._warnings = warnings.catch_warnings()
+        self._warnings.__enter__()
+        warnings.simplefilter("ignore")
+
+    def __exit__(self, *exc):
+        self._warnings.__exit__(*exc)
+        return False
 
 
 # -- sympy.physics.mechanics ----------------------------------------------------------------------
@@ -238,15 +430,18 @@ class SympyChain:
         return sol.y[:n, -1].copy()
 
 
-BUILDERS = {"mujoco": MujocoChain, "pinocchio": PinocchioChain, "sympy": SympyChain}
+BUILDERS = {"mujoco": MujocoChain, "pinocchio": PinocchioChain, "exudyn": ExudynChain, "sympy": SympyChain}
 
 
-def build_peers(n: int, *, sympy_n10: bool = False, log=print) -> dict:
-    """``{name: model}`` of every importable peer (sympy only for N <= 5 unless asked)."""
+def build_peers(n: int, *, sympy_n10: bool = False, sympy: bool = True, log=print) -> dict:
+    """``{name: model}`` of every importable peer (sympy only for N <= 5 unless asked, and
+    not at all with ``sympy=False``)."""
     peers = {}
     for name, importable in available().items():
         if not importable:
             log(f"  {name}: not installed, skipped")
+            continue
+        if name == "sympy" and not sympy:
             continue
         if name == "sympy" and n > 5 and not sympy_n10:
             log(f"  sympy: N = {n} skipped (derivation is slow; pass --sympy-n10)")
