@@ -168,6 +168,8 @@ class LagrangeFormulation(Formulation):
 
     name = "lagrange"
     workspace_class = LagrangeWorkspace
+    #: condition number of the dependent block above which the independent coordinates are chosen anew
+    repartition_condition = REPARTITION_CONDITION
 
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:

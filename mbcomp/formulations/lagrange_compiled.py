@@ -21,7 +21,6 @@ import ctypes
 import numpy as np
 
 from ..errors import SimulationError
-from .lagrange import REPARTITION_CONDITION, LagrangeWorkspace
 from ..integrators import PAUSED, TRIAL_FAILED
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
@@ -49,7 +48,7 @@ class ReducedRun:
         constraints = formulation.constraints
         topology = kernel.topology
         self.contacts = tuple(contacts)
-        self.workspace = LagrangeWorkspace(formulation, kernel, t0, q0, qd0, tau, self.contacts)
+        self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
         if offsets is not None:  # after an event: the speed motors keep the run's start values
             self.workspace.offsets = offsets
         nm = 0 if constraints is None else constraints.nc
@@ -123,7 +122,7 @@ class ReducedRun:
         status = self.lib.lagrange_configure(
             len(self.geo), _ptr(self.geo), _ptr(self.mq), _ptr(self.mv), _ptr(self.speed), _ptr(self.offset),
             len(self.rows), _ptr(self.rows), _ptr(self.dep), len(self.ind), _ptr(self.ind),
-            float(self.formulation.jacobian_scale), float(REPARTITION_CONDITION), _ptr(self.acc), _ptr(self.info))
+            float(self.formulation.jacobian_scale), float(self.formulation.repartition_condition), _ptr(self.acc), _ptr(self.info))
         if status:
             raise SimulationError("the compiled lagrange loop could not allocate its work space")
         if self.gaps is not None:  # (configuring clears the contact watch)
