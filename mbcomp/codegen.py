@@ -219,23 +219,6 @@ def _free_symbols(prog) -> dict:
     return {symbol: expr.free_symbols for symbol, expr in prog.assignments}
 
 
-def _needed(prog, outputs, free: dict) -> list:
-    """``prog.needed(outputs)`` (the assignments the outputs depend on, in order) on the
-    free symbols computed once."""
-    import sympy as sp
-    wanted = set()
-    for name in outputs:
-        for expr in prog.outputs[name]:
-            wanted |= sp.sympify(expr).free_symbols
-    keep = []
-    for symbol, expr in reversed(prog.assignments):
-        if symbol in wanted:
-            keep.append((symbol, expr))
-            wanted |= free[symbol]
-    keep.reverse()
-    return keep
-
-
 def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: dict | None = None):
     """``([(part text, statements)], main text)`` of one generated function: its chunks
     (``void name_partB(..., double *w) {...}``, for the caller to prefix with their linkage)
@@ -243,7 +226,7 @@ def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: d
     ``name_many``.  ``free``: ``_free_symbols(prog)`` when the caller has it."""
     import sympy as sp
     free = _free_symbols(prog) if free is None else free
-    needed = _needed(prog, outputs, free)
+    needed = prog.needed(outputs, free)
     results = [sp.sympify(e) for name in outputs for e in prog.outputs[name]]
     blocks = [needed[i:i + chunk] for i in range(0, len(needed), chunk)] or [[]]
     block_of = {symbol: b for b, block in enumerate(blocks) for symbol, _ in block}

@@ -73,8 +73,10 @@ class Program:
     def lets(self, exprs) -> list:
         return [self.let(e) for e in exprs]
 
-    def needed(self, names) -> list:
-        """The assignments the given outputs depend on (dead code removed), in order."""
+    def needed(self, names, free: dict | None = None) -> list:
+        """The assignments the given outputs depend on (dead code removed), in order;
+        ``free`` maps each assigned symbol to its expression's free symbols when the caller
+        has computed them once (the code generator, over many functions)."""
         wanted = set()
         for name in names:
             for expr in self.outputs[name]:
@@ -83,7 +85,7 @@ class Program:
         for symbol, expr in reversed(self.assignments):
             if symbol in wanted:
                 keep.append((symbol, expr))
-                wanted |= expr.free_symbols
+                wanted |= expr.free_symbols if free is None else free[symbol]
         keep.reverse()
         return keep
 

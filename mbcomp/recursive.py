@@ -265,11 +265,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
         }}
     const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
     if (dropped < 0) return 2;
-    if (dropped) {{  /* at rest on a singular position the motion is not determined */
-        double vmax = 0.0;
-        for (int i = 0; i < n; ++i) if (fabs(qd[i]) > vmax) vmax = fabs(qd[i]);
-        if (vmax < 1e-9) return 2;
-    }}
+    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
     for (int i = 0; i < n; ++i) {{
         double s = free_[i];
         for (int k = 0; k < nr; ++k) s += X[i * NG + k] * lam[k];

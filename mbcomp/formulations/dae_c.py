@@ -32,6 +32,13 @@ void dae_configure(int nr, const long *rows, double alpha, double beta, double s
    factorisation in place that drops the directions whose pivot falls below dae_tol relative
    to the largest (and scale): their multiplier is zero.  Returns 1 when one was dropped,
    -1 on a non-finite pivot, 0 otherwise. */
+/* 1 when every speed is below 1e-9: a dropped multiplier direction then leaves the motion
+   undetermined (a singular position at rest), 0 otherwise. */
+static int dae_at_rest(const double *qd, int n) {{
+    for (int i = 0; i < n; ++i) if (fabs(qd[i]) >= 1e-9) return 0;
+    return 1;
+}}
+
 static int dae_gram_solve(double *A, const double *r, double *lam, int nr, double scale) {{
     double amax = 0.0;
     for (int j = 0; j < nr; ++j) if (A[j * NG + j] > amax) amax = A[j * NG + j];
@@ -103,11 +110,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
         }}
     const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
     if (dropped < 0) return 2;
-    if (dropped) {{  /* at rest on a singular position the motion is not determined */
-        double vmax = 0.0;
-        for (int i = 0; i < n; ++i) if (fabs(qd[i]) > vmax) vmax = fabs(qd[i]);
-        if (vmax < 1e-9) return 2;
-    }}
+    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
     for (int i = 0; i < n; ++i) {{  /* qdd = L^-T (uvec + Y lam) */
         double s = uvec[i];
         for (int k = 0; k < nr; ++k) s += Y[i * NG + k] * lam[k];
