@@ -193,13 +193,17 @@ def run_compile(sizes, rounds, log=print):
     if importlib.util.find_spec("compile_startup") is None:
         return None, ("`bench/compile_startup.py` is not in this tree: compile time, warm start-up and memory "
                       "were not measured (see `bench/chain_compile.py` for the in-process cold/cached times).")
-    import compile_startup
+    # In a process of its own: a child's peak RSS (getrusage) starts from the high-water mark
+    # of the process it was forked from, and this one holds the other parts' buffers.
+    import csv
     log(f"compile and start-up, N = {list(sizes)} (fresh processes)")
-    import inspect
-    if "trees" in inspect.signature(compile_startup.run).parameters:
-        rows = compile_startup.run(list(sizes), rounds, [None])      # None: the mbcomp imported here
-    else:
-        rows = compile_startup.run(list(sizes), rounds)
+    done = subprocess.run([sys.executable, str(HERE / "compile_startup.py"), *map(str, sizes), "--rounds", str(rounds)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode:
+        return None, f"`compile_startup.py` failed: {done.stderr[-500:]}"
+    with open(RESULTS / "compile_startup.csv", newline="") as fh:
+        rows = [{k: (float(v) if k not in ("tree", "warm_sympy", "warm_scipy_integrate") else v) for k, v in r.items()}
+                for r in csv.DictReader(fh)]
     return rows, ("Each figure a median over rounds of fresh processes (`compile_startup.py`); peak RSS is the "
                   "Python process plus its largest child (the C compiler), an upper bound of the two together.")
 
