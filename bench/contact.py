@@ -19,7 +19,6 @@ Writes bench/results/contact.csv and contact_levels.csv.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -30,7 +29,7 @@ import mbcomp as mb
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from models import write_csv  # noqa: E402
-from timing import Run, fmt, measure, time_at  # noqa: E402
+from timing import Run, fmt, measure, rounds_main, time_at  # noqa: E402
 
 MASS, RADIUS, HEIGHT, E, G, T_END = 0.1, 0.05, 1.0, 0.8, 9.81, 2.0
 LEVELS = (1e-2, 1e-3, 1e-4, 1e-6)
@@ -157,11 +156,7 @@ def run(rounds: int = 3, quick: bool = False, log=print) -> dict:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args(argv)
-    return run(1 if args.quick else args.rounds, args.quick)
+    return rounds_main(run, __doc__, argv)
 
 
 if __name__ == "__main__":

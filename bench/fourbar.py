@@ -19,7 +19,6 @@ Writes bench/results/fourbar.csv (every point) and fourbar_levels.csv.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -29,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from constraints_work_precision import fourbar  # noqa: E402
 from models import write_csv  # noqa: E402
-from timing import Run, fmt, measure, time_at  # noqa: E402
+from timing import Run, fmt, measure, rounds_main, time_at  # noqa: E402
 
 T_END = 10.0
 G = 9.81
@@ -154,11 +153,7 @@ def run(rounds: int = 3, quick: bool = False, log=print) -> dict:
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args(argv)
-    return run(1 if args.quick else args.rounds, args.quick)
+    return rounds_main(run, __doc__, argv)
 
 
 if __name__ == "__main__":

@@ -138,3 +138,14 @@ def fmt(value: float, digits: int = 3) -> str:
     if value is None or not math.isfinite(value):
         return "-"
     return f"{value:.{digits}g}"
+
+
+def rounds_main(run: Callable[[int, bool], Any], doc: str, argv: list[str] | None = None) -> Any:
+    """The command line of a benchmark taking ``--rounds`` and ``--quick`` (one round):
+    ``run(rounds, quick)``, described by the first paragraph of ``doc``."""
+    import argparse
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    return run(1 if args.quick else args.rounds, args.quick)

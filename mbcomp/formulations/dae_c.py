@@ -32,6 +32,20 @@ void dae_configure(int nr, const long *rows, double alpha, double beta, double s
    factorisation in place that drops the directions whose pivot falls below dae_tol relative
    to the largest (and scale): their multiplier is zero.  Returns 1 when one was dropped,
    -1 on a non-finite pivot, 0 otherwise. */
+/* Column ``col`` of Y = L^-1 J_r^T (the configured row of the constraint Jacobian J, with M =
+   L L^T packed); returns the row's rate J_r qd. */
+static double dae_row_solve(const double *L, const double *J, const double *qd, double *Y, int col) {{
+    const double *Jr = J + dae_rows[col] * NQ;
+    double rate = 0.0;
+    for (int i = 0; i < NQ; ++i) {{
+        double s = Jr[i];
+        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * Y[k * NG + col];
+        Y[i * NG + col] = s / L[IDX(i, i)];
+        rate += Jr[i] * qd[i];
+    }}
+    return rate;
+}}
+
 /* 1 when every speed is below 1e-9: a dropped multiplier direction then leaves the motion
    undetermined (a singular position at rest), 0 otherwise. */
 static int dae_at_rest(const double *qd, int n) {{
@@ -91,14 +105,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     if (mass_cholesky(L)) return 1;
     lower_solve(L, uvec);  /* uvec <- L^-1 (f + tau) */
     for (int col = 0; col < nr; ++col) {{  /* Y[:, col] = L^-1 J_row^T; rhs of the row */
-        const double *Jr = J + dae_rows[col] * NQ;
-        double gdot = 0.0;
-        for (int i = 0; i < n; ++i) {{
-            double s = Jr[i];
-            for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * Y[k * NG + col];
-            Y[i * NG + col] = s / L[IDX(i, i)];
-            gdot += Jr[i] * qd[i];
-        }}
+        const double gdot = dae_row_solve(L, J, qd, Y, col);
         r[col] = -bias[dae_rows[col]] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[dae_rows[col]];
         for (int i = 0; i < n; ++i) r[col] -= Y[i * NG + col] * uvec[i];
     }}
@@ -158,17 +165,7 @@ int dae_project(double *y, const double *p, const double *u, double *work) {{
     dynamics(q, qd, p, u, work);
     (void)f;
     if (mass_cholesky(L)) return changed;
-    for (int col = 0; col < nr; ++col) {{  /* Y = L^-1 J_r^T, r = J_r qd */
-        const double *Jr = J + dae_rows[col] * NQ;
-        double v = 0.0;
-        for (int i = 0; i < n; ++i) {{
-            double s = Jr[i];
-            for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * Y[k * NG + col];
-            Y[i * NG + col] = s / L[IDX(i, i)];
-            v += Jr[i] * qd[i];
-        }}
-        r[col] = v;
-    }}
+    for (int col = 0; col < nr; ++col) r[col] = dae_row_solve(L, J, qd, Y, col);  /* Y = L^-1 J_r^T, r = J_r qd */
     for (int a = 0; a < nr; ++a)
         for (int b = 0; b <= a; ++b) {{
             double s = 0.0;
