@@ -189,11 +189,29 @@ class CBuild:
         self._objects: list[str] = []
         self._linked_last: list[str] = []
         self._failure: str | None = None
+        self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
 
-    def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False) -> None:
+    def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False,
+            shared: dict | None = None) -> None:
         """Queue ``text`` as unit ``name`` (a file stem, unique in this build), compiled with
-        ``flags``; ``last``: linked after the units without it (the library's layout)."""
-        (self._linked_last if last else self._objects).append(str(self._tmp / f"{name}.o"))  # link order
+        ``flags``; ``last``: linked after the units without it (the library's layout).
+
+        ``shared``: the toolchain inputs of the code cache (``cache.toolchain``) for a unit
+        many models have in common (the hand-written templates of one model structure): its
+        object file is taken from the cache when a signed copy is there, and stored after
+        compiling otherwise, so models of the same sizes compile it once."""
+        obj = self._tmp / f"{name}.o"
+        (self._linked_last if last else self._objects).append(str(obj))  # link order
+        if shared is not None:
+            key = cache.entry_key(f"object {name}", text + " ".join(flags), shared)
+            path = cache.verified(key, ".o", shared)
+            if path is not None:
+                try:
+                    shutil.copyfile(path, obj)
+                    return
+                except OSError:
+                    pass
+            self._shared.append((obj, key, shared))
         (self._tmp / f"{name}.c").write_text(text)
         self._waiting.append((statements, name, tuple(flags)))
         self._waiting.sort(key=lambda item: item[0])
@@ -236,6 +254,8 @@ class CBuild:
         try:
             self._pump(block=True)
             if self._failure is None:
+                for obj, key, inputs in self._shared:
+                    cache.store(key, ".o", obj.read_bytes(), inputs)
                 out = self._tmp / "model.so"
                 done = subprocess.run([self.compiler, "-shared", *self._objects, *self._linked_last, "-o", str(out),
                                        "-lm"],

@@ -163,7 +163,8 @@ class CompiledModel:
             # generated unit starts compiling as soon as it is printed.
             # Linked after the generated code, as in one unit: the layout of the integrators'
             # loops changes their speed by up to 15 % (N = 5 chain).
-            build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True)
+            build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True,
+                      shared=tools if use_cache else None)
             digest = hashlib.sha256(templates.encode())
             for unit in codegen.c_units(self.program, functions, cold=cold, unit=UNIT_STATEMENTS):
                 build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)

@@ -8,6 +8,7 @@ import tempfile
 import numpy as np
 import pytest
 
+import mbcomp as mb
 from mbcomp import backend, codegen
 from mbcomp.backend import C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CBuild, c_compiler, c_functions, c_library
 from conftest import pendulum_chain
@@ -124,3 +125,56 @@ def test_the_cache_entry_records_both_flag_sets_and_cold_flags_change_the_key(tm
     monkeypatch.setattr(compiler, "COLD_FLAGS", ("-O1", "-fPIC", "-fno-math-errno"))
     second = pendulum_chain(2).compile(backend="c")._compiled
     assert second.key != first.key and not second.cache_hit
+
+
+def _chain_about(axes: str) -> mb.Model:
+    """A chain of pendulum_chain's links whose joints turn about ``axes``."""
+    m = pendulum_chain(len(axes))
+    for joint, axis in zip((c for c in m.components.values() if isinstance(c, mb.Revolute)), axes):
+        joint.axis = axis
+    return m
+
+
+@needs_cc
+class TestSharedUnits:
+    """The hand-written templates of one model structure compile once: later models with the
+    same sizes link the cached object (signed like every cache entry)."""
+
+    def _count_compiles(self, monkeypatch):
+        calls = []
+        real = backend.subprocess.Popen
+
+        def popen(cmd, *args, **kwargs):
+            calls.append(cmd)
+            return real(cmd, *args, **kwargs)
+        monkeypatch.setattr(backend.subprocess, "Popen", popen)
+        return calls
+
+    def test_a_second_model_of_the_same_sizes_reuses_the_templates_object(self, tmp_path, monkeypatch):
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+        calls = self._count_compiles(monkeypatch)
+        first = pendulum_chain(3).compile(backend="c")
+        assert any("templates.c" in " ".join(c) for c in calls)
+        assert len(list(tmp_path.glob("*.o"))) == 1
+        calls.clear()
+        heavier = _chain_about("zxz")  # the same sizes, other equations: a new model entry
+        second = heavier.compile(backend="c")
+        assert calls and not any("templates.c" in " ".join(c) for c in calls)
+        q, qd = np.array([0.3, -0.2, 0.5]), np.array([0.1, 0.0, -0.4])
+        reference = pendulum_chain(3).compile(backend="python", cache=False)
+        np.testing.assert_allclose(first.accelerations(q, qd), reference.accelerations(q, qd), rtol=1e-12)
+        moon = heavier.compile(backend="python", cache=False)
+        np.testing.assert_allclose(second.accelerations(q, qd), moon.accelerations(q, qd), rtol=1e-12)
+
+    def test_a_damaged_object_is_rebuilt_not_linked(self, tmp_path, monkeypatch):
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+        pendulum_chain(2).compile(backend="c")
+        (obj,) = tmp_path.glob("*.o")
+        obj.write_bytes(obj.read_bytes()[:100])
+        calls = self._count_compiles(monkeypatch)
+        other = _chain_about("zz")
+        system = other.compile(backend="c")
+        assert any("templates.c" in " ".join(c) for c in calls)
+        q, qd = np.array([0.3, -0.2]), np.array([0.1, 0.4])
+        np.testing.assert_allclose(system.accelerations(q, qd),
+                                   other.compile(backend="python", cache=False).accelerations(q, qd), rtol=1e-12)
