@@ -686,6 +686,11 @@ def bind_reduced(lib):
     return run
 
 
+def bind_dop853(lib):
+    """``dop853_run`` (the loop on the tree state ``[q, v, z]``) with its argument types."""
+    return _bind(lib)[0]
+
+
 def _bind(lib):
     void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
     run = lib.dop853_run

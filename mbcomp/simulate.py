@@ -11,7 +11,7 @@ from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
-from .integrators import (EVENT, FINISHED, CollapseWatch, RankLost, _bind, bind_reduced, collapse_message, compiled_jacobian,
+from .integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_dop853, bind_reduced, collapse_message, compiled_jacobian,
                           dop853_segment, hooked, poll_step_hooks, run_compiled, step_hook, why_not_compiled)
 from .progress import ProgressBar
 
@@ -352,7 +352,7 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
     from .formulations.lagrange_compiled import ReducedRun
     lib = kernel.compiled.functions.lib
     Run = getattr(formulation, "contact_run", None) or ReducedRun  # the dae formulation steps [q, qd] itself
-    run_loop = bind_reduced(lib) if Run is ReducedRun else _bind(lib)[0]
+    run_loop = bind_reduced(lib) if Run is ReducedRun else bind_dop853(lib)
     n = kernel.nv
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
