@@ -28,6 +28,7 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     is ``dae_time`` (set by the integrators before each call).  Offsets into the packed
     outputs come from the ``OutputLayout`` defines.
     """
+    from ..events_c import C_BRENTQ, MAX_ITERATIONS
     from ..expressions_c import C_PROGRAM
     return f"""
 #define NG {ng}
@@ -43,6 +44,7 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
 #define DAE_SOLVE_OFF (DAE_ROWS_OFF + DAE_NR * (NQ + 3))
 #define NDAEWORK (DAE_SOLVE_OFF + NQ * DAE_NR + DAE_NR * DAE_NR + 3 * DAE_NR + NQ)
 {C_PROGRAM}
+{C_BRENTQ}
 static __thread int dae_nr = -1;
 static __thread long dae_rows[DAE_NR];            /* legacy configuration: geometric rows */
 static __thread long dae_legacy[{SPEC_LONGS} * DAE_NR];
@@ -362,6 +364,33 @@ double dae_force_at(double s, double t_old, double h, const double *y_old, const
     const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
     free(work);
     return status ? NAN : dae_lam[row];
+}}
+
+/* The event's time on its step by Brent's method in C (events_c.py): where the gap of
+   contact `index` (dae_gap_root) or the multiplier of configured row `index` (dae_force_root)
+   crosses zero in [a, b]; *status as mb_brentq's. */
+struct dae_root_ctx {{ double t_old, h; const double *y_old, *F; int ny; long index; const double *p, *tau; }};
+
+static double dae_gap_fn(double s, void *c) {{
+    const struct dae_root_ctx *x = c;
+    return dae_gap_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p);
+}}
+
+static double dae_force_fn(double s, void *c) {{
+    const struct dae_root_ctx *x = c;
+    return dae_force_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}}
+
+double dae_gap_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny, long index,
+                    const double *p, double xtol, double rtol, int *status) {{
+    struct dae_root_ctx c = {{t_old, h, y_old, F, ny, index, p, 0}};
+    return mb_brentq(dae_gap_fn, &c, a, b, xtol, rtol, {MAX_ITERATIONS}, status);
+}}
+
+double dae_force_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                      long index, const double *p, const double *tau, double xtol, double rtol, int *status) {{
+    struct dae_root_ctx c = {{t_old, h, y_old, F, ny, index, p, tau}};
+    return mb_brentq(dae_force_fn, &c, a, b, xtol, rtol, {MAX_ITERATIONS}, status);
 }}
 #else
 #define NDAEWORK 0

@@ -154,3 +154,23 @@ def test_a_step_hook_stops_a_compiled_contact_run():
     with step_hook(lambda t: t > 1.0, interval=0.0):
         with pytest.raises(mb.SimulationError, match="stopped at t = .* by a step hook"):
             system.simulate(4.0, [0.6], [0.0], rtol=1e-10, atol=1e-12, integrator="compiled")
+
+
+def test_event_times_located_in_c_equal_scipys_brentq(ball, monkeypatch):
+    """Brent's method in C (events_c.py) finds the same root as scipy's brentq on the same
+    gap function (the C gaps on the event step's dense output)."""
+    from scipy.optimize import brentq
+    from mbcomp.formulations import dae_compiled
+    pairs = []
+    original = dae_compiled._Locator.gap_root
+
+    def both(self, i, a, b, xtol, rtol):
+        located = original(self, i, a, b, xtol, rtol)
+        pairs.append((located, brentq(lambda s: self.gap(s, i), a, b, xtol=xtol, rtol=rtol)))
+        return located
+
+    monkeypatch.setattr(dae_compiled._Locator, "gap_root", both)
+    result = ball.simulate(2.0, [1.0], [0.0], rtol=1e-10, atol=1e-12)
+    assert len(pairs) == len(result.events) >= 3
+    for located, reference in pairs:
+        assert abs(located - reference) <= 4e-16 * abs(reference) + 1e-14
