@@ -82,6 +82,43 @@ def test_the_step_hook_reports_progress_and_can_stop_a_run(chain):
     assert len(seen) == 3 and 0.0 < seen[0] < seen[1] < seen[2] < LONG
 
 
+def test_a_run_leaves_the_sigint_handler_as_it_found_it(chain):
+    """During a run SIGINT only sets a flag; afterwards the caller's own handler is back."""
+    seen = []
+
+    def mine(signum, frame):
+        seen.append(signum)
+
+    previous = signal.signal(signal.SIGINT, mine)
+    try:
+        chain.simulate(0.5, np.full(4, 0.5), integrator="compiled")
+        assert signal.getsignal(signal.SIGINT) is mine
+        signal.raise_signal(signal.SIGINT)
+        assert seen == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_a_run_nested_in_a_hook_callback_keeps_the_outer_runs_hook(chain):
+    """A callback that runs a simulation of its own: the inner run uses (and then gives
+    back) the one compiled callback, the outer run keeps calling its hook and can be
+    stopped by it; the inner run's result equals a run outside any hook."""
+    calls, inner = [], []
+
+    def hook(t):
+        calls.append(t)
+        if len(calls) == 1:
+            inner.append(chain.simulate(0.5, np.full(4, 0.3), integrator="compiled").q[-1])
+        return len(calls) >= 3
+
+    with pytest.raises(mb.SimulationError, match="stopped at t = "):
+        with integrators.step_hook(hook, interval=0.0):
+            chain.simulate(200.0, np.full(4, 0.5), t_eval=[0.0, 200.0], integrator="compiled")  # (finite:
+            # an outer run that lost its hook finishes, and pytest.raises fails)
+    assert len(calls) == 3 and calls[0] < calls[1] < calls[2]
+    np.testing.assert_array_equal(inner[0], chain.simulate(0.5, np.full(4, 0.3), integrator="compiled").q[-1])
+
+
 def test_a_sweep_stops_its_remaining_cases_on_ctrl_c(chain):
     cases = [{"q0": np.full(4, 0.1 * i), "t_end": LONG, "t_eval": [0.0, LONG]} for i in range(1, 9)]
     timer = _interrupt_after(0.5)
