@@ -269,7 +269,7 @@ def merge_chain_rows(lines: list[str], oks: list[bool], previous: list[str], siz
     start = next(i for i, line in enumerate(lines) if line.startswith("|---"))
     kept_sizes = sorted({size_of(line) for line in old_rows})
     note = (f"Rows for N = {', '.join(map(str, kept_sizes))} are kept from the previous summary "
-            f"({date.lstrip('- ') or 'undated'}); the others are from this run.")
+            f"({date.lstrip('- ') or 'undated'}; their target column as judged there); the others are from this run.")
     oks = oks + [line.rstrip().endswith("| PASS |") for line in old_rows if "level" not in line and "|" in line
                  and "not resolved" not in line]
     return lines[:start + 1] + table + ["", note], oks
@@ -387,6 +387,10 @@ def main(argv=None):
             f"Written by `python bench/run_all.py{' --quick' if quick else ''}` "
             f"({'smoke run: one round, fewer settings' if quick else f'{rounds} interleaved rounds, medians'}; "
             f"{total / 60:.1f} min). Ratios are mbcomp / fastest peer from this one run; a ratio below 1 means "
+            "mbcomp is faster. Wall time is the primary figure on a machine with a free core; the machine may be "
+            "shared, so CPU-time ratios are given too, and the chain's verdicts are judged by CPU time when it was "
+            "oversubscribed (see its section)."
+            if "chain" in sections else
             "mbcomp is faster. Wall time is the primary figure; the machine may be shared, so CPU-time ratios "
             "are given too.", ""] + head + ["", *overview, ""]
     for part in PARTS:
