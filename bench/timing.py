@@ -5,7 +5,8 @@ each of its settings once per *round* (all tools and settings in turn, so that a
 spell hits them alike) and reports the **median over the rounds**, both as wall time and
 as process CPU time (CPU time leaves out the time spent waiting for a core; for the
 multi-threaded batch runs it adds the threads up, so there wall time is the figure).
-A run shorter than ``burst`` seconds is repeated within its round and averaged.
+A run shorter than ``burst`` seconds is repeated within its round (after one untimed
+warm-up call) and averaged; one garbage collection per setting and round.
 """
 from __future__ import annotations
 
@@ -17,9 +18,11 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 
-def timed(fn: Callable[[], Any]) -> tuple[float, float, Any]:
-    """(wall s, process CPU s, result) of one call, garbage collection off (as timeit)."""
-    gc.collect()
+def timed(fn: Callable[[], Any], collect: bool = True) -> tuple[float, float, Any]:
+    """(wall s, process CPU s, result) of one call, garbage collection off (as timeit);
+    ``collect``: a full collection first."""
+    if collect:
+        gc.collect()
     gc.disable()
     try:
         wall, cpu = time.perf_counter(), time.process_time()
@@ -55,11 +58,19 @@ class Run:
 
 
 def _once(run: Run, burst: float) -> None:
-    """Time ``run`` once in this round (repeated up to 5 times when shorter than ``burst``)."""
+    """Time ``run`` once in this round; a run shorter than ``burst`` is repeated (up to 5
+    timed calls) after one untimed warm-up call.
+
+    One garbage collection per setting and round, not one per call: with a compiled model's
+    sympy objects alive a collection takes ~70 ms and leaves the caches cold, which added
+    0.2-0.5 ms to every millisecond run right after it, whichever the tool (an additive
+    penalty that favours the slower tool in a ratio); the warm-up puts the short run's code
+    and data back in the caches, as when a user runs it in a loop."""
+    gc.collect()
     walls, cpus = [], []
     while True:
         try:
-            wall, cpu, out = timed(run.fn)
+            wall, cpu, out = timed(run.fn, collect=False)
         except Exception as exc:        # a diverging fixed step: recorded, never timed again
             run.failed = f"{type(exc).__name__}: {str(exc)[:100]}"
             return
@@ -67,8 +78,10 @@ def _once(run: Run, burst: float) -> None:
             run.result = out
         walls.append(wall)
         cpus.append(cpu)
-        if sum(walls) > burst or len(walls) >= 5:
+        if walls[0] > burst or sum(walls[1:]) > burst or len(walls) >= 6:
             break
+    if len(walls) > 1:  # the first call was the warm-up
+        walls, cpus = walls[1:], cpus[1:]
     run.walls.append(sum(walls) / len(walls))
     run.cpus.append(sum(cpus) / len(cpus))
 

@@ -563,6 +563,11 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
 HOOK_INTERVAL = 0.05
 _HOOK_TYPE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
 _hooks = threading.local()  # this thread's callbacks (step_hook)
+try:  # the C functions behind ``signal.signal``/``getsignal``: the wrappers convert handlers to
+    # and from enums, which cost ~40 us per run, a tenth of a 50-link chain's loose-tolerance run
+    from _signal import SIGINT as _SIGINT, getsignal as _getsignal, signal as _setsignal
+except ImportError:  # not CPython
+    _SIGINT, _getsignal, _setsignal = signal.SIGINT, signal.getsignal, signal.signal
 try:
     _check_signals = ctypes.pythonapi.PyErr_CheckSignals  # runs Python's handlers: Ctrl-C raises here
     _check_signals.argtypes, _check_signals.restype = [], ctypes.c_int
@@ -606,7 +611,7 @@ class _Hook:
         self.previous = None      # the SIGINT handler to restore (when one was replaced)
         self.signal = None        # (signum, frame) of a SIGINT received during the run
         self.error: BaseException | None = None
-        self.pointer = _HOOK_TYPE(self)  # kept alive with this object
+        self.outer: "_Hook | None" = None  # the hook of a run this one is nested in (a callback's)
 
     def __call__(self, t: float) -> int:
         try:
@@ -625,24 +630,30 @@ class _Hook:
     def install(self, lib) -> None:
         if self.main:
             try:
-                previous = signal.getsignal(signal.SIGINT)
+                previous = _getsignal(_SIGINT)
                 if callable(previous):
-                    signal.signal(signal.SIGINT, self._on_sigint)
+                    _setsignal(_SIGINT, self._on_sigint)
                     self.previous = previous
             except ValueError:  # not the main interpreter
                 pass
-        setter = lib.set_step_hook
-        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
-        setter(self.pointer, self.interval)
+        self.outer = getattr(_hooks, "active", None)
+        _hooks.active = self
+        _hook_setter(lib)(_TRAMPOLINE, self.interval)
 
     def remove(self, lib) -> None:
-        """Unset the hook, restore the SIGINT handler and deliver a pending Ctrl-C to it."""
-        lib.set_step_hook(_HOOK_TYPE(), 0.0)
+        """Unset the hook (the outer run's again, for a nested run), restore the SIGINT
+        handler and deliver a pending Ctrl-C to it."""
+        _hooks.active = self.outer
+        if self.outer is None:
+            _hook_setter(lib)(_NO_HOOK, 0.0)
+        else:
+            _hook_setter(lib)(_TRAMPOLINE, self.outer.interval)
+        self.outer = None
         self._deliver()
 
     def _deliver(self, where: str = "") -> None:
         if self.previous is not None:
-            signal.signal(signal.SIGINT, self.previous)
+            _setsignal(_SIGINT, self.previous)
         previous, self.previous = self.previous, None
         pending, self.signal = self.signal, None
         if pending is not None and previous is not None:
@@ -662,6 +673,25 @@ class _Hook:
                 self.error.add_note(where)
             raise self.error
         raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
+
+
+def _dispatch(t: float) -> int:
+    """The one C callback of every compiled loop: this thread's active ``_Hook`` (creating a
+    ctypes callback per run cost more than the rest of a short run's set-up)."""
+    hook = getattr(_hooks, "active", None)
+    return 0 if hook is None else hook(t)
+
+
+_TRAMPOLINE = _HOOK_TYPE(_dispatch)
+_NO_HOOK = _HOOK_TYPE()
+
+
+def _hook_setter(lib):
+    """``lib.set_step_hook`` with its argument types (set once per library)."""
+    setter = lib.set_step_hook
+    if setter.restype is not None:
+        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
+    return setter
 
 
 @contextlib.contextmanager

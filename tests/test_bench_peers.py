@@ -41,6 +41,21 @@ def test_measure_takes_medians_and_stops_a_sweep_once_accurate():
     assert run.wall == 3.0
 
 
+def test_a_short_run_is_timed_after_a_warm_up_call(monkeypatch):
+    """Below ``burst``: one untimed warm-up call, then up to 5 timed ones (their mean); one
+    garbage collection per round, none between the calls; a long run is timed once."""
+    script = iter([(0.004, 0.003), (0.001, 0.001), (0.002, 0.002), (0.001, 0.001), (0.002, 0.002), (0.004, 0.004),
+                   (0.5, 0.4)])
+    collects = []
+    monkeypatch.setattr(timing, "timed", lambda fn, collect=True: (*next(script), fn()))
+    monkeypatch.setattr(timing.gc, "collect", lambda: collects.append(1))
+    short, long = timing.Run("s", "k", 1, lambda: "out"), timing.Run("l", "k", 1, lambda: "out")
+    timing.measure([short, long], 1, burst=0.05, log=lambda *_: None)
+    assert short.walls == [pytest.approx(0.002)] and short.cpus == [pytest.approx(0.002)]   # the warm-up left out
+    assert long.walls == [0.5] and long.cpus == [0.4] and short.result == "out"
+    assert len(collects) == 2                                                                 # one per run and round
+
+
 def test_exact_bouncing_ball():
     t1 = math.sqrt(2 * (HEIGHT - RADIUS) / G)
     assert math.isclose(exact_height(0.0), HEIGHT)

@@ -34,6 +34,14 @@ def _interrupt_after(seconds: float) -> threading.Timer:
     return timer
 
 
+def _warm_up(system, method: str) -> None:
+    """One short run first, so that what a process does on its first run (modules imported
+    on first use) is done before the interrupt is timed: on a loaded machine it could take
+    longer than the delay, and Ctrl-C would then land before the compiled loop starts."""
+    system.simulate(0.01, np.full(4, 0.5), method=method, integrator="compiled", t_eval=[0.0, 0.01],
+                    **({"dt": 1e-3} if method == "RK4" else {}))
+
+
 def _where(exc: BaseException) -> float:
     """The simulated time the interrupt note reports."""
     notes = " ".join(getattr(exc, "__notes__", []))
@@ -45,6 +53,7 @@ def _where(exc: BaseException) -> float:
                                            ("RK4", {"dt": 1e-3})], ids=["dop853-dense", "dop853-steps", "rk4"])
 def test_ctrl_c_stops_a_compiled_run(chain, method, extra):
     q0 = np.full(4, 0.5)
+    _warm_up(chain, method)
     timer = _interrupt_after(0.3)
     try:
         with pytest.raises(KeyboardInterrupt) as info:
@@ -56,6 +65,7 @@ def test_ctrl_c_stops_a_compiled_run(chain, method, extra):
 
 def test_a_run_after_an_interrupt_is_unaffected(chain):
     q0 = np.full(4, 0.5)
+    _warm_up(chain, "DOP853")
     timer = _interrupt_after(0.2)
     try:
         with pytest.raises(KeyboardInterrupt):
@@ -80,6 +90,43 @@ def test_the_step_hook_reports_progress_and_can_stop_a_run(chain):
         with integrators.step_hook(hook, interval=0.0):
             chain.simulate(LONG, np.full(4, 0.5), t_eval=[0.0, LONG], integrator="compiled")
     assert len(seen) == 3 and 0.0 < seen[0] < seen[1] < seen[2] < LONG
+
+
+def test_a_run_leaves_the_sigint_handler_as_it_found_it(chain):
+    """During a run SIGINT only sets a flag; afterwards the caller's own handler is back."""
+    seen = []
+
+    def mine(signum, frame):
+        seen.append(signum)
+
+    previous = signal.signal(signal.SIGINT, mine)
+    try:
+        chain.simulate(0.5, np.full(4, 0.5), integrator="compiled")
+        assert signal.getsignal(signal.SIGINT) is mine
+        signal.raise_signal(signal.SIGINT)
+        assert seen == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_a_run_nested_in_a_hook_callback_keeps_the_outer_runs_hook(chain):
+    """A callback that runs a simulation of its own: the inner run uses (and then gives
+    back) the one compiled callback, the outer run keeps calling its hook and can be
+    stopped by it; the inner run's result equals a run outside any hook."""
+    calls, inner = [], []
+
+    def hook(t):
+        calls.append(t)
+        if len(calls) == 1:
+            inner.append(chain.simulate(0.5, np.full(4, 0.3), integrator="compiled").q[-1])
+        return len(calls) >= 3
+
+    with pytest.raises(mb.SimulationError, match="stopped at t = "):
+        with integrators.step_hook(hook, interval=0.0):
+            chain.simulate(200.0, np.full(4, 0.5), t_eval=[0.0, 200.0], integrator="compiled")  # (finite:
+            # an outer run that lost its hook finishes, and pytest.raises fails)
+    assert len(calls) == 3 and calls[0] < calls[1] < calls[2]
+    np.testing.assert_array_equal(inner[0], chain.simulate(0.5, np.full(4, 0.3), integrator="compiled").q[-1])
 
 
 def test_a_sweep_stops_its_remaining_cases_on_ctrl_c(chain):
