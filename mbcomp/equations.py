@@ -285,7 +285,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None,
-                  recursive: bool = False, factors: bool = False) -> Program:
+                  recursive: bool = False, factors: bool = False, ready=None) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
@@ -296,7 +296,12 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     also ``"aba"`` (``recursive.aba_outputs``: the accelerations by the O(N)
     articulated-body recursion, with the run-time generalised forces as extra inputs; with
     ``factors`` also what the dae formulation's KKT solve needs).
+
+    ``ready(prog, names)``, when given, is called as soon as the outputs ``names`` are final
+    (the rest of the program only appends assignments), so that a code generator can print
+    and compile them while the rest is built.  It must not change the program.
     """
+    ready = ready or (lambda prog, names: None)
     nq, nv = topology.nq, topology.nv
     n_inputs = sum(size for _, size in inputs.values())
     prog = Program(q=[sp.Symbol(f"q{i}") for i in range(nq)], qd=[sp.Symbol(f"qd{i}") for i in range(nv)],
@@ -353,6 +358,14 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         inertia[body.name] = SpatialInertia(mass, [mass * c for c in com], Ibar).materialise(prog)
         weight = [mass * g for g in gravity]
         external[body.name] = prog.lets(cross(com, weight) + weight)
+
+    kinematics = []
+    for body in topology.bodies:
+        kinematics += [e for row in kin.R[body.name] for e in row] + kin.origin[body.name] + kin.V[body.name] + kin.A[body.name]
+    for S in kin.S:
+        kinematics += S
+    prog.outputs["kinematics"] = kinematics
+    ready(prog, ["kinematics"])
 
     generalized = [sp.Integer(0)] * nv
     potential = sp.Integer(0)
@@ -415,16 +428,13 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
             kinetic += value * prog.qd[i] ** 2 / 2
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
     prog.outputs["forces"] = forces
+    ready(prog, ["mass_matrix", "forces"])
     prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
-    kinematics = []
-    for body in topology.bodies:
-        kinematics += [e for row in kin.R[body.name] for e in row] + kin.origin[body.name] + kin.V[body.name] + kin.A[body.name]
-    for S in kin.S:
-        kinematics += S
-    prog.outputs["kinematics"] = kinematics
+    ready(prog, ["energy"])
     if recursive:
         from .recursive import aba_outputs
         aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature, factors=factors)
+        ready(prog, ["aba"])
     constraint_outputs(prog, kin, equations)
     constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
     from .drive_equations import drive_outputs
