@@ -104,13 +104,13 @@ def _add(A, B) -> list:
 
 
 def _matvec(A, x) -> list:
-    import sympy as sp  # only when the program is built
-    return [sum((a * b for a, b in zip(row, x)), sp.Integer(0)) for row in A]
+    from .equations import dot  # sympy: only when the program is built
+    return [dot(row, x) for row in A]
 
 
 def _dot(a, b):
-    import sympy as sp  # only when the program is built
-    return sum((x * y for x, y in zip(a, b)), sp.Integer(0))
+    from .equations import dot  # sympy: only when the program is built
+    return dot(a, b)
 
 
 def speed_tree(topology) -> tuple[list, dict]:
