@@ -159,6 +159,10 @@ UNIT_STATEMENTS = 1500
 #: Short functions packed into one unit: a pack of this many statements starts compiling as soon
 #: as its functions are final instead of waiting for more (``codegen.UnitStream``).
 EAGER_STATEMENTS = 300
+#: A hot function longer than this (and shorter than a unit) is compiled as two halves side
+#: by side (``codegen.UnitStream``): measured on the chain, -O1 takes 0.22 s for the 354
+#: statements of N = 5 in one unit, 0.07 + 0.10 s in two; 0.52 s for N = 10 (804), 0.17 + 0.25 s.
+HALVE_STATEMENTS = 300
 
 
 def compile_jobs() -> int:

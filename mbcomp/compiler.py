@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from . import cache, codegen, recursive
-from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
+from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
+                      UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
                       c_compiler, c_library)
 from .components._values import name_of
 from .param_layout import input_layout, parameter_layout, parameter_values
@@ -159,7 +160,8 @@ class CompiledModel:
         templates = self._c_templates()
         tools = cache.toolchain(compiler, C_FLAGS)
         plan = (f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit, "
-                f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final")  # how the C is built
+                f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final, "
+                f"hot functions of more than {HALVE_STATEMENTS} in two halves")  # how the C is built
         self.key = cache.entry_key(self.description, templates + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
@@ -194,7 +196,8 @@ class CompiledModel:
             def ready(prog, names):
                 nonlocal stream
                 if stream is None:
-                    stream = codegen.UnitStream(prog, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS)
+                    stream = codegen.UnitStream(prog, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
+                                                 halve=HALVE_STATEMENTS)
                 final.update(names)
                 now = {f: outs for f, outs in functions.items() if f not in done and set(outs) <= final}
                 done.update(now)
@@ -203,7 +206,8 @@ class CompiledModel:
             if self._program is None:
                 self._build_program(ready)
             if stream is None:
-                stream = codegen.UnitStream(self.program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS)
+                stream = codegen.UnitStream(self.program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
+                                                 halve=HALVE_STATEMENTS)
             compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
             compile_units(stream.flush())
         except BaseException:

@@ -244,3 +244,27 @@ class TestStreamedUnits:
             assert library  # linked: the bytes of a shared library
         finally:
             build.cancel()
+
+
+@needs_cc
+def test_a_hot_function_is_compiled_in_two_halves_with_the_same_numbers(chain):
+    """``halve``: the hot dynamics of the 4-link chain as two units of half its statements each,
+    linked into the numbers of the whole-function unit."""
+    compiled, p = chain
+    needed = len(compiled.program.needed(FUNCTIONS["dynamics"]))
+    stream = codegen.UnitStream(compiled.program, cold=COLD_FUNCTIONS, halve=needed - 1)
+    units = stream.add(dict(FUNCTIONS)) + stream.flush()
+    halves = [u for u in units if u.name.startswith("dynamics")]
+    assert [u.statements for u in halves] == [-(-needed // 2), needed // 2] and all(u.hot for u in halves)
+    build = CBuild(c_compiler())
+    build.add("templates", codegen.c_prototypes(FUNCTIONS) + compiled.output_layout.c_defines()
+              + codegen.c_accelerations(compiled.topology.nv), C_FLAGS)
+    for u in units:
+        build.add(u.name, u.text, C_FLAGS if u.hot else COLD_FLAGS, u.statements)
+    split = c_library(build.finish(), compiled.sizes)
+    whole = c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                        + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
+                        compiled.sizes)
+    for seed in range(3):
+        q, qd = _states(compiled, seed)
+        assert np.array_equal(split("dynamics", q, qd, p, np.zeros(0)), whole("dynamics", q, qd, p, np.zeros(0)))
