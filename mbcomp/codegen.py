@@ -218,15 +218,17 @@ class UnitStream:
         free = self._free_symbols()
         for fname, outputs in functions.items():
             hot = fname not in self.cold
-            parts, main = _c_function(self.prog, fname, outputs, self.chunk, "", free)
-            total = sum(size for _, size in parts)
-            unit = self.unit
-            if hot and self.halve is not None and self.halve < total <= unit:
+            total = len(self.prog.needed(outputs, free))
+            count = -(-total // self.unit)  # units of its own (1: packed with other functions)
+            if hot and self.halve is not None and total > self.halve:
                 # An optimising compiler's time grows faster than the function: two halves take
                 # less time together than the whole (N = 5 chain: 0.17 s against 0.22 s), and
-                # run on two cores.  Printed again with half-size chunks: the same statements.
-                unit = -(-total // 2)
-                parts, main = _c_function(self.prog, fname, outputs, unit, "", free)
+                # run on two cores.
+                count = max(count, 2)
+            # A function of several units: units of equal size, one chunk each (N = 20: 1024 +
+            # 1024 statements, not 1500 + 548), the same statements in the same order.
+            unit = -(-total // count) if count > 1 else self.unit
+            parts, main = _c_function(self.prog, fname, outputs, unit if count > 1 else self.chunk, "", free)
             if total > unit:  # its own function only calls the chunks and copies the outputs out of
                 # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
                 main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
