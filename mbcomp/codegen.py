@@ -225,10 +225,16 @@ class UnitStream:
                 # less time together than the whole (N = 5 chain: 0.17 s against 0.22 s), and
                 # run on two cores.
                 count = max(count, 2)
-            # A function of several units: units of equal size, one chunk each (N = 20: 1024 +
-            # 1024 statements, not 1500 + 548), the same statements in the same order.
-            unit = -(-total // count) if count > 1 else self.unit
-            parts, main = _c_function(self.prog, fname, outputs, unit if count > 1 else self.chunk, "", free)
+            # A function of several units: units of equal size (N = 20: 1024 + 1024 statements, not
+            # 1500 + 548) made of equal chunks of at most ``chunk`` statements (4 x 256), the same
+            # statements in the same order.
+            unit, chunk = self.unit, self.chunk
+            if count > 1:
+                share = -(-total // count)
+                per_unit = -(-share // chunk)
+                chunk = -(-share // per_unit)
+                unit = per_unit * chunk
+            parts, main = _c_function(self.prog, fname, outputs, chunk, "", free)
             if total > unit:  # its own function only calls the chunks and copies the outputs out of
                 # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
                 main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
