@@ -413,9 +413,9 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     ready(prog, ["kinematics"])
 
     generalized = [sp.Integer(0)] * nv
-    potential = sp.Integer(0)
+    potential = []  # terms, summed once at the end (a growing sum rebuilt per body is O(N^2))
     for body in topology.bodies:
-        potential -= inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)
+        potential.append(-(inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)))
     for element in topology.forces:
         for load in element._loads(kin):
             if load[0] == "generalized":
@@ -428,17 +428,17 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
                 continue
             wrench = cross(load[2], load[3]) + list(load[3]) if load[0] == "point" else list(load[2]) + [0, 0, 0]
             external[target] = prog.lets([a + b for a, b in zip(external[target], wrench)])
-        potential += element._potential(kin)
+        potential.append(element._potential(kin))
 
     # Backward pass: composite inertias and wrenches, projected on the motion columns.
     composite = {b.name: inertia[b.name] for b in topology.bodies}
     wrench = {}
-    kinetic = sp.Integer(0)
+    kinetic = []  # terms, as the potential's
     for body in topology.bodies:
         I = inertia[body.name]
         V = kin.V[body.name]
         momentum = prog.lets(I.apply(V))
-        kinetic += dot(V, momentum) / 2
+        kinetic.append(dot(V, momentum) / 2)
         body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
         wrench[body.name] = prog.lets(body_force)
     own_wrench = dict(wrench)  # each body's own, before the subtree sums (recursive program)
@@ -470,11 +470,11 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
             i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
             armature[i] = armature.get(i, 0) + value
             M[i, i] = prog.let(M[i, i] + value)
-            kinetic += value * prog.qd[i] ** 2 / 2
+            kinetic.append(value * prog.qd[i] ** 2 / 2)
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
     prog.outputs["forces"] = forces
     ready(prog, ["mass_matrix", "forces"])
-    prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
+    prog.outputs["energy"] = [prog.let(sp.Add(*kinetic)), prog.let(sp.Add(*potential))]
     ready(prog, ["energy"])
     if recursive:
         from .recursive import aba_outputs
