@@ -17,12 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import sympy as sp
-from sympy.core.add import _addsort
-from sympy.core.basic import Basic
-
-_ZERO = sp.S.Zero
 
 from .components import Body
+from .symbolic import dot, product, total  # noqa: F401 - dot and product are this module's too
 from .components._values import name_of
 
 
@@ -32,53 +29,9 @@ def exact(value: float) -> sp.Expr:
     return sp.Integer(int(value)) if value.is_integer() else sp.Float(value)
 
 
-def product(x, y):
-    """``x * y``, the same expression as sympy's, built directly when both are distinct
-    symbols (the common case of the program's dot products: sympy's general ``Mul``
-    takes ~8x longer to find that nothing combines)."""
-    if getattr(x, "is_Symbol", False) and getattr(y, "is_Symbol", False) and x != y:
-        return sp.Mul._from_args((x, y) if Basic.compare(x, y) < 0 else (y, x), True)
-    return x * y
-
-
-def _plain_term(e) -> bool:
-    """A symbol, or a product of symbols with at most a leading number: a term that sympy's
-    ``Add`` keeps as it is unless another term has the same symbols."""
-    if e.is_Symbol:
-        return True
-    if not e.is_Mul:
-        return False
-    args = e.args
-    return all(a.is_Symbol for a in args[1:]) and (args[0].is_Symbol or args[0].is_Number)
-
-
-def total(terms: list):
-    """``sympy.Add(*terms)``, built directly when every term is plain (``_plain_term``) and no
-    two share their symbols: then sympy's sum is those terms in its canonical order."""
-    terms = [t for t in terms if t is not _ZERO]
-    if len(terms) < 2:
-        return terms[0] if terms else _ZERO
-    seen = set()
-    for t in terms:
-        if not _plain_term(t):
-            return sp.Add(*terms)
-        key = t.as_coeff_Mul()[1]
-        if key in seen:
-            return sp.Add(*terms)
-        seen.add(key)
-    _addsort(terms)
-    return sp.Add._from_args(terms, True)
-
-
 def cross(a, b):
     return [total([product(a[1], b[2]), -product(a[2], b[1])]), total([product(a[2], b[0]), -product(a[0], b[2])]),
             total([product(a[0], b[1]), -product(a[1], b[0])])]
-
-
-def dot(a, b):
-    """``sum(x * y)`` as one ``Add`` (the same canonical sum as adding term by term, without
-    building every partial sum: most of the symbolic work of a large mass matrix)."""
-    return total([product(x, y) for x, y in zip(a, b)])
 
 
 def matvec(R, v):

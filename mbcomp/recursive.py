@@ -104,12 +104,12 @@ def _add(A, B) -> list:
 
 
 def _matvec(A, x) -> list:
-    from .equations import dot  # sympy: only when the program is built
+    from .symbolic import dot  # sympy: only when the program is built
     return [dot(row, x) for row in A]
 
 
 def _dot(a, b):
-    from .equations import dot  # sympy: only when the program is built
+    from .symbolic import dot  # sympy: only when the program is built
     return dot(a, b)
 
 
@@ -143,7 +143,7 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
     the mass-matrix diagonal.
     """
     import sympy as sp  # only when the program is built (a cached model loads without it)
-    from .equations import product, total  # sympy's own expressions, built directly
+    from .symbolic import product, total  # sympy's own expressions, built directly
     nv = topology.nv
     tau = [sp.Symbol(f"tau{k}") for k in range(nv)]
     prog.tau_offset = len(prog.u)

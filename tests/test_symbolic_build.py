@@ -1,11 +1,12 @@
-"""The program builder's direct constructions (equations.product, equations.total) give exactly
+"""The program builder's direct constructions (symbolic.product, symbolic.total) give exactly
 sympy's own expressions: the same arguments in the same order, so the same generated code."""
 from __future__ import annotations
 
 import sympy as sp
 import pytest
 
-from mbcomp.equations import cross, dot, product, total
+from mbcomp.equations import cross
+from mbcomp.symbolic import dot, product, total
 
 t1, t2, t10, q0, u3 = sp.symbols("t1 t2 t10 q0 u3")
 
