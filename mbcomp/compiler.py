@@ -147,6 +147,8 @@ class CompiledModel:
         if self.dynamics == "recursive":  # the tree solve, and the dae KKT solve, by the recursive program
             tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
         reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
+        if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
+            reduced += "#define DAE_LOOP 1\n"
         return (reduced + self.output_layout.c_defines() + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")

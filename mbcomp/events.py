@@ -59,8 +59,13 @@ class ContactWatch:
                 q, qd = workspace.full_state(s, dense(s))
                 return self.gaps(q, qd).g[i]
 
-            from scipy.optimize import brentq
-            te = t_old if gap(t_old) <= 0.0 else brentq(gap, t_old, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+            if gap(t_old) <= 0.0:
+                te = t_old
+            elif hasattr(self.locator, "gap_root"):  # Brent's method in compiled code (events_c.py)
+                te = self.locator.gap_root(i, t_old, t_new, 1e-14, 4 * np.finfo(float).eps)
+            else:
+                from scipy.optimize import brentq
+                te = brentq(gap, t_old, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
             if earliest is None or te < earliest:
                 earliest = te
         return earliest
@@ -91,6 +96,8 @@ class ContactWatch:
         contact = self.persistent[k]
         if force(t_old) <= 0.0:
             return t_old, contact
+        if hasattr(self.locator, "force_root"):  # Brent's method in compiled code (events_c.py)
+            return self.locator.force_root(k, t_old, t_new, 1e-13, 4 * np.finfo(float).eps), contact
         from scipy.optimize import brentq
         return brentq(force, t_old, t_new, xtol=1e-13, rtol=4 * np.finfo(float).eps), contact
 

@@ -79,6 +79,7 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
         f"#define NCOORD {nq}",
+        f"#define LOOP_EVENT {EVENT}",
         f"#define NV {nv}",
         f"#define NMECH {nq + nv}",
         f"#define NZ {nz}",
@@ -219,6 +220,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         /* contacts watched: a step in which one closes or a held one would pull is not taken */
         const int event = lag_nk ? lagrange_event(t_new, y_new, p, tau) : 0;
         if (event < 0) { status = event; goto done; }
+#elif defined(DAE_LOOP)
+        /* contacts watched (dae): the multipliers of the last evaluation, at (t_new, y_new) */
+        const int event = dae_nk ? dae_event(t_new, y_new, p) : 0;
 #else
         const int event = 0;
 #endif
@@ -244,13 +248,18 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                     F[(3 + r) * LOOP_NY + i] = h * acc;
                 }
             }
-#if LOOP_REDUCED
+#if LOOP_REDUCED || defined(DAE_LOOP)
             if (event) {  /* [t_new, y_new, f_new, F] for Python; the loop stays at the step's start */
-                lag_ev[0] = t_new;
-                memcpy(lag_ev + 1, y_new, sizeof(double) * LOOP_NY);
-                memcpy(lag_ev + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
-                memcpy(lag_ev + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
-                status = LAG_EVENT;
+#if LOOP_REDUCED
+                double *ev_ = lag_ev;
+#else
+                double *ev_ = dae_ev;
+#endif
+                ev_[0] = t_new;
+                memcpy(ev_ + 1, y_new, sizeof(double) * LOOP_NY);
+                memcpy(ev_ + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+                memcpy(ev_ + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
+                status = LOOP_EVENT;
                 goto done;
             }
 #endif
@@ -296,8 +305,8 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         memcpy(y, y_new, sizeof(double) * LOOP_NY);
         memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
-#if NG > 0 && NQUAT == 0 && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (dae_nr >= 0 && dae_project(y, p, dummy_input, work)) {  /* back onto the constraints */
+#if defined(DAE_LOOP) && NQUAT == 0 && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
         }
@@ -350,8 +359,9 @@ static int mech_rhs(double t, const double *y, double *f, const double *p, const
 #else
     for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
 #endif
-#if NG > 0
+#ifdef DAE_LOOP
     if (dae_nr >= 0) {
+        dae_time = t;
         int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
         return status == 2 ? -5 : status;
     }
@@ -676,6 +686,11 @@ def bind_reduced(lib):
     return run
 
 
+def bind_dop853(lib):
+    """``dop853_run`` (the loop on the tree state ``[q, v, z]``) with its argument types."""
+    return _bind(lib)[0]
+
+
 def _bind(lib):
     void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
     run = lib.dop853_run
@@ -790,7 +805,7 @@ def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndar
     """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
     entirely in compiled code; returns ``(t, y, stats, wall)``."""
     lib = kernel.compiled.functions.lib
-    with formulation.compiled_setup(lib):  # e.g. the dae rows and gains, for this thread only
+    with formulation.compiled_setup(lib, kernel=kernel, q0=q0):  # e.g. the dae rows and gains, for this thread only
         tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
         session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
         if session is None:
@@ -916,5 +931,6 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
             return status, np.concatenate(chunks_t), np.concatenate(chunks_y), y, f
         if status == STOPPED:
             hook.stopped(state[0], method)
-        _fail(kernel, status, state[0], y if session is None else np.concatenate(session.accepted()[1:]), method)
+        full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
+        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method)
 

@@ -234,9 +234,8 @@ static void aba_solve(const double *D, const double *W, const double *S, const d
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
                       const double *tau, double *qdd, double *work) {{
     const int n = ABA_NV, nr = dae_nr;
-    double ue[ABA_NU + ABA_NV + 1], fac[14 * ABA_NV], c[CONSTRAINTS_SIZE], X[ABA_NV * NG], A[NG * NG];
-    double r[NG], lam[NG], col[ABA_NV], pa[6 * ABA_NV];
-    (void)work;
+    double ue[ABA_NU + ABA_NV + 1], fac[14 * ABA_NV], X[ABA_NV * DAE_NR], A[DAE_NR * DAE_NR];
+    double r[DAE_NR], lam[DAE_NR], col[ABA_NV], pa[6 * ABA_NV];
     for (int i = 0; i < ABA_NU; ++i) ue[i] = u[i];
     for (int i = 0; i < n; ++i) ue[ABA_NU + i] = tau ? tau[i] : 0.0;
     aba(q, qd, p, ue, fac);
@@ -244,32 +243,33 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     double scale = 1e-300;
     for (int i = 0; i < n; ++i) if (fabs(D[i]) > scale) scale = fabs(D[i]);
     for (int i = 0; i < n; ++i) if (!(D[i] > 1e-13 * scale)) return 1;
-    constraints(q, qd, p, u, c);
-    const double *g = c + CONSTRAINTS_RESIDUAL_OFF, *J = c + CONSTRAINTS_JACOBIAN_OFF, *bias = c + CONSTRAINTS_BIAS_OFF;
+    dae_rows_eval(q, qd, p, u, work);  /* the configured rows (formulations/dae_c.py) */
+    const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
     for (int k = 0; k < nr; ++k) {{  /* X[:, k] = M^-1 J_row^T; the row's right-hand side */
-        const double *Jr = J + dae_rows[k] * n;
+        const double *Jr = J + k * n;
         aba_solve(D, W, S, Jr, col, pa);
-        double gdot = 0.0, jfree = 0.0;
+        double gdot = gt[k], jfree = 0.0;
         for (int i = 0; i < n; ++i) {{
-            X[i * NG + k] = col[i];
+            X[i * DAE_NR + k] = col[i];
             gdot += Jr[i] * qd[i];
             jfree += Jr[i] * free_[i];
         }}
-        r[k] = -bias[dae_rows[k]] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[dae_rows[k]] - jfree;
+        r[k] = -bias[k] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[k] - jfree;
     }}
     for (int a = 0; a < nr; ++a)  /* A = J_r M^-1 J_r^T (lower) */
         for (int b = 0; b <= a; ++b) {{
-            const double *Ja = J + dae_rows[a] * n;
+            const double *Ja = J + a * n;
             double s = 0.0;
-            for (int i = 0; i < n; ++i) s += Ja[i] * X[i * NG + b];
-            A[a * NG + b] = s;
+            for (int i = 0; i < n; ++i) s += Ja[i] * X[i * DAE_NR + b];
+            A[a * DAE_NR + b] = s;
         }}
     const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
     if (dropped < 0) return 2;
     if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
+    for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
     for (int i = 0; i < n; ++i) {{
         double s = free_[i];
-        for (int k = 0; k < nr; ++k) s += X[i * NG + k] * lam[k];
+        for (int k = 0; k < nr; ++k) s += X[i * DAE_NR + k] * lam[k];
         qdd[i] = s;
     }}
     return 0;

@@ -11,7 +11,7 @@ from .errors import ModelError, SimulationError, TrialStateError
 from .events import ContactWatch
 from .impact import GAP_TOLERANCE
 from .drive_runtime import DriveTorque, DriveWorkspace
-from .integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_reduced, collapse_message, compiled_jacobian,
+from .integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_dop853, bind_reduced, collapse_message, compiled_jacobian,
                           dop853_segment, hooked, poll_step_hooks, run_compiled, step_hook, why_not_compiled)
 from .progress import ProgressBar
 
@@ -351,7 +351,8 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
     stepping (``_contact_step``), and the loop restarts after it."""
     from .formulations.lagrange_compiled import ReducedRun
     lib = kernel.compiled.functions.lib
-    run_loop = bind_reduced(lib)
+    Run = getattr(formulation, "contact_run", None) or ReducedRun  # the dae formulation steps [q, qd] itself
+    run_loop = bind_reduced(lib) if Run is ReducedRun else bind_dop853(lib)
     n = kernel.nv
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
@@ -373,8 +374,8 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
     started = time.perf_counter()
     with hooked(lib) as hook:
         while t < t_end:
-            with ReducedRun(formulation, kernel, lib, q, qd, tau_arr, t0=t, contacts=watch.persistent,
-                            offsets=offsets) as segment:
+            with Run(formulation, kernel, lib, q, qd, tau_arr, t0=t, contacts=watch.persistent,
+                     offsets=offsets) as segment:
                 if t == 0.0 and segment.ni == 0:
                     max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
                 segment.watch_contacts(gaps, GAP_TOLERANCE)

@@ -372,8 +372,9 @@ class Formulation:
         return f"the {self.name} formulation of a constrained model steps in Python (use formulation='dae')"
 
     @contextmanager
-    def compiled_setup(self, lib):
-        """Configure the compiled library for one compiled run on this thread (and undo it)."""
+    def compiled_setup(self, lib, kernel=None, q0=None):
+        """Configure the compiled library for one compiled run on this thread (and undo it);
+        ``kernel`` and the start coordinates ``q0`` when the configuration depends on them."""
         yield
 
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.

@@ -6,9 +6,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, SimulationError
 from .base import Formulation, Workspace
 from .dae_c import c_dae_accelerations
+from .dae_compiled import DaeRows, DaeRun, motor_programs
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
@@ -68,22 +69,47 @@ class DaeFormulation(Formulation):
         return c_dae_accelerations(nv, ng)
 
     def compiled_loop(self) -> str | None:
-        if self.constraints is None:
+        if self.constraints is None and not self.compiled.topology.contacts:
             return None
         if self.projection:
             return "projection=True steps in Python"
-        if self.constraints.coordinate_rows:
-            return "motors step in Python"
-        if self.nominal_rows is None:
+        for r, program in motor_programs(self).items():
+            if program is None:
+                return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
+                        f"which is evaluated in Python")
+        if self.compiled.topology.contacts:
+            if not self.compiled.topology.state_map.identity:
+                return "the dae formulation steps contacts on ball or free joints in Python"
+            if self.compiled.drives.elements:
+                return "the dae formulation steps contacts with drive elements in Python"
+        if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
 
+    @property
+    def compiled_contacts(self) -> bool:
+        """Contacts run in the compiled loop (events handled between compiled stretches)."""
+        return self.compiled_loop() is None
+
+    #: The compiled stretch between contact events (``simulate._compiled_contacts``).
+    contact_run = DaeRun
+
     @contextmanager
-    def compiled_setup(self, lib):
+    def compiled_setup(self, lib, kernel=None, q0=None):
         """The compiled right-hand side solves the KKT system on the rows found independent
-        at compile time, with this formulation's Baumgarte gains (set per thread)."""
+        at compile time (motor rows with the run's start values, from ``kernel`` and the
+        start coordinates ``q0``), with this formulation's Baumgarte gains (set per thread)."""
         if self.constraints is None:
             yield
+            return
+        if self.constraints.coordinate_rows:
+            if kernel is None or q0 is None:
+                raise SimulationError("the compiled dae solve of a model with motors needs the kernel and q0")
+            rows = DaeRows(self, kernel, lib, self.nominal_rows, self.motor_offsets(np.asarray(q0, dtype=float), 0.0))
+            try:
+                yield
+            finally:
+                rows.close()
             return
         configure = lib.dae_configure
         configure.argtypes = [ctypes.c_int, ctypes.c_void_p] + [ctypes.c_double] * 4

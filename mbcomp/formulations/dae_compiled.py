@@ -1,0 +1,271 @@
+"""The Python side of the dae formulation's compiled loop (``dae_c.py``).
+
+``DaeRows`` configures the KKT rows the compiled solve uses on this thread: geometric rows,
+motor rows (speed motors; position motors whose position is a file expression, run as
+postfix programs, ``expressions_c``) and the gaps of contacts held closed.
+
+``DaeRun`` is one compiled stretch of a run with contacts (``simulate._compiled_contacts``):
+the loop steps the full state ``[q, qd]`` and checks every accepted step for a contact
+event (a free contact closing, a held contact's force pulling); at one it stops with the
+step's end and dense output, Python locates the event with the gaps and forces evaluated
+in C (``locator``), applies the impact law (``events.ContactWatch``) and starts the next
+stretch with the new set of held contacts.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..errors import ModelError, SimulationError
+from ..expressions_c import compile_position
+from .dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
+
+_VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
+
+
+def _ptr(array: np.ndarray) -> int:
+    return array.__array_interface__["data"][0]
+
+
+def _bind_configure(lib):
+    """``dae_configure_rows`` with its argument types."""
+    configure = lib.dae_configure_rows
+    configure.argtypes = [_INT, _VOID, _VOID, _VOID, _DBL, _DBL, _DBL, _DBL]
+    configure.restype = ctypes.c_int
+    return configure
+
+
+def motor_programs(formulation) -> dict[int, np.ndarray | None]:
+    """Per motor row with a position function: its programs (value, first and second
+    derivative, ``expressions_c.compile_position``), or None for a Python callable."""
+    constraints = formulation.constraints
+    out = {}
+    if constraints is None:
+        return out
+    for r in constraints.coordinate_rows:
+        eq = constraints.equations[r]
+        if eq.speed is None:
+            try:
+                out[r] = compile_position(eq.position)
+            except ModelError:
+                out[r] = None
+    return out
+
+
+class DaeRows:
+    """The configured KKT rows of one compiled dae run: ``rows`` are equation indices of
+    the formulation's constraints (``nc`` and on: the held contacts, in ``contacts`` order).
+    The arrays the C code reads live as long as this object; ``close()`` switches it off."""
+
+    def __init__(self, formulation, kernel, lib, rows, offsets: dict | None, contacts: tuple = ()):
+        self.formulation, self.lib = formulation, lib
+        constraints = formulation.constraints
+        topology = kernel.topology
+        nc = 0 if constraints is None else constraints.nc
+        rows = [int(r) for r in rows]
+        spec = np.zeros((len(rows), SPEC_LONGS), dtype=np.int64)
+        data = np.zeros((len(rows), DATA_DOUBLES))
+        programs: list[np.ndarray] = []
+        start = 0
+        compiled = motor_programs(formulation)
+        for k, r in enumerate(rows):
+            spec[k, 4] = -1
+            if r >= nc:
+                spec[k, :2] = (ROW_CONTACT, contacts[r - nc])
+                continue
+            eq = constraints.equations[r]
+            if r not in constraints.coordinate_rows:
+                spec[k, :2] = (ROW_GEOMETRIC, constraints.geometric_rows.index(r))
+                continue
+            joint = eq.joint if isinstance(eq.joint, str) else eq.joint.name
+            spec[k, :4] = (ROW_MOTOR, r, topology.q_slice[joint].start, topology.v_slice[joint].start)
+            speed = constraints.motor_speed(kernel, r)
+            if speed is not None:
+                if offsets is None or r not in offsets:
+                    raise SimulationError(f"motor {constraints.owner[r]!r}: no start value for its coordinate")
+                data[k] = (speed, offsets[r])
+                continue
+            program = compiled.get(r)
+            if program is None:
+                raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
+                                                               "evaluated in compiled code")
+            spec[k, 4] = start
+            programs.append(program)
+            start += len(program)
+        self.spec = np.ascontiguousarray(spec)
+        self.data = np.ascontiguousarray(data)
+        self.programs = np.ascontiguousarray(np.concatenate(programs) if programs else np.zeros(1))
+        self.nr = len(rows)
+        configure = _bind_configure(lib)
+        alpha, beta = formulation.baumgarte
+        if configure(self.nr, _ptr(self.spec), _ptr(self.data), _ptr(self.programs), alpha, beta,
+                     float(formulation.schur_scale), float(formulation.singular_tolerance)):
+            raise SimulationError(f"the compiled dae solve has room for fewer rows than {self.nr}")
+
+    def close(self) -> None:
+        self.lib.dae_configure_rows(-1, None, None, None, 0.0, 0.0, 0.0, 0.0)
+
+    def __enter__(self) -> "DaeRows":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class DaeRun:
+    """One compiled stretch of a dae run with contacts, from ``(q0, qd0)`` at ``t0`` with the
+    held contacts ``contacts``; the interface ``simulate._compiled_contacts`` steps
+    (``y0``, ``ni``, ``watch_contacts``, ``event_step``, ``locator``, ``sync``, ``workspace``)."""
+
+    #: The loop steps the full state (``integrators.dop853_segment`` reads failures from y).
+    full_state_loop = True
+
+    def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0,
+                 contacts: tuple = (), offsets: dict | None = None):
+        self.formulation, self.kernel, self.lib = formulation, kernel, lib
+        self.contacts = tuple(contacts)
+        self.n = kernel.nv
+        self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
+        if offsets is not None:
+            self.workspace.offsets = offsets
+        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.restarts = 0
+        self.gaps = self.event = self.held = None
+        nc = 0 if formulation.constraints is None else formulation.constraints.nc
+        rows = self._rows(t0, q0)
+        self.dae_rows = None
+        if rows is not None and len(rows):
+            self.dae_rows = DaeRows(formulation, kernel, lib, rows, self.workspace.offsets, self.contacts)
+        else:  # the tree's own accelerations
+            _bind_configure(lib)(-1, None, None, None, 0.0, 0.0, 0.0, 0.0)
+        self.nc = nc
+
+    def _rows(self, t0, q0):
+        """The KKT rows at the stretch's start: the nominal rows without held contacts, else
+        the independent rows of the constraints and held contacts (as ``solve_constrained``);
+        None when there are none (the tree's own accelerations)."""
+        formulation = self.formulation
+        if not self.contacts:
+            if formulation.constraints is None:
+                return None
+            return formulation.nominal_rows
+        cv = formulation.constraint_values(self.kernel, t0, q0, np.zeros(self.n), self.workspace.offsets,
+                                           self.contacts)
+        return formulation.rows_of(cv.J)
+
+    @property
+    def ni(self) -> int:
+        return self.n
+
+    @property
+    def y0(self) -> np.ndarray:
+        return np.ascontiguousarray(self.workspace.y0, dtype=float)
+
+    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
+        """Check every accepted step for contact events: ``gaps`` of every contact at the
+        start (updated by the loop); this stretch's held contacts are ``contacts``."""
+        nk = len(gaps)
+        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
+        self.held = np.zeros(nk, dtype=np.int64)
+        self.held[list(self.contacts)] = 1
+        self.event = np.zeros(1 + 9 * 2 * self.n)
+        watch = self.lib.dae_watch
+        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
+        watch.restype = ctypes.c_int
+        watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
+
+    def event_step(self, t_old: float, y_old: np.ndarray):
+        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT."""
+        from scipy.integrate._ivp.rk import Dop853DenseOutput
+        ny = len(y_old)
+        t_new = float(self.event[0])
+        y_new = self.event[1:1 + ny].copy()
+        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
+        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
+
+    def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
+        return _Locator(self, t_old, y_old)
+
+    def sync(self) -> None:
+        """(The full state is the loop's own: nothing to bring over.)"""
+
+    def close(self) -> None:
+        if self.dae_rows is not None:
+            self.dae_rows.close()
+        if self.event is not None:
+            self.lib.dae_watch(0, None, None, 0.0, None)
+
+    def __enter__(self) -> "DaeRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class _Locator:
+    """``gap(s, i)`` and ``force(s, k)`` (contact i's gap, the k-th held contact's normal
+    force) on the event step of a ``DaeRun``, from its dense output, computed in C."""
+
+    def __init__(self, run: DaeRun, t_old: float, y_old: np.ndarray):
+        self.run, self.t_old = run, float(t_old)
+        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
+        ny = len(self.y_old)
+        self.h = float(run.event[0]) - self.t_old
+        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
+        lib = run.lib
+        self._gap, self._force = lib.dae_gap_at, lib.dae_force_at
+        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
+        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
+        self._gap.restype = self._force.restype = _DBL
+        self.args = (self.t_old, self.h, _ptr(self.y_old), _ptr(self.F), ny)
+        self.p = _ptr(run.kernel.p)
+        self.tau = None if run.tau is None else _ptr(run.tau)
+        rows = [] if run.dae_rows is None else run.dae_rows.spec
+        # configured row of each held contact (None: dropped as dependent, its force is 0)
+        self.row_of = {}
+        for k, spec in enumerate(rows):
+            if spec[0] == ROW_CONTACT:
+                self.row_of[int(spec[1])] = k
+
+    def _root(self, fn, a: float, b: float, index: int, xtol: float, rtol: float, what: str, *extra) -> float:
+        status = ctypes.c_int(0)
+        value = fn(float(a), float(b), *self.args, int(index), self.p, *extra, float(xtol), float(rtol),
+                   ctypes.byref(status))
+        if status.value == 1:
+            raise SimulationError(f"the {what} does not change sign on [{a:.9g}, {b:.9g}] s")
+        if status.value:
+            raise SimulationError(f"the {what} could not be located on [{a:.9g}, {b:.9g}] s (status {status.value})")
+        return value
+
+    def gap_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where contact ``i``'s gap crosses zero in [a, b] (Brent's method in C, as scipy's brentq)."""
+        fn = self.run.lib.dae_gap_root
+        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _DBL, _DBL, _VOID]
+        fn.restype = _DBL
+        return self._root(fn, a, b, i, xtol, rtol, "gap")
+
+    def force_root(self, k: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where the k-th held contact's normal force crosses zero in [a, b] (in C)."""
+        row = self.row_of.get(self.run.contacts[k])
+        if row is None:
+            return a  # (dropped as dependent: no force of its own)
+        fn = self.run.lib.dae_force_root
+        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID, _DBL, _DBL, _VOID]
+        fn.restype = _DBL
+        return self._root(fn, a, b, row, xtol, rtol, "contact force", self.tau)
+
+    def gap(self, s: float, i: int) -> float:
+        value = self._gap(float(s), *self.args, int(i), self.p)
+        if value != value:
+            raise SimulationError(f"the gap cannot be evaluated at t = {s:.6g} s")
+        return value
+
+    def force(self, s: float, k: int) -> float:
+        row = self.row_of.get(self.run.contacts[k])
+        if row is None:
+            return 0.0
+        value = self._force(float(s), *self.args, row, self.p, self.tau)
+        if value != value:
+            raise SimulationError(f"the contact force cannot be evaluated at t = {s:.6g} s")
+        return value
