@@ -1,9 +1,10 @@
 """The examples and the documentation stay true: every ``examples/*.py`` runs, and every
 ```python block of every ``docs/*.md`` executes.
 
-- Examples run as scripts (``sys.executable``) in a temporary working directory, with
-  ``MBCOMP_CACHE_DIR`` in a temporary directory and ``MPLBACKEND=Agg``; each asserts its
-  own physics, so a zero exit status is the check.
+- Examples run as scripts (``__main__``, each in a process of its own, forked from one
+  that has imported numpy, scipy, sympy and matplotlib once: ``script_server.py``) in a
+  temporary working directory, with ``MBCOMP_CACHE_DIR`` in a temporary directory and
+  ``MPLBACKEND=Agg``; each asserts its own physics, so a zero exit status is the check.
 - The blocks of one docs page run in order in one fresh namespace (a page reads like a
   session), in a temporary working directory that holds a link to ``library/`` (the pages
   are written as if run from the repository root).  A block whose first line is
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 import sys
 import textwrap
 from concurrent.futures import ThreadPoolExecutor
@@ -23,6 +23,11 @@ from pathlib import Path
 import pytest
 
 from mbcomp.components.base import KINDS
+
+try:                                    # tests/ on sys.path (pytest's default rootdir-less import)
+    from script_server import ScriptServer
+except ImportError:                     # tests imported as a package
+    from tests.script_server import ScriptServer
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
@@ -62,15 +67,22 @@ def cache_dir(tmp_path_factory) -> Path:
     return Path(env) if env else tmp_path_factory.mktemp("mbcomp-cache")
 
 
-def run_example(script: Path, cwd: Path, cache: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, MBCOMP_CACHE_DIR=str(cache), MPLBACKEND="Agg")
+@pytest.fixture(scope="module")
+def scripts(cache_dir):
+    """The process the example scripts are forked from (its environment is theirs)."""
+    env = dict(os.environ, MBCOMP_CACHE_DIR=str(cache_dir), MPLBACKEND="Agg")
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
-    return subprocess.run([sys.executable, str(script)], cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=300)
+    server = ScriptServer(env)
+    yield server
+    server.close()
+
+
+def run_example(script: Path, cwd: Path, scripts: ScriptServer):
+    return scripts.run(script, cwd, timeout=300)
 
 
 @pytest.fixture(scope="module")
-def example_runs(tmp_path_factory, cache_dir):
+def example_runs(tmp_path_factory, scripts):
     """The example scripts, run one after another on a background thread while the docs
     blocks execute in this process: ``{script: (future, working directory)}``.  Empty under
     pytest-xdist, whose parallel workers share the tests out (each example test then runs
@@ -82,7 +94,7 @@ def example_runs(tmp_path_factory, cache_dir):
     runs = {}
     for script in EXAMPLES:
         cwd = tmp_path_factory.mktemp(f"example-{script.stem}")
-        runs[script] = (pool.submit(run_example, script, cwd, cache_dir), cwd)
+        runs[script] = (pool.submit(run_example, script, cwd, scripts), cwd)
     yield runs
     pool.shutdown(wait=True, cancel_futures=True)
 
@@ -126,13 +138,13 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
 
 
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.stem for p in EXAMPLES])
-def test_example_runs(script, example_runs, tmp_path_factory, cache_dir):
+def test_example_runs(script, example_runs, tmp_path_factory, scripts):
     if script in example_runs:
         future, cwd = example_runs[script]
         proc = future.result()
     else:
         cwd = tmp_path_factory.mktemp(f"example-{script.stem}")
-        proc = run_example(script, cwd, cache_dir)
+        proc = run_example(script, cwd, scripts)
     assert proc.returncode == 0, (f"{script.name} failed (exit {proc.returncode})\n"
                                   f"--- stdout ---\n{proc.stdout}\n--- stderr ---\n{proc.stderr}")
     assert proc.stdout.strip(), f"{script.name} printed nothing"
@@ -151,3 +163,26 @@ def test_index_links_every_page():
     linked = set(re.findall(r"\]\(([\w.-]+\.md)(?:#[\w-]*)?\)", index))
     missing = sorted(p.name for p in DOCS if p.name != "index.md" and p.name not in linked)
     assert not missing, f"docs/index.md does not link {missing}"
+
+
+def test_scripts_run_like_python_script(tmp_path, scripts):
+    """The example runner gives what ``python script.py`` gives: ``__main__``, argv, the
+    script's directory on sys.path, its working directory, exit status, both streams."""
+    where = tmp_path / "scripts"
+    where.mkdir()
+    (where / "sibling.py").write_text("VALUE = 42\n")
+    script = where / "exits.py"
+    script.write_text("import os, sys\nimport sibling\n"
+                      "print(__name__, sys.argv == [__file__], os.getcwd(), sibling.VALUE)\n"
+                      "print('to stderr', file=sys.stderr)\nsys.exit(3)\n")
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    proc = scripts.run(script, cwd)
+    assert proc.returncode == 3
+    assert proc.stdout.split() == ["__main__", "True", str(cwd), "42"]
+    assert proc.stderr == "to stderr\n"
+    script.write_text("import sys\nsys.modules['numpy'].left_behind = 1\nraise ValueError('boom')\n")
+    proc = scripts.run(script, cwd)
+    assert proc.returncode == 1 and "ValueError: boom" in proc.stderr and proc.stdout == ""
+    script.write_text("import numpy\nprint(hasattr(numpy, 'left_behind'))\n")
+    assert scripts.run(script, cwd).stdout == "False\n"  # nothing one script does reaches the next
