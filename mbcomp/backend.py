@@ -156,6 +156,13 @@ C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno")
 COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno")
 #: Statements per generated translation unit (``codegen.c_units``).
 UNIT_STATEMENTS = 1500
+#: Short functions packed into one unit: a pack of this many statements starts compiling as soon
+#: as its functions are final instead of waiting for more (``codegen.UnitStream``).
+EAGER_STATEMENTS = 300
+#: A hot function longer than this (and shorter than a unit) is compiled as two halves side
+#: by side (``codegen.UnitStream``): measured on the chain, -O1 takes 0.22 s for the 354
+#: statements of N = 5 in one unit, 0.07 + 0.10 s in two; 0.52 s for N = 10 (804), 0.17 + 0.25 s.
+HALVE_STATEMENTS = 300
 
 
 def compile_jobs() -> int:
@@ -190,6 +197,11 @@ class CBuild:
         self._linked_last: list[str] = []
         self._failure: str | None = None
         self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
+        # Reaps finished compilers and starts waiting units while the caller is busy (building
+        # the rest of the program in Python): a free core never waits for the next ``add``.
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._watcher: threading.Thread | None = None
 
     def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False,
             shared: dict | None = None) -> None:
@@ -213,41 +225,56 @@ class CBuild:
                     pass
             self._shared.append((obj, key, shared))
         (self._tmp / f"{name}.c").write_text(text)
-        self._waiting.append((statements, name, tuple(flags)))
-        self._waiting.sort(key=lambda item: item[0])
+        with self._lock:
+            self._waiting.append((statements, name, tuple(flags)))
+            self._waiting.sort(key=lambda item: item[0])
         self._pump()
+        if self._watcher is None:
+            self._watcher = threading.Thread(target=self._watch, name="mbcomp-cbuild", daemon=True)
+            self._watcher.start()
+
+    def _watch(self) -> None:
+        """The watcher thread: pump every few milliseconds until ``finish`` or ``cancel``."""
+        while not self._stop.wait(0.004):
+            self._pump()
 
     def _pump(self, block: bool = False) -> None:
         """Reap finished compilers and start waiting units while slots are free; with
         ``block``, until every unit is compiled (or one failed, or ``TIMEOUT`` s passed)."""
         deadline = time.monotonic() + self.TIMEOUT
         while True:
-            still = []
-            for process, name in self._running:
-                if process.poll() is None:
-                    still.append((process, name))
-                elif process.returncode and self._failure is None:
-                    log = self._tmp / f"{name}.log"
-                    self._failure = (log.read_text(errors="replace")[-2000:] if log.exists() else "") or \
-                        f"exit status {process.returncode} compiling {name}"
-            self._running = still
-            while self._waiting and len(self._running) < self.jobs and self._failure is None:
-                _, name, flags = self._waiting.pop()
-                source, obj = self._tmp / f"{name}.c", self._tmp / f"{name}.o"
-                cmd = [self.compiler, *flags, "-c", str(source), "-o", str(obj)]
-                try:
-                    with open(self._tmp / f"{name}.log", "wb") as log:  # a file: a pipe could fill and block
-                        process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=log)
-                except OSError as exc:
-                    self._failure = str(exc)
-                    break
-                self._running.append((process, name))
-            if not block or not self._running:
+            with self._lock:
+                self._pump_once()
+                running = bool(self._running)
+            if not block or not running:
                 return
             if time.monotonic() > deadline:
                 self._failure = f"a compiler ran for more than {self.TIMEOUT} s"
                 return
             time.sleep(0.002)
+
+    def _pump_once(self) -> None:
+        """Reap finished compilers and start waiting units while slots are free (under the lock)."""
+        still = []
+        for process, name in self._running:
+            if process.poll() is None:
+                still.append((process, name))
+            elif process.returncode and self._failure is None:
+                log = self._tmp / f"{name}.log"
+                self._failure = (log.read_text(errors="replace")[-2000:] if log.exists() else "") or \
+                    f"exit status {process.returncode} compiling {name}"
+        self._running = still
+        while self._waiting and len(self._running) < self.jobs and self._failure is None:
+            _, name, flags = self._waiting.pop()
+            source, obj = self._tmp / f"{name}.c", self._tmp / f"{name}.o"
+            cmd = [self.compiler, *flags, "-c", str(source), "-o", str(obj)]
+            try:
+                with open(self._tmp / f"{name}.log", "wb") as log:  # a file: a pipe could fill and block
+                    process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+            except OSError as exc:
+                self._failure = str(exc)
+                break
+            self._running.append((process, name))
 
     def finish(self) -> bytes | None:
         """Wait for every unit, link them, remove the directory; the library's bytes or None."""
@@ -273,10 +300,14 @@ class CBuild:
 
     def cancel(self) -> None:
         """Stop every compiler still running and remove the build directory."""
-        for process, _ in self._running:
-            process.kill()
-            process.wait()
-        self._running, self._waiting = [], []
+        self._stop.set()
+        if self._watcher is not None and self._watcher is not threading.current_thread():
+            self._watcher.join()
+        with self._lock:
+            for process, _ in self._running:
+                process.kill()
+                process.wait()
+            self._running, self._waiting = [], []
         shutil.rmtree(self._tmp, ignore_errors=True)
 
 

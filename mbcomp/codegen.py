@@ -170,47 +170,106 @@ def c_units(prog, functions: dict, cold: tuple = (), chunk: int = 300, unit: int
     (a small model: two units that compile side by side).  The chunks in the unit of their
     function stay ``static`` (the compiler inlines them and keeps the workspace in
     registers).  The same statements in the same order: the numbers are those of
-    ``c_source``."""
-    packed = {True: ([], [0]), False: ([], [0])}  # hot / cold: texts, statements
-    count = 0
-    free = _free_symbols(prog)
+    ``c_source``.  (``UnitStream`` gives the same units function by function, while the
+    program is still being built.)"""
+    stream = UnitStream(prog, cold=cold, chunk=chunk, unit=unit)
     for fname, outputs in functions.items():
-        hot = fname not in cold
-        parts, main = _c_function(prog, fname, outputs, chunk, "", free)
-        total = sum(size for _, size in parts)
-        if total > unit:  # its own function only calls the chunks and copies the outputs out of
-            # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
-            main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
-        if total <= unit:
-            texts, size = packed[hot]
-            if texts and size[0] + total > unit:
-                yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
-                count += 1
-                texts.clear()
-                size[0] = 0
-            texts.append("".join(f"static {text}\n" for text, _ in parts) + main)
-            size[0] += total
-            continue
-        groups, sizes = [[]], [0]
-        for b, (text, size) in enumerate(parts):
-            if groups[-1] and sizes[-1] + size > unit:
-                groups.append([])
-                sizes.append(0)
-            groups[-1].append((b, text))
-            sizes[-1] += size
-        elsewhere = [b for group in groups[:-1] for b, _ in group]
-        declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in elsewhere)
-        for g, (group, size) in enumerate(zip(groups, sizes)):
-            last = g == len(groups) - 1
-            prefix = "static " if last else _HIDDEN
-            body = "\n".join(prefix + text for _, text in group)
-            if last:
-                body = declarations + "\n" + body + "\n" + main
-            yield CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, hot, size)
-    for hot, (texts, size) in packed.items():
-        if texts:
-            yield CUnit(f"functions{count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
-            count += 1
+        yield from stream.add({fname: outputs})
+    yield from stream.flush()
+
+
+class UnitStream:
+    """``c_units`` fed function by function: the compiler prints a function's units as soon
+    as the program builder has made its outputs final (``build_program(ready=...)``), so that
+    they compile on another core while the rest of the program is built.
+
+    Short functions are packed as in ``c_units``; a pack of at least ``eager`` statements is
+    handed out at the end of the ``add`` that filled it instead of waiting for more (None:
+    never, which gives exactly the units of ``c_units``)."""
+
+    def __init__(self, prog, cold: tuple = (), chunk: int = 300, unit: int = 1500, eager: int | None = None,
+                 halve: int | None = None):
+        self.prog, self.cold, self.chunk, self.unit, self.eager = prog, tuple(cold), chunk, unit, eager
+        #: A hot function of more than ``halve`` statements (and at most ``unit``) gets two units
+        #: of its own, one chunk each, that compile side by side (None: never).
+        self.halve = halve
+        self._packed = {True: ([], [0]), False: ([], [0])}  # hot / cold: texts, statements
+        self._count = 0
+        self._free: dict = {}
+
+    def _free_symbols(self) -> dict:
+        """``_free_symbols(prog)``, extended over the assignments added since the last call."""
+        for symbol, expr in self.prog.assignments[len(self._free):]:
+            self._free[symbol] = expr.free_symbols
+        return self._free
+
+    def _pack(self, hot: bool) -> CUnit:
+        texts, size = self._packed[hot]
+        out = CUnit(f"functions{self._count}", "#include <math.h>\n\n" + "\n".join(texts), hot, size[0])
+        self._count += 1
+        texts.clear()
+        size[0] = 0
+        return out
+
+    def add(self, functions: dict) -> list:
+        """The units ready to compile once ``functions`` (``{name: [output names]}``, whose
+        outputs are final) are printed."""
+        units = []
+        free = self._free_symbols()
+        for fname, outputs in functions.items():
+            hot = fname not in self.cold
+            total = len(self.prog.needed(outputs, free))
+            count = -(-total // self.unit)  # units of its own (1: packed with other functions)
+            if hot and self.halve is not None and total > self.halve:
+                # An optimising compiler's time grows faster than the function: two halves take
+                # less time together than the whole (N = 5 chain: 0.17 s against 0.22 s), and
+                # run on two cores.
+                count = max(count, 2)
+            # A function of several units: units of equal size (N = 20: 1024 + 1024 statements, not
+            # 1500 + 548) made of equal chunks of at most ``chunk`` statements (4 x 256), the same
+            # statements in the same order.
+            unit, chunk = self.unit, self.chunk
+            if count > 1:
+                share = -(-total // count)
+                per_unit = -(-share // chunk)
+                chunk = -(-share // per_unit)
+                unit = per_unit * chunk
+            parts, main = _c_function(self.prog, fname, outputs, chunk, "", free)
+            if total > unit:  # its own function only calls the chunks and copies the outputs out of
+                # the workspace: optimising that took 1 s of 4.5 s at N = 50 and gained nothing
+                main = main.replace(f"void {fname}(", f"{_COLD_ATTRIBUTE}void {fname}(", 1)
+            if total <= unit:
+                texts, size = self._packed[hot]
+                if texts and size[0] + total > unit:
+                    units.append(self._pack(hot))
+                texts.append("".join(f"static {text}\n" for text, _ in parts) + main)
+                size[0] += total
+                continue
+            groups, sizes = [[]], [0]
+            for b, (text, size) in enumerate(parts):
+                if groups[-1] and sizes[-1] + size > unit:
+                    groups.append([])
+                    sizes.append(0)
+                groups[-1].append((b, text))
+                sizes[-1] += size
+            elsewhere = [b for group in groups[:-1] for b, _ in group]
+            declarations = "".join(f"{_HIDDEN}void {fname}_part{b}({_ARGS}, double *w);\n" for b in elsewhere)
+            for g, (group, size) in enumerate(zip(groups, sizes)):
+                last = g == len(groups) - 1
+                prefix = "static " if last else _HIDDEN
+                body = "\n".join(prefix + text for _, text in group)
+                if last:
+                    body = declarations + "\n" + body + "\n" + main
+                units.append(CUnit(f"{fname}{g}", "#include <math.h>\n\n" + body, hot, size))
+        if self.eager is not None:
+            for hot, (texts, size) in self._packed.items():
+                if texts and size[0] >= self.eager:
+                    units.append(self._pack(hot))
+        return units
+
+    def flush(self) -> list:
+        """The packs still waiting (hot first)."""
+        return [self._pack(hot) for hot, (texts, _) in self._packed.items() if texts]
 
 
 def _free_symbols(prog) -> dict:
@@ -352,7 +411,7 @@ def generator_text() -> str:
     except OSError:
         try:
             parts = [inspect.getsource(obj) for obj in (Printer, _names, python_source, c_source, c_prototypes,
-                                                       c_units, _c_function)]
+                                                       c_units, UnitStream, _c_function)]
         except (OSError, TypeError):
             parts = []
     return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])

@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from . import cache, codegen, recursive
-from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
+from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
+                      UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
                       c_compiler, c_library)
 from .components._values import name_of
 from .param_layout import input_layout, parameter_layout, parameter_values
@@ -96,13 +97,27 @@ class CompiledModel:
     def program(self):
         """The symbolic straight-line program (built on demand when code came from the cache)."""
         if self._program is None:
-            from .equations import build_program  # sympy: only when code is generated
-            equations = [] if self.constraint_set is None else self.constraint_set.equations
-            self._program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
-                                          recursive=self.dynamics == "recursive", factors=bool(self.geometric_rows))
-            self._check_layout(self._program)
-            self._program.p = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
+            self._build_program()
         return self._program
+
+    def _build_program(self, ready=None) -> None:
+        """Build the symbolic program (sympy: only when code is generated); ``ready(prog,
+        names)``: called with the outputs as they become final (``build_program``), the
+        parameter symbols already in place."""
+        from .equations import build_program
+        equations = [] if self.constraint_set is None else self.constraint_set.equations
+        parameters = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
+
+        def with_parameters(prog, names):
+            prog.p = parameters
+            ready(prog, names)
+
+        program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
+                                recursive=self.dynamics == "recursive", factors=bool(self.geometric_rows),
+                                ready=with_parameters if ready else None)
+        self._check_layout(program)
+        program.p = parameters
+        self._program = program
 
     def _check_layout(self, program) -> None:
         """The program's outputs must fill the output layout exactly (C and Python read them by it)."""
@@ -146,7 +161,9 @@ class CompiledModel:
             return None
         templates = self._c_templates()
         tools = cache.toolchain(compiler, C_FLAGS)
-        plan = f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit"  # how the C is built
+        plan = (f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit, "
+                f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final, "
+                f"hot functions of more than {HALVE_STATEMENTS} in two halves")  # how the C is built
         self.key = cache.entry_key(self.description, templates + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
@@ -168,9 +185,33 @@ class CompiledModel:
             build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True,
                       shared=tools if use_cache else None)
             digest = hashlib.sha256(templates.encode())
-            for unit in codegen.c_units(self.program, functions, cold=cold, unit=UNIT_STATEMENTS):
-                build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
-                digest.update(unit.text.encode())
+
+            def compile_units(units):
+                for unit in units:
+                    build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
+                    digest.update(unit.text.encode())
+
+            # Each function's units are printed and start compiling as soon as its outputs are
+            # final, on the other core while sympy builds the rest of the program.
+            stream, done, final = None, set(), set()
+
+            def ready(prog, names):
+                nonlocal stream
+                if stream is None:
+                    stream = codegen.UnitStream(prog, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
+                                                 halve=HALVE_STATEMENTS)
+                final.update(names)
+                now = {f: outs for f, outs in functions.items() if f not in done and set(outs) <= final}
+                done.update(now)
+                compile_units(stream.add(now))
+
+            if self._program is None:
+                self._build_program(ready)
+            if stream is None:
+                stream = codegen.UnitStream(self.program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
+                                                 halve=HALVE_STATEMENTS)
+            compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
+            compile_units(stream.flush())
         except BaseException:
             build.cancel()
             raise

@@ -19,6 +19,7 @@ from typing import Any
 import sympy as sp
 
 from .components import Body
+from .symbolic import dot, product, total  # noqa: F401 - dot and product are this module's too
 from .components._values import name_of
 
 
@@ -29,11 +30,8 @@ def exact(value: float) -> sp.Expr:
 
 
 def cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def dot(a, b):
-    return sum((x * y for x, y in zip(a, b)), sp.Integer(0))
+    return [total([product(a[1], b[2]), -product(a[2], b[1])]), total([product(a[2], b[0]), -product(a[0], b[2])]),
+            total([product(a[0], b[1]), -product(a[1], b[0])])]
 
 
 def matvec(R, v):
@@ -285,7 +283,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None,
-                  recursive: bool = False, factors: bool = False) -> Program:
+                  recursive: bool = False, factors: bool = False, ready=None) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
@@ -296,7 +294,12 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     also ``"aba"`` (``recursive.aba_outputs``: the accelerations by the O(N)
     articulated-body recursion, with the run-time generalised forces as extra inputs; with
     ``factors`` also what the dae formulation's KKT solve needs).
+
+    ``ready(prog, names)``, when given, is called as soon as the outputs ``names`` are final
+    (the rest of the program only appends assignments), so that a code generator can print
+    and compile them while the rest is built.  It must not change the program.
     """
+    ready = ready or (lambda prog, names: None)
     nq, nv = topology.nq, topology.nv
     n_inputs = sum(size for _, size in inputs.values())
     prog = Program(q=[sp.Symbol(f"q{i}") for i in range(nq)], qd=[sp.Symbol(f"qd{i}") for i in range(nv)],
@@ -354,10 +357,18 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         weight = [mass * g for g in gravity]
         external[body.name] = prog.lets(cross(com, weight) + weight)
 
-    generalized = [sp.Integer(0)] * nv
-    potential = sp.Integer(0)
+    kinematics = []
     for body in topology.bodies:
-        potential -= inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)
+        kinematics += [e for row in kin.R[body.name] for e in row] + kin.origin[body.name] + kin.V[body.name] + kin.A[body.name]
+    for S in kin.S:
+        kinematics += S
+    prog.outputs["kinematics"] = kinematics
+    ready(prog, ["kinematics"])
+
+    generalized = [sp.Integer(0)] * nv
+    potential = []  # terms, summed once at the end (a growing sum rebuilt per body is O(N^2))
+    for body in topology.bodies:
+        potential.append(-(inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)))
     for element in topology.forces:
         for load in element._loads(kin):
             if load[0] == "generalized":
@@ -370,17 +381,17 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
                 continue
             wrench = cross(load[2], load[3]) + list(load[3]) if load[0] == "point" else list(load[2]) + [0, 0, 0]
             external[target] = prog.lets([a + b for a, b in zip(external[target], wrench)])
-        potential += element._potential(kin)
+        potential.append(element._potential(kin))
 
     # Backward pass: composite inertias and wrenches, projected on the motion columns.
     composite = {b.name: inertia[b.name] for b in topology.bodies}
     wrench = {}
-    kinetic = sp.Integer(0)
+    kinetic = []  # terms, as the potential's
     for body in topology.bodies:
         I = inertia[body.name]
         V = kin.V[body.name]
         momentum = prog.lets(I.apply(V))
-        kinetic += dot(V, momentum) / 2
+        kinetic.append(dot(V, momentum) / 2)
         body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
         wrench[body.name] = prog.lets(body_force)
     own_wrench = dict(wrench)  # each body's own, before the subtree sums (recursive program)
@@ -412,19 +423,16 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
             i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
             armature[i] = armature.get(i, 0) + value
             M[i, i] = prog.let(M[i, i] + value)
-            kinetic += value * prog.qd[i] ** 2 / 2
+            kinetic.append(value * prog.qd[i] ** 2 / 2)
     prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
     prog.outputs["forces"] = forces
-    prog.outputs["energy"] = [prog.let(kinetic), prog.let(potential)]
-    kinematics = []
-    for body in topology.bodies:
-        kinematics += [e for row in kin.R[body.name] for e in row] + kin.origin[body.name] + kin.V[body.name] + kin.A[body.name]
-    for S in kin.S:
-        kinematics += S
-    prog.outputs["kinematics"] = kinematics
+    ready(prog, ["mass_matrix", "forces"])
+    prog.outputs["energy"] = [prog.let(sp.Add(*kinetic)), prog.let(sp.Add(*potential))]
+    ready(prog, ["energy"])
     if recursive:
         from .recursive import aba_outputs
         aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature, factors=factors)
+        ready(prog, ["aba"])
     constraint_outputs(prog, kin, equations)
     constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
     from .drive_equations import drive_outputs

@@ -104,13 +104,13 @@ def _add(A, B) -> list:
 
 
 def _matvec(A, x) -> list:
-    import sympy as sp  # only when the program is built
-    return [sum((a * b for a, b in zip(row, x)), sp.Integer(0)) for row in A]
+    from .symbolic import dot  # sympy: only when the program is built
+    return [dot(row, x) for row in A]
 
 
 def _dot(a, b):
-    import sympy as sp  # only when the program is built
-    return sum((x * y for x, y in zip(a, b)), sp.Integer(0))
+    from .symbolic import dot  # sympy: only when the program is built
+    return dot(a, b)
 
 
 def speed_tree(topology) -> tuple[list, dict]:
@@ -143,6 +143,7 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
     the mass-matrix diagonal.
     """
     import sympy as sp  # only when the program is built (a cached model loads without it)
+    from .symbolic import product, total  # sympy's own expressions, built directly
     nv = topology.nv
     tau = [sp.Symbol(f"tau{k}") for k in range(nv)]
     prog.tau_offset = len(prog.u)
@@ -174,15 +175,15 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
         parent = pred[k]
         if parent is None:
             continue
-        Ia = [[Ik[i][j] - W[k][i] * U[k][j] for j in range(6)] for i in range(6)]
-        pa = [a + w * u[k] for a, w in zip(p, W[k])]
+        Ia = [[total([Ik[i][j], -product(W[k][i], U[k][j])]) for j in range(6)] for i in range(6)]
+        pa = [total([a, product(w, u[k])]) for a, w in zip(p, W[k])]
         IA[parent] = Ia if IA[parent] is None else _add(IA[parent], Ia)
         pA[parent] = pa if pA[parent] is None else [a + b for a, b in zip(pA[parent], pa)]
     qdd, da = [None] * nv, [None] * nv
     for k in range(nv):
         before = zero6 if pred[k] is None else da[pred[k]]
         qdd[k] = prog.let(u[k] / D[k] - _dot(W[k], before))
-        da[k] = prog.lets([a + s * qdd[k] for a, s in zip(before, kin.S[k])])
+        da[k] = prog.lets([total([a, product(s, qdd[k])]) for a, s in zip(before, kin.S[k])])
     prog.outputs["aba"] = qdd + D
     if factors:
         prog.outputs["aba"] += [w for k in range(nv) for w in W[k]] + [x for k in range(nv) for x in kin.S[k]]

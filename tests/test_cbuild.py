@@ -178,3 +178,93 @@ class TestSharedUnits:
         q, qd = np.array([0.3, -0.2]), np.array([0.1, 0.4])
         np.testing.assert_allclose(system.accelerations(q, qd),
                                    other.compile(backend="python", cache=False).accelerations(q, qd), rtol=1e-12)
+
+
+class TestStreamedUnits:
+    """Units printed while the program is built (``build_program(ready=...)`` and
+    ``codegen.UnitStream``): the same functions, each defined once, as the whole-program units."""
+
+    def test_ready_outputs_are_final_when_announced(self):
+        from mbcomp.equations import build_program
+        compiled = pendulum_chain(3).compile(backend="python", cache=False)._compiled
+        seen = []
+
+        def ready(prog, names):  # a snapshot of each output and of the program's length then
+            seen.append((tuple(names), {n: list(prog.outputs[n]) for n in names}, len(prog.assignments)))
+
+        prog = build_program(compiled.topology, compiled.layout, compiled.inputs, recursive=True, ready=ready)
+        assert [names for names, _, _ in seen] == [("kinematics",), ("mass_matrix", "forces"), ("energy",), ("aba",)]
+        for names, outputs, length in seen:
+            for name in names:
+                assert outputs[name] == prog.outputs[name]  # never changed afterwards
+                before = {s for s, _ in prog.assignments[:length]}
+                assert {s for s, _ in prog.needed([name])} <= before  # needs nothing assigned later
+        lengths = [length for _, _, length in seen]
+        assert lengths == sorted(lengths) and lengths[0] < lengths[-1]
+
+    @pytest.mark.parametrize("eager", [None, 1, 10_000])
+    def test_a_stream_defines_every_function_once(self, chain, eager):
+        compiled, _ = chain
+        stream = codegen.UnitStream(compiled.program, cold=COLD_FUNCTIONS, chunk=10, unit=40, eager=eager)
+        units = []
+        for fname, outputs in FUNCTIONS.items():
+            units += stream.add({fname: outputs})
+        units += stream.flush()
+        assert len({u.name for u in units}) == len(units)
+        for fname in FUNCTIONS:
+            head = f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
+            assert len([u for u in units if head in u.text]) == 1, fname
+        total = sum(len(compiled.program.needed(FUNCTIONS[f])) for f in FUNCTIONS)
+        assert sum(u.statements for u in units) == total
+        if eager is None:  # exactly the units of c_units
+            assert [(u.name, u.text) for u in units] == [
+                (u.name, u.text) for u in codegen.c_units(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS, chunk=10,
+                                                          unit=40)]
+
+    @needs_cc
+    def test_waiting_units_start_without_another_add(self):
+        """One job slot, three units: the watcher starts the second and third while the caller
+        does something else (builds the program), not at the next ``add`` or ``finish``."""
+        import time
+        build = CBuild(c_compiler(), jobs=1)
+        try:
+            for k in range(3):
+                build.add(f"u{k}", f"double f{k}(double x) {{ return {k + 1}.0 * x; }}\n", C_FLAGS, 10)
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:
+                with build._lock:
+                    if not build._waiting and not build._running:
+                        break
+                time.sleep(0.01)
+            with build._lock:
+                assert not build._waiting and not build._running
+            assert build._failure is None
+            assert all((build._tmp / f"u{k}.o").stat().st_size > 0 for k in range(3))
+            library = build.finish()
+            assert library  # linked: the bytes of a shared library
+        finally:
+            build.cancel()
+
+
+@needs_cc
+def test_a_hot_function_is_compiled_in_two_halves_with_the_same_numbers(chain):
+    """``halve``: the hot dynamics of the 4-link chain as two units of half its statements each,
+    linked into the numbers of the whole-function unit."""
+    compiled, p = chain
+    needed = len(compiled.program.needed(FUNCTIONS["dynamics"]))
+    stream = codegen.UnitStream(compiled.program, cold=COLD_FUNCTIONS, halve=needed - 1)
+    units = stream.add(dict(FUNCTIONS)) + stream.flush()
+    halves = [u for u in units if u.name.startswith("dynamics")]
+    assert [u.statements for u in halves] == [-(-needed // 2), needed // 2] and all(u.hot for u in halves)
+    build = CBuild(c_compiler())
+    build.add("templates", codegen.c_prototypes(FUNCTIONS) + compiled.output_layout.c_defines()
+              + codegen.c_accelerations(compiled.topology.nv), C_FLAGS)
+    for u in units:
+        build.add(u.name, u.text, C_FLAGS if u.hot else COLD_FLAGS, u.statements)
+    split = c_library(build.finish(), compiled.sizes)
+    whole = c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                        + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
+                        compiled.sizes)
+    for seed in range(3):
+        q, qd = _states(compiled, seed)
+        assert np.array_equal(split("dynamics", q, qd, p, np.zeros(0)), whole("dynamics", q, qd, p, np.zeros(0)))

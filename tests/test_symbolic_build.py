@@ -1,0 +1,50 @@
+"""The program builder's direct constructions (symbolic.product, symbolic.total) give exactly
+sympy's own expressions: the same arguments in the same order, so the same generated code."""
+from __future__ import annotations
+
+import sympy as sp
+import pytest
+
+from mbcomp.equations import cross
+from mbcomp.symbolic import dot, product, total
+
+t1, t2, t10, q0, u3 = sp.symbols("t1 t2 t10 q0 u3")
+
+
+def _same(a, b) -> bool:
+    return a == b and type(a) is type(b) and a.args == b.args and hash(a) == hash(b)
+
+
+@pytest.mark.parametrize("x, y", [(t1, t2), (t2, t1), (t10, t2), (q0, t1), (t1, t1), (t1, sp.Integer(0)),
+                                  (sp.Integer(1), t2), (sp.Float(2.5), t1), (-t1, t2), (t1 * t2, u3),
+                                  (sp.Integer(3), sp.Integer(4))])
+def test_product_is_sympys_product(x, y):
+    assert _same(product(x, y), x * y)
+
+
+@pytest.mark.parametrize("terms", [
+    [t1 * t2, t10 * q0, -u3 * t1],             # distinct plain terms: built directly
+    [t2, t1, t10],
+    [t1 * t2, t2 * t1],                        # the same symbols: sympy collects 2*t1*t2
+    [t1 * t2, -t1 * t2],                       # cancel to 0
+    [sp.Integer(0), t1, sp.Integer(0)],        # zeros dropped: the term itself
+    [sp.Float(1.5), t1],                       # a number: sympy's own path
+    [sp.Integer(0)],
+    [],
+    [t1 + t2, t10],                            # nested sums flattened by sympy
+    [sp.cos(q0) * t1, t2],
+])
+def test_total_is_sympys_sum(terms):
+    assert _same(total(list(terms)), sp.Add(*terms))
+
+
+def test_dot_and_cross_are_the_sums_of_products():
+    a = [t1, sp.Integer(0), q0]
+    b = [t2, t10, sp.Integer(1)]
+    assert _same(dot(a, b), sum((x * y for x, y in zip(a, b)), sp.Integer(0)))
+    expected = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    for got, want in zip(cross(a, b), expected):
+        assert _same(got, want)
+    values = {t1: 0.3, t2: -1.2, t10: 2.0, q0: 0.7}
+    va, vb = [float(sp.sympify(x).subs(values)) for x in a], [float(sp.sympify(x).subs(values)) for x in b]
+    assert float(dot(a, b).subs(values)) == pytest.approx(sum(x * y for x, y in zip(va, vb)))
