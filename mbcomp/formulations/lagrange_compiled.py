@@ -25,7 +25,6 @@ import ctypes
 
 import numpy as np
 
-from ..constraint_set import _derivatives
 from ..errors import SimulationError
 from ..expression_c import NotCompilable, StackPrograms, stack_programs
 from ..integrators import PAUSED, TRIAL_FAILED
@@ -183,7 +182,8 @@ class ReducedRun:
         for r in np.flatnonzero(self.programs[0] >= 0):
             eq = constraints.equations[r]
             try:
-                _derivatives(eq.position, t, exact=constraints.exact_derivatives.get(r))
+                for f in (eq.position, *constraints.exact_derivatives[r]):
+                    f(t)  # (an Expression raises SimulationError saying why)
             except Exception as exc:  # as ConstraintSet.evaluate reports it
                 raise SimulationError(f"position({t:g}) failed: {exc}", constraints.groups_by_row(r)) from None
         raise SimulationError(f"a motor's prescribed position is not finite at t = {t:.6g} s in compiled code: "
