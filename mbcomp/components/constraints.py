@@ -55,9 +55,12 @@ class Slider(Constraint):
 
 
 class Motor(Constraint):
-    """Prescribes a 1-DOF joint's coordinate: ``position(t)`` (a callable of t) or a
+    """Prescribes a 1-DOF joint's coordinate: ``position(t)`` (a callable of t, or the text
+    of an expression of t such as ``"0.5*sin(2*pi*t)"``, as model files write it) or a
     constant ``speed`` from the initial value.  Its reaction is the torque (N m) or
-    force (N) the motor applies along the joint coordinate.
+    force (N) the motor applies along the joint coordinate.  A position given as an
+    expression runs in compiled code (with its exact derivatives); a Python callable is
+    evaluated in Python, so the simulation steps in Python.
     """
 
     kind = "motor"
@@ -70,14 +73,20 @@ class Motor(Constraint):
     file_required = ("joint",)
     file_options = {"position": "time"}
 
-    def __init__(self, name: str, joint: Any, position: Callable[[float], float] | None = None,
+    def __init__(self, name: str, joint: Any, position: Callable[[float], float] | str | None = None,
                  speed: float | None = None):
         super().__init__(name)
         self.joint = joint
         if (position is None) == (speed is None):
             raise ModelError(self, "give exactly one of position (a callable of t) or speed")
+        if isinstance(position, str):
+            from ..expressions import Expression, ExpressionError, parse_expression
+            try:
+                position = Expression(position, parse_expression(position, {}, allow_t=True), name)
+            except ExpressionError as exc:
+                raise ModelError(self, f"position: {exc}") from None
         if position is not None and not callable(position):
-            raise ModelError(self, f"position must be a callable of t, got {position!r}")
+            raise ModelError(self, f"position must be a callable of t or an expression of t, got {position!r}")
         self.position = position
         self.speed = speed
 

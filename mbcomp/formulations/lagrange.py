@@ -195,10 +195,12 @@ class LagrangeFormulation(Formulation):
             return "the lagrange formulation steps constrained models with ball or free joints in Python"
         if self.compiled.drives.nz:
             return "the lagrange formulation steps constrained models with drive states in Python"
-        for r in self.constraints.coordinate_rows:
-            if self.constraints.equations[r].speed is None:
-                return (f"motor {self.constraints.owner[r]!r} prescribes its position by a function of time, "
-                        f"which is evaluated in Python")
+        from ..expression_c import NotCompilable
+        from .lagrange_compiled import motor_programs
+        try:
+            motor_programs(self.constraints)  # positions given as expressions of t run in C
+        except NotCompilable as exc:
+            return str(exc)
         if not getattr(self.compiled, "reduced_loop", False):
             return "the compiled library has no reduced loop for this model"
         if self.nominal_rows is None:

@@ -13,8 +13,9 @@ coordinates and their speeds); everything else follows in C, as in ``LagrangeWor
   chooses the partition afresh.
 
 Drive elements without states add their forces (the generated ``drives`` at time t).
-Motor rows (``q_k - offset - speed t``) are evaluated here, the geometric rows come from the
-generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
+Motor rows (``q_k - offset - speed t``, or ``q_k - s(t)`` for a position given as an
+expression of t: ``s`` and its exact derivatives run as stack programs, ``expression_c.py``)
+are evaluated here, the geometric rows come from the generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
 and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
 numpy arrays that Python owns and configures per thread with ``lagrange_configure``.
 Only models whose coordinates are their own chart (no free rotations) use this code.
@@ -32,6 +33,7 @@ from __future__ import annotations
 # failed or the dependent block is singular; like ``TrialStateError``, the step is retried
 # from the last accepted state); PAUSED, after an accepted step for Python to look at the
 # partition.
+from ..expression_c import C_EVALUATOR
 from ..integrators import EVENT, PAUSED, TRIAL_FAILED
 
 
@@ -41,7 +43,7 @@ def c_lagrange(nv: int, ng: int) -> str:
     configuration (``lagrange_configure``) and prescribed motion without degrees of freedom
     (``lagrange_prescribed``), for a model with ``nv`` speeds and ``ng`` geometric
     constraint rows (offsets from the ``OutputLayout`` defines)."""
-    return _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
+    return C_EVALUATOR + _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
 
 
 _C = r"""
@@ -65,6 +67,28 @@ static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag
     *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
 static __thread int *lag_piv;
 static double lag_u[1];
+/* motors prescribing their position by an expression of t (expression_c.py): row r runs
+   the stack programs 3 prog[r], 3 prog[r] + 1, 3 prog[r] + 2 (s, s', s''; prog[r] < 0: a
+   speed motor); a non-finite value stops the Newton solve and writes t to lag_info[1] */
+static __thread const long *lag_prog = 0, *lag_pops, *lag_pstart;
+static __thread const double *lag_pargs;
+static __thread int lag_bad = 0;
+
+int lagrange_positions(const long *prog, const long *ops, const double *args, const long *start) {
+    lag_prog = prog; lag_pops = ops; lag_pargs = args; lag_pstart = start;
+    return 0;
+}
+
+static double lag_program(long i, double t) {
+    const long a = lag_pstart[i];
+    const double v = mbc_stack_eval(lag_pops + a, lag_pargs + a, lag_pstart[i + 1] - a, t);
+    if (!isfinite(v)) {
+        lag_bad = 1;
+        if (lag_info) lag_info[1] = t;
+    }
+    return v;
+}
+
 /* drive elements without states (nz = 0, no callables): their forces join tau */
 static __thread int lag_drives = 0;
 static __thread double lag_dv[DRIVES_SIZE + 1];
@@ -101,7 +125,8 @@ int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, doubl
    mq[r], speed index mv[r], speed speed[r] and start value offset[r], or -2 - k for the gap
    of contact k (held closed).
    rows (nr), dep (nr), ind (ni): the partition.  acc: [t, q, qd] of the last accepted
-   state (read and written).  info: [condition of the last accepted state]. */
+   state (read and written).  info: [condition of the last accepted state, time at which a
+   motor's prescribed position was not finite (written then)]. */
 int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, const double *speed,
                        const double *offset, int nr, const long *rows, const long *dep, int ni, const long *ind,
                        double scale, double limit, double *acc, double *info) {
@@ -109,7 +134,7 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_mem = 0;
     lag_on = 0;
     lag_nk = 0;
-    if (nc < 0) return 0;
+    if (nc < 0) { lag_prog = 0; lag_info = 0; return 0; }
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
         + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 4L * n + 8;
@@ -139,8 +164,10 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     return 0;
 }
 
-/* g, J, g_t and bias of every equation at (q, qd, t). */
-static void lag_values(double t, const double *q, const double *qd, const double *p) {
+/* g, J, g_t and bias of every equation at (q, qd, t); 1 when a motor's prescribed
+   position is not finite at t (lag_info[1] = t), else 0. */
+static int lag_values(double t, const double *q, const double *qd, const double *p) {
+    lag_bad = 0;
     constraints(q, qd, p, lag_u, lag_c);
     if (lag_nk) contacts(q, qd, p, lag_u, lag_kc);
     for (int r = 0; r < lag_nc; ++r) {
@@ -160,11 +187,19 @@ static void lag_values(double t, const double *q, const double *qd, const double
         } else {
             for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
             Jr[lag_mv[r]] = 1.0;
-            lag_g[r] = q[lag_mq[r]] - lag_offset[r] - lag_speed[r] * t;
-            lag_gt[r] = -lag_speed[r];
-            lag_bias[r] = 0.0;
+            if (lag_prog && lag_prog[r] >= 0) {  /* q_k - s(t) */
+                const long i = 3 * lag_prog[r];
+                lag_g[r] = q[lag_mq[r]] - lag_program(i, t);
+                lag_gt[r] = -lag_program(i + 1, t);
+                lag_bias[r] = -lag_program(i + 2, t);
+            } else {
+                lag_g[r] = q[lag_mq[r]] - lag_offset[r] - lag_speed[r] * t;
+                lag_gt[r] = -lag_speed[r];
+                lag_bias[r] = 0.0;
+            }
         }
     }
+    return lag_bad;
 }
 
 /* LU factorisation with partial pivoting of the dependent block J[rows][:, dep] into lag_lu;
@@ -215,7 +250,7 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
     for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
     int converged = 0;
     for (int it = 0; it < LAG_NEWTON_ITER; ++it) {
-        lag_values(t, q, lag_v, p);
+        if (lag_values(t, q, lag_v, p)) return LAG_TRIAL;
         double gmax = 0.0;
         for (int a = 0; a < nr; ++a) { const double e = fabs(lag_g[lag_rows[a]]); if (!(e <= gmax)) gmax = e; }
         if (gmax < LAG_NEWTON_TOL) { converged = 1; break; }
@@ -247,7 +282,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     double *q = lag_q, *qd = lag_qd;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
-    lag_values(t, q, qd, p);  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, p);

@@ -13,6 +13,11 @@ only where the scipy-stepped path would do something other than step:
 
 A model without degrees of freedom (every coordinate driven or dependent) has nothing to
 integrate: ``prescribed`` evaluates the motion at the output times in C.
+
+Motors that prescribe their position by an expression of t (``expressions.Expression``, as
+model files give it) run in C as stack programs (``expression_c.py``: the expression and its
+exact first and second derivatives, ``motor_programs``); a position given as a Python
+callable keeps the run in Python stepping (``LagrangeFormulation.compiled_loop`` says so).
 """
 from __future__ import annotations
 
@@ -21,6 +26,7 @@ import ctypes
 import numpy as np
 
 from ..errors import SimulationError
+from ..expression_c import NotCompilable, StackPrograms, stack_programs
 from ..integrators import PAUSED, TRIAL_FAILED
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
@@ -31,6 +37,35 @@ _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctype
 
 def _ptr(array: np.ndarray) -> int:
     return array.__array_interface__["data"][0]
+
+
+def motor_programs(constraints) -> tuple[np.ndarray, StackPrograms] | None:
+    """The stack programs of the motors that prescribe their position (None when there are
+    none): ``prog[r]`` (nc entries, -1 for other rows) numbers motor row r's programs
+    ``3 prog[r]`` (position s, m or rad), ``3 prog[r] + 1`` (s', per s) and ``3 prog[r] + 2``
+    (s'', per s^2): the exact derivatives Python stepping uses (``ConstraintSet``).
+    ``NotCompilable`` (naming the motor) for a position given as a Python callable or an
+    expression the C evaluator cannot run."""
+    prog = np.full(constraints.nc, -1, dtype=np.int64)
+    trees: list[tuple] = []
+    for r in constraints.coordinate_rows:
+        eq = constraints.equations[r]
+        if eq.speed is not None:
+            continue
+        name = constraints.owner[r]
+        exact = constraints.exact_derivatives.get(r)
+        nodes = [getattr(f, "node", None) for f in (eq.position, *(exact or ()))]
+        if exact is None or any(node is None for node in nodes):
+            raise NotCompilable(f"motor {name!r} prescribes its position by a Python callable, which is evaluated in "
+                                f"Python (a position given as an expression of t, as model files write it, runs "
+                                f"compiled)")
+        try:
+            stack_programs(nodes)
+        except NotCompilable as exc:
+            raise NotCompilable(f"motor {name!r}: its position expression is evaluated in Python ({exc})") from None
+        prog[r] = len(trees) // 3
+        trees += nodes
+    return None if not trees else (prog, stack_programs(trees))
 
 
 class ReducedRun:
@@ -65,12 +100,15 @@ class ReducedRun:
                 joint = joint if isinstance(joint, str) else joint.name
                 self.mq[r] = topology.q_slice[joint].start
                 self.mv[r] = topology.v_slice[joint].start
-                self.speed[r] = constraints.motor_speed(kernel, r)
-                self.offset[r] = self.workspace.offsets[r]
+                speed = constraints.motor_speed(kernel, r)
+                if speed is not None:  # (a position motor's row runs its stack programs)
+                    self.speed[r] = speed
+                    self.offset[r] = self.workspace.offsets[r]
         for j, k in enumerate(self.contacts):
             self.geo[nm + j] = -2 - k
         self.acc = np.concatenate(([t0], q0, qd0))
-        self.info = np.zeros(1)
+        self.info = np.array([0.0, np.nan])  # [condition, time of a non-finite motor position]
+        self.programs = None if constraints is None else motor_programs(constraints)
         self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
         self.retries, self.t_retry = 0, -np.inf
         self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
@@ -80,6 +118,11 @@ class ReducedRun:
         self.run = lib.dop853_reduced_run
         self.gaps = self.event = self.held = None
         self._configure()
+        if self.programs is not None:  # (after configuring: the C side reports into self.info)
+            positions = lib.lagrange_positions
+            positions.argtypes, positions.restype = [_VOID] * 4, ctypes.c_int
+            prog, programs = self.programs
+            positions(_ptr(prog), _ptr(programs.ops), _ptr(programs.args), _ptr(programs.start))
         drives = lib.lagrange_drives
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
         drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
@@ -129,6 +172,23 @@ class ReducedRun:
             self.lib.lagrange_watch(len(self.gaps), _ptr(self.held), _ptr(self.gaps), self.gap_tolerance,
                                     _ptr(self.event))
 
+    def check_motors(self) -> None:
+        """After a failed C evaluation: when a motor's prescribed position (or a derivative)
+        was not finite, raise the ``SimulationError`` Python stepping raises there."""
+        t = float(self.info[1])
+        if t != t or self.programs is None:
+            return
+        constraints = self.formulation.constraints
+        for r in np.flatnonzero(self.programs[0] >= 0):
+            eq = constraints.equations[r]
+            try:
+                for f in (eq.position, *constraints.exact_derivatives[r]):
+                    f(t)  # (an Expression raises SimulationError saying why)
+            except Exception as exc:  # as ConstraintSet.evaluate reports it
+                raise SimulationError(f"position({t:g}) failed: {exc}", constraints.groups_by_row(r)) from None
+        raise SimulationError(f"a motor's prescribed position is not finite at t = {t:.6g} s in compiled code: "
+                              f"motors {[constraints.owner[r] for r in np.flatnonzero(self.programs[0] >= 0)]}")
+
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
         self.lib.lagrange_drives(0)
@@ -167,6 +227,7 @@ class ReducedRun:
         f = np.empty_like(y)
         status = fn(float(t), _ptr(y), _ptr(f), _ptr(self.kernel.p), None if self.tau is None else _ptr(self.tau))
         if status:
+            self.check_motors()
             raise SimulationError(f"no dependent coordinates at t = {t:.6g} s (the constraints "
                                   f"{self.formulation.row_names(self.rows)} cannot be solved there)")
         return f
@@ -189,6 +250,7 @@ class ReducedRun:
             return y, np.empty_like(y)
         if status != TRIAL_FAILED:
             raise SimulationError(f"compiled lagrange loop: unexpected status {status}")
+        self.check_motors()
         if state[0] > self.t_retry:
             self.retries = 0
         self.retries += 1
@@ -219,6 +281,7 @@ class ReducedRun:
         fn.argtypes = [_VOID, _LONG, _VOID, _VOID, _VOID]
         fn.restype = ctypes.c_int
         if fn(_ptr(self.kernel.p), len(times), _ptr(times), _ptr(out), _ptr(done)):
+            self.check_motors()
             t = times[int(done[0])]
             raise SimulationError(f"the prescribed motion cannot be followed at t = {t:.6g} s: constraints "
                                   f"{self.formulation.row_names(self.rows)} have no solution near the last one")
@@ -247,6 +310,7 @@ class _Locator:
 
     def _checked(self, value: float, s: float, what: str) -> float:
         if value != value:
+            self.run.check_motors()
             raise SimulationError(f"the {what} cannot be evaluated at t = {s:.6g} s (no dependent coordinates "
                                   f"near the step's start)")
         return value
