@@ -19,13 +19,13 @@ import numpy as np
 
 from ..errors import ModelError, SimulationError
 from ..expressions_c import compile_position
+from .compiled_watch import ContactWatching, EventStepFunctions, pointer
 from .dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
 
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
 
-def _ptr(array: np.ndarray) -> int:
-    return array.__array_interface__["data"][0]
+_ptr = pointer
 
 
 def _bind_configure(lib):
@@ -113,10 +113,12 @@ class DaeRows:
         self.close()
 
 
-class DaeRun:
+class DaeRun(ContactWatching):
     """One compiled stretch of a dae run with contacts, from ``(q0, qd0)`` at ``t0`` with the
     held contacts ``contacts``; the interface ``simulate._compiled_contacts`` steps
     (``y0``, ``ni``, ``watch_contacts``, ``event_step``, ``locator``, ``sync``, ``workspace``)."""
+
+    WATCH = "dae_watch"
 
     #: The loop steps the full state (``integrators.dop853_segment`` reads failures from y).
     full_state_loop = True
@@ -162,28 +164,6 @@ class DaeRun:
     def y0(self) -> np.ndarray:
         return np.ascontiguousarray(self.workspace.y0, dtype=float)
 
-    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
-        """Check every accepted step for contact events: ``gaps`` of every contact at the
-        start (updated by the loop); this stretch's held contacts are ``contacts``."""
-        nk = len(gaps)
-        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
-        self.held = np.zeros(nk, dtype=np.int64)
-        self.held[list(self.contacts)] = 1
-        self.event = np.zeros(1 + 9 * 2 * self.n)
-        watch = self.lib.dae_watch
-        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
-        watch.restype = ctypes.c_int
-        watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
-
-    def event_step(self, t_old: float, y_old: np.ndarray):
-        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT."""
-        from scipy.integrate._ivp.rk import Dop853DenseOutput
-        ny = len(y_old)
-        t_new = float(self.event[0])
-        y_new = self.event[1:1 + ny].copy()
-        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
-        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
-
     def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
         return _Locator(self, t_old, y_old)
 
@@ -203,24 +183,12 @@ class DaeRun:
         self.close()
 
 
-class _Locator:
+class _Locator(EventStepFunctions):
     """``gap(s, i)`` and ``force(s, k)`` (contact i's gap, the k-th held contact's normal
     force) on the event step of a ``DaeRun``, from its dense output, computed in C."""
 
     def __init__(self, run: DaeRun, t_old: float, y_old: np.ndarray):
-        self.run, self.t_old = run, float(t_old)
-        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
-        ny = len(self.y_old)
-        self.h = float(run.event[0]) - self.t_old
-        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
-        lib = run.lib
-        self._gap, self._force = lib.dae_gap_at, lib.dae_force_at
-        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
-        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
-        self._gap.restype = self._force.restype = _DBL
-        self.args = (self.t_old, self.h, _ptr(self.y_old), _ptr(self.F), ny)
-        self.p = _ptr(run.kernel.p)
-        self.tau = None if run.tau is None else _ptr(run.tau)
+        super().__init__(run, t_old, y_old, "dae")
         rows = [] if run.dae_rows is None else run.dae_rows.spec
         # configured row of each held contact (None: dropped as dependent, its force is 0)
         self.row_of = {}

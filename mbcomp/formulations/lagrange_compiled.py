@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import SimulationError
 from ..expression_c import NotCompilable, StackPrograms, stack_programs
 from ..integrators import PAUSED, TRIAL_FAILED
+from .compiled_watch import ContactWatching, EventStepFunctions, pointer
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
 MAX_RETRIES = 10
@@ -35,8 +36,7 @@ MAX_RETRIES = 10
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
 
-def _ptr(array: np.ndarray) -> int:
-    return array.__array_interface__["data"][0]
+_ptr = pointer
 
 
 def motor_programs(constraints) -> tuple[np.ndarray, StackPrograms] | None:
@@ -68,13 +68,15 @@ def motor_programs(constraints) -> tuple[np.ndarray, StackPrograms] | None:
     return None if not trees else (prog, stack_programs(trees))
 
 
-class ReducedRun:
+class ReducedRun(ContactWatching):
     """One compiled lagrange run of ``formulation`` on ``kernel`` from the consistent state
     ``(q0, qd0)`` at t = 0 with constant generalised forces ``tau`` (None or nv values).
 
     Owns the arrays the C code reads (partition, motor rows) and writes (``acc``: time,
     coordinates and speeds of the last accepted state).  ``close()`` switches the loop off.
     """
+
+    WATCH = "lagrange_watch"
 
     def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0,
                  contacts: tuple = (), offsets: dict | None = None):
@@ -127,34 +129,10 @@ class ReducedRun:
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
         drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
 
-    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
-        """Check every accepted step for contact events (see ``lagrange_c``): ``gaps`` of every
-        contact at the start (updated by the loop), the closed ones are this run's contacts."""
-        nk = len(gaps)
-        self.gap_tolerance = float(gap_tolerance)
-        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
-        self.held = np.zeros(nk, dtype=np.int64)
-        self.held[list(self.contacts)] = 1
-        self.event = np.zeros(1 + 9 * 2 * self.n)
-        watch = self.lib.lagrange_watch
-        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
-        watch.restype = ctypes.c_int
-        watch(nk, _ptr(self.held), _ptr(self.gaps), float(gap_tolerance), _ptr(self.event))
-
     def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
         """The gaps and held contacts' forces on the event step the loop stopped at, in C
         (for ``ContactWatch.locator``)."""
         return _Locator(self, t_old, y_old)
-
-    def event_step(self, t_old: float, y_old: np.ndarray):
-        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its
-        dense output (scipy's DOP853 interpolant, from the loop's coefficients)."""
-        from scipy.integrate._ivp.rk import Dop853DenseOutput
-        ny = len(y_old)
-        t_new = float(self.event[0])
-        y_new = self.event[1:1 + ny].copy()
-        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
-        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
 
     # -- configuration ---------------------------------------------------------------------------
     def _configure(self) -> None:
@@ -288,25 +266,13 @@ class ReducedRun:
         return times, out, {"nfev": 0, "steps": max(len(times) - 1, 0), "rejected": 0, "method": "prescribed"}
 
 
-class _Locator:
+class _Locator(EventStepFunctions):
     """``gap(s, i)`` and ``force(s, k)`` on the event step of a ``ReducedRun`` (its dense
     output, the dependent coordinates by Newton from the step's start), computed in C."""
 
     def __init__(self, run: ReducedRun, t_old: float, y_old: np.ndarray):
-        self.run, self.t_old = run, float(t_old)
-        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
-        ny = len(self.y_old)
-        self.h = float(run.event[0]) - self.t_old
-        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
+        super().__init__(run, t_old, y_old, "lagrange")
         self.nm = 0 if run.formulation.constraints is None else run.formulation.constraints.nc
-        lib = run.lib
-        self._gap, self._force = lib.lagrange_gap_at, lib.lagrange_force_at
-        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
-        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
-        self._gap.restype = self._force.restype = _DBL
-        self.args = (self.t_old, self.h, _ptr(self.y_old), _ptr(self.F), ny)
-        self.p = _ptr(run.kernel.p)
-        self.tau = None if run.tau is None else _ptr(run.tau)
 
     def _checked(self, value: float, s: float, what: str) -> float:
         if value != value:

@@ -1,0 +1,73 @@
+"""Contact watching shared by the compiled loops of both formulations.
+
+A compiled run with contacts arms the loop's watch (``<prefix>_watch``): after each accepted
+step the C loop checks the gaps of open contacts and the normal forces of held ones, and on a
+sign change stops with EVENT, writing the step into ``event``: ``[t_new, y_new (ny values),
+(ny values the loop uses), the 7 x ny DOP853 dense-output coefficients]``.  Python then
+locates the event on that step with ``<prefix>_gap_at`` / ``<prefix>_force_at`` (C functions
+of the step's dense output) and applies the impact law.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+_VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
+
+
+def pointer(array: np.ndarray) -> int:
+    """The address of a contiguous numpy array's data (for the C loops' arguments)."""
+    return array.__array_interface__["data"][0]
+
+
+class ContactWatching:
+    """Mixin of a compiled run (``lib``, ``n`` reduced/full coordinates, ``contacts`` held):
+    arming the loop's watch and reading back the step it stopped at.  ``WATCH`` names the C
+    function of the formulation (``dae_watch``, ``lagrange_watch``)."""
+
+    WATCH = ""
+
+    def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
+        """Check every accepted step for contact events: ``gaps`` of every contact at the
+        start (updated by the loop, m); the held ones are this stretch's ``contacts``."""
+        nk = len(gaps)
+        self.gap_tolerance = float(gap_tolerance)
+        self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
+        self.held = np.zeros(nk, dtype=np.int64)
+        self.held[list(self.contacts)] = 1
+        self.event = np.zeros(1 + 9 * 2 * self.n)
+        watch = getattr(self.lib, self.WATCH)
+        watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
+        watch.restype = ctypes.c_int
+        watch(nk, pointer(self.held), pointer(self.gaps), self.gap_tolerance, pointer(self.event))
+
+    def event_step(self, t_old: float, y_old: np.ndarray):
+        """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its
+        dense output (scipy's DOP853 interpolant, from the loop's coefficients)."""
+        from scipy.integrate._ivp.rk import Dop853DenseOutput
+        ny = len(y_old)
+        t_new = float(self.event[0])
+        y_new = self.event[1:1 + ny].copy()
+        F = self.event[1 + 2 * ny:1 + 9 * ny].reshape(7, ny).copy()
+        return t_new, y_new, Dop853DenseOutput(t_old, t_new, y_old.copy(), F)
+
+
+class EventStepFunctions:
+    """The C gap and held-force functions (``<prefix>_gap_at``, ``<prefix>_force_at``) bound
+    to the event step of ``run`` that starts at ``(t_old, y_old)``: ``self._gap(s, *self.args,
+    i, self.p)`` and ``self._force(s, *self.args, row, self.p, self.tau)``."""
+
+    def __init__(self, run, t_old: float, y_old: np.ndarray, prefix: str):
+        self.run, self.t_old = run, float(t_old)
+        self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
+        ny = len(self.y_old)
+        self.h = float(run.event[0]) - self.t_old
+        self.F = np.ascontiguousarray(run.event[1 + 2 * ny:1 + 9 * ny])
+        self._gap, self._force = getattr(run.lib, f"{prefix}_gap_at"), getattr(run.lib, f"{prefix}_force_at")
+        self._gap.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID]
+        self._force.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID]
+        self._gap.restype = self._force.restype = _DBL
+        self.args = (self.t_old, self.h, pointer(self.y_old), pointer(self.F), ny)
+        self.p = pointer(run.kernel.p)
+        self.tau = None if run.tau is None else pointer(run.tau)
