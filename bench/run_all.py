@@ -230,8 +230,8 @@ def run_compile(sizes, rounds, log=print):
     with open(RESULTS / "compile_startup.csv", newline="") as fh:
         rows = [{k: (float(v) if k not in ("tree", "warm_sympy", "warm_scipy_integrate") else v) for k, v in r.items()}
                 for r in csv.DictReader(fh)]
-    return rows, ("Each figure a median over rounds of fresh processes (`compile_startup.py`); peak RSS is the "
-                  "Python process plus its largest child (the C compiler), an upper bound of the two together.")
+    return rows, ("Each figure a median over rounds of fresh processes (`compile_startup.py`); peak RSS is "
+                  "sampled over the whole process tree (Python and every C compiler process running at once).")
 
 
 def chain_results_from_csv(sizes) -> list[dict]:
