@@ -18,6 +18,7 @@ changing any of them gives a new entry.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import hmac
@@ -29,13 +30,17 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import time
 import warnings
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 #: Bump when the manifest format changes.
 MANIFEST_VERSION = 1
 SECRET_NAME = "secret"
+#: Longest wait (s) for another process that builds the same entry (a compiler's own limit is
+#: 600 s); after it this process builds the entry itself.
+BUILD_WAIT = 660.0
 
 
 class CacheWarning(UserWarning):
@@ -206,6 +211,45 @@ def store(key: str, suffix: str, data: bytes, inputs: Mapping[str, Any]) -> Path
         return path
     except OSError:
         return None  # an unusable cache only costs a rebuild next time
+
+
+@contextlib.contextmanager
+def building(name: str, wait: float | None = None) -> Iterator[bool]:
+    """Hold the build lock ``name`` (e.g. a hash of a model's structure) while generating an
+    entry: another process (a parallel worker, a second script) compiling the same model waits
+    here, then finds the entry in the cache instead of compiling it a second time.
+
+    An exclusive ``flock`` on ``<name>.lock`` in the cache directory; the kernel releases it when
+    its holder exits or crashes.  Yields whether the lock is held: False where locks are not
+    available (no ``fcntl``, an unusable cache) or after waiting ``wait`` s (``BUILD_WAIT``),
+    and the caller then builds unlocked, as it would without a cache."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: no flock; concurrent builds stay correct (atomic writes)
+        yield False
+        return
+    try:
+        fd = os.open(cache_dir() / f"{name}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        yield False
+        return
+    try:
+        deadline = time.monotonic() + (BUILD_WAIT if wait is None else wait)
+        held = False
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                held = True
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    break
+                time.sleep(0.005)
+            except OSError:  # a file system without locks
+                break
+        yield held
+    finally:
+        os.close(fd)  # releases the lock
 
 
 # -- reading ----------------------------------------------------------------------------------

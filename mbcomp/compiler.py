@@ -127,9 +127,19 @@ class CompiledModel:
                 raise ModelError(f"Model {self.model_name!r}", f"internal error: {function} writes {written} values, "
                                  f"its layout has {self.output_layout.size(function)}")
 
-    def _load(self, cache: bool, backend: str):
+    def _load(self, use_cache: bool, backend: str):
+        """The generated functions: from the cache, or generated and compiled (and cached).
+        With the cache, the build holds the model's build lock (``cache.building``), so a
+        process compiling the same model at the same time waits and then loads this one's."""
         if backend not in ("auto", "c", "python"):
             raise ModelError(f"Model {self.model_name!r}", f"backend must be 'auto', 'c' or 'python', got {backend!r}")
+        if not use_cache:
+            return self._load_unlocked(False, backend)
+        lock = hashlib.sha256(f"{backend}\n{self.description}".encode()).hexdigest()
+        with cache.building(f"build-{lock}"):
+            return self._load_unlocked(True, backend)
+
+    def _load_unlocked(self, cache: bool, backend: str):
         if backend in ("auto", "c"):
             functions = self._load_c(cache)
             if functions is not None:
