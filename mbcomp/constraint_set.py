@@ -147,6 +147,22 @@ class ConstraintSet:
             return None
         return float(kernel.parameters.get(f"{self.owner[r]}.speed", eq.speed))
 
+    def explain_position_failure(self, rows, t: float) -> None:
+        """After compiled code found a motor's prescribed position (or a derivative) not
+        finite at ``t`` (s): raise the ``SimulationError`` Python stepping raises there,
+        naming the motor; ``rows``: the position motors' rows."""
+        for r in rows:
+            eq = self.equations[r]
+            try:
+                for f in (eq.position, *self.exact_derivatives.get(r, ())):
+                    value = float(f(t))  # (an Expression raises saying why)
+                    if value != value or value in (float("inf"), float("-inf")):
+                        raise ArithmeticError(f"the value {value} is not finite")
+            except Exception as exc:  # as evaluate reports it
+                raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
+        raise SimulationError(f"a motor's prescribed position is not finite at t = {t:.6g} s in compiled code: "
+                              f"motors {[self.owner[r] for r in rows]}")
+
     def groups_by_row(self, r: int):
         for name, comp, _ in self.groups:
             if r < self.slices[name].stop:

@@ -6,7 +6,13 @@ negation and ``sin cos exp sqrt log`` calls.  Rather than generating C text per 
 the tree is flattened here into a postfix program of doubles that one C routine,
 ``mb_program``, evaluates: the same operations in the same order as
 ``expressions.evaluate`` (``pow`` for ``**``, as ``math.pow``), so compiled and
-Python-stepped runs agree to rounding.
+Python-stepped runs agree to rounding.  Both formulations' compiled loops use it
+(``formulations/dae_c.py``, ``formulations/lagrange_c.py``).
+
+Where Python's evaluation raises (division by zero, ``sqrt`` of a negative number, ``log``
+of a non-positive one), ``mb_program`` gives NaN (and an overflow gives an infinity): the
+loops treat a non-finite value as a failed step and the caller raises the same
+``SimulationError`` as Python stepping.
 
 Program layout: ``[n, op_1, arg_1, ..., op_n, arg_n]`` (doubles); several programs may
 follow each other in one array.
@@ -23,12 +29,18 @@ _BINARY = {"+": ADD, "-": SUB, "*": MUL, "/": DIV, "**": POW}
 _CALLS = {"sin": SIN, "cos": COS, "exp": EXP, "sqrt": SQRT, "log": LOG}
 
 #: Deepest evaluation stack the C routine has room for.
-STACK = 64
+STACK = 256
+
+
+class NotCompilable(ModelError):
+    """An expression ``mb_program`` cannot run (a node outside the language, a linked
+    parameter object, a stack deeper than ``STACK``): it is evaluated in Python instead."""
 
 
 def compile_program(node: tuple, owner: str = "expression") -> np.ndarray:
     """The postfix program of an expression tree (``expressions`` node tuples).
-    ``ModelError`` for a node outside the language or a tree deeper than ``STACK``."""
+    ``NotCompilable`` (a ``ModelError``) for a node outside the language or a tree deeper
+    than ``STACK``."""
     ops: list[float] = []
     depth = 0
 
@@ -57,12 +69,15 @@ def compile_program(node: tuple, owner: str = "expression") -> np.ndarray:
             walk(n[1])
             walk(n[2])
             emit(_BINARY[kind], 0.0, -1)
+        elif kind == "call":
+            raise NotCompilable(owner, f"function {n[1]!r} has no compiled form")
         else:
-            raise ModelError(owner, f"cannot evaluate {kind!r} in compiled code")
+            raise NotCompilable(owner, f"a {kind!r} node (a linked parameter object) has no compiled form")
 
     walk(node)
     if peak[0] > STACK:
-        raise ModelError(owner, f"expression needs {peak[0]} stack entries, more than the compiled {STACK}")
+        raise NotCompilable(owner, f"the expression needs a stack of {peak[0]} values (the compiled evaluator "
+                                   f"has {STACK})")
     return np.array([len(ops) // 2, *ops], dtype=float)
 
 
@@ -78,26 +93,49 @@ def compile_position(expression) -> np.ndarray | None:
     return np.concatenate([compile_program(e.node, owner) for e in (expression, first, second)])
 
 
-def run_program(program: np.ndarray, t: float) -> float:
-    """Evaluate one program at ``t`` in Python (the C routine's reference, for tests)."""
+def programs(trees: list[tuple], owner: str = "expression") -> np.ndarray:
+    """The programs of several expression trees, one after the other in one array."""
+    return np.concatenate([compile_program(tree, owner) for tree in trees]) if trees else np.zeros(0)
+
+
+def run_program(program: np.ndarray, t: float, index: int = 0) -> float:
+    """Evaluate program ``index`` of an array of programs at ``t`` in Python, with the C
+    routine's rules (NaN where Python's evaluation raises): its reference, for tests."""
     import math
+    start = 0
+    for _ in range(index):
+        start += 1 + 2 * int(program[start])
     stack: list[float] = []
-    n = int(program[0])
+    n = int(program[start])
     for k in range(n):
-        op, arg = int(program[1 + 2 * k]), float(program[2 + 2 * k])
+        op, arg = int(program[start + 1 + 2 * k]), float(program[start + 2 + 2 * k])
         if op == NUM:
             stack.append(arg)
         elif op == TIME:
             stack.append(t)
         elif op == NEG:
             stack[-1] = -stack[-1]
-        elif op in (SIN, COS, EXP, SQRT, LOG):
-            stack[-1] = {SIN: math.sin, COS: math.cos, EXP: math.exp, SQRT: math.sqrt, LOG: math.log}[op](stack[-1])
+        elif op in (SIN, COS, EXP):
+            try:
+                stack[-1] = {SIN: math.sin, COS: math.cos, EXP: math.exp}[op](stack[-1])
+            except OverflowError:
+                stack[-1] = math.inf
+        elif op == SQRT:
+            stack[-1] = math.sqrt(stack[-1]) if stack[-1] >= 0.0 else math.nan
+        elif op == LOG:
+            stack[-1] = math.log(stack[-1]) if stack[-1] > 0.0 else math.nan
         else:
             b = stack.pop()
             a = stack.pop()
-            stack.append({ADD: a + b, SUB: a - b, MUL: a * b}.get(op) if op in (ADD, SUB, MUL)
-                         else a / b if op == DIV else math.pow(a, b))
+            if op == DIV:
+                stack.append(a / b if b != 0.0 else math.nan)
+            elif op == POW:
+                try:
+                    stack.append(math.pow(a, b))
+                except (OverflowError, ValueError):
+                    stack.append(math.nan)
+            else:
+                stack.append({ADD: a + b, SUB: a - b, MUL: a * b}[op])
     return stack[-1]
 
 
@@ -106,6 +144,7 @@ def run_program(program: np.ndarray, t: float) -> float:
 C_PROGRAM = f"""
 #ifndef MB_PROGRAM_DEFINED
 #define MB_PROGRAM_DEFINED 1
+#include <math.h>
 static double mb_program(const double **prog, double t) {{
     const double *pc = *prog;
     const long n = (long)pc[0];
@@ -120,11 +159,12 @@ static double mb_program(const double **prog, double t) {{
         case {SIN}: st[sp] = sin(st[sp]); break;
         case {COS}: st[sp] = cos(st[sp]); break;
         case {EXP}: st[sp] = exp(st[sp]); break;
-        case {SQRT}: st[sp] = sqrt(st[sp]); break;
-        case {LOG}: st[sp] = log(st[sp]); break;
+        case {SQRT}: st[sp] = st[sp] < 0.0 ? NAN : sqrt(st[sp]); break;
+        case {LOG}: st[sp] = st[sp] <= 0.0 ? NAN : log(st[sp]); break;
         default: {{
             const double b = st[sp--], a = st[sp];
-            st[sp] = op == {ADD} ? a + b : op == {SUB} ? a - b : op == {MUL} ? a * b : op == {DIV} ? a / b : pow(a, b);
+            st[sp] = op == {ADD} ? a + b : op == {SUB} ? a - b : op == {MUL} ? a * b
+                : op == {DIV} ? (b == 0.0 ? NAN : a / b) : pow(a, b);
         }}
         }}
     }}

@@ -838,10 +838,14 @@ def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndar
     with formulation.compiled_setup(lib, kernel=kernel, q0=q0):  # e.g. the dae rows and gains, for this thread only
         tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
         session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
-        if session is None:
-            return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
-        with session:
-            return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session)
+        try:
+            if session is None:
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+            with session:
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session)
+        except SimulationError:
+            formulation.explain_compiled_failure(lib)  # raises the cause when it knows one (a motor's law)
+            raise
 
 
 def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None):

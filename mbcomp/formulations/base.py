@@ -386,6 +386,11 @@ class Formulation:
         ``formulations/lagrange_compiled.py``); None for the plain loop."""
         return None
 
+    def explain_compiled_failure(self, lib) -> None:
+        """After the compiled loop failed (inside ``compiled_setup``): raise a
+        ``SimulationError`` naming the cause when this formulation's C code recorded one (a
+        motor's law that was not finite); return otherwise, and the loop's own error stands."""
+
     def start(self, kernel, t0, q0, qd0, tau, contacts=()) -> Workspace:
         """The per-simulation workspace (the plain tree one when there are no constraints)."""
         cls = Workspace if self.constraints is None and not contacts else self.workspace_class

@@ -94,6 +94,18 @@ class DaeFormulation(Formulation):
     #: The compiled stretch between contact events (``simulate._compiled_contacts``).
     contact_run = DaeRun
 
+    def explain_compiled_failure(self, lib) -> None:
+        """A position motor whose law was not finite in C (``dae_motor_failure``): the
+        ``SimulationError`` Python stepping raises there, not the singular solve it caused."""
+        if self.constraints is None or not hasattr(lib, "dae_motor_failure"):
+            return
+        failure = lib.dae_motor_failure
+        failure.argtypes, failure.restype = [], ctypes.c_double
+        t = float(failure())
+        if t == t:
+            rows = [r for r in self.constraints.coordinate_rows if self.constraints.equations[r].speed is None]
+            self.constraints.explain_position_failure(rows, t)
+
     @contextmanager
     def compiled_setup(self, lib, kernel=None, q0=None):
         """The compiled right-hand side solves the KKT system on the rows found independent

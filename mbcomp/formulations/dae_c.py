@@ -55,6 +55,12 @@ static __thread double dae_alpha, dae_beta, dae_scale, dae_tol = 1e-9;
 static __thread double dae_time = 0.0;            /* the time of the state being evaluated */
 static __thread double dae_lam[DAE_NR + 1];       /* multipliers of the last solve, per configured row */
 static __thread int dae_has_geo, dae_has_contacts;
+static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
+
+/* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
+double dae_motor_failure(void) {{
+    return dae_bad_time;
+}}
 
 static void dae_scan(void) {{
     dae_has_geo = dae_has_contacts = 0;
@@ -70,6 +76,7 @@ int dae_configure_rows(int nr, const long *spec, const double *data, const doubl
                        double beta, double scale, double tol) {{
     if (nr > DAE_NR) return -4;
     dae_nr = nr; dae_spec = spec; dae_data = data; dae_programs = programs;
+    dae_bad_time = NAN;
     dae_alpha = alpha; dae_beta = beta; dae_scale = scale; dae_tol = tol;
     if (nr >= 0) dae_scan();
     return 0;
@@ -123,6 +130,8 @@ static void dae_rows_eval(const double *q, const double *qd, const double *p, co
                 const double *prog = dae_programs + s[4];
                 const double v0 = mb_program(&prog, dae_time), v1 = mb_program(&prog, dae_time);
                 const double v2 = mb_program(&prog, dae_time);
+                if (!(isfinite(v0) && isfinite(v1) && isfinite(v2)) && dae_bad_time != dae_bad_time)
+                    dae_bad_time = dae_time;
                 g[k] = q[s[2]] - v0;
                 gt[k] = -v1;
                 bias[k] = -v2;

@@ -195,7 +195,7 @@ class LagrangeFormulation(Formulation):
             return "the lagrange formulation steps constrained models with ball or free joints in Python"
         if self.compiled.drives.nz:
             return "the lagrange formulation steps constrained models with drive states in Python"
-        from ..expression_c import NotCompilable
+        from ..expressions_c import NotCompilable
         from .lagrange_compiled import motor_programs
         try:
             motor_programs(self.constraints)  # positions given as expressions of t run in C

@@ -14,7 +14,7 @@ coordinates and their speeds); everything else follows in C, as in ``LagrangeWor
 
 Drive elements without states add their forces (the generated ``drives`` at time t).
 Motor rows (``q_k - offset - speed t``, or ``q_k - s(t)`` for a position given as an
-expression of t: ``s`` and its exact derivatives run as stack programs, ``expression_c.py``)
+expression of t: ``s`` and its exact derivatives run as postfix programs, ``expressions_c.py``)
 are evaluated here, the geometric rows come from the generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
 and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
 numpy arrays that Python owns and configures per thread with ``lagrange_configure``.
@@ -33,7 +33,7 @@ from __future__ import annotations
 # failed or the dependent block is singular; like ``TrialStateError``, the step is retried
 # from the last accepted state); PAUSED, after an accepted step for Python to look at the
 # partition.
-from ..expression_c import C_EVALUATOR
+from ..expressions_c import C_PROGRAM
 from ..integrators import EVENT, PAUSED, TRIAL_FAILED
 
 
@@ -43,7 +43,7 @@ def c_lagrange(nv: int, ng: int) -> str:
     configuration (``lagrange_configure``) and prescribed motion without degrees of freedom
     (``lagrange_prescribed``), for a model with ``nv`` speeds and ``ng`` geometric
     constraint rows (offsets from the ``OutputLayout`` defines)."""
-    return C_EVALUATOR + _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
+    return C_PROGRAM + _C.replace("@TRIAL@", str(TRIAL_FAILED)).replace("@PAUSED@", str(PAUSED)).replace("@EVENT@", str(EVENT))
 
 
 _C = r"""
@@ -67,21 +67,23 @@ static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag
     *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
 static __thread int *lag_piv;
 static double lag_u[1];
-/* motors prescribing their position by an expression of t (expression_c.py): row r runs
-   the stack programs 3 prog[r], 3 prog[r] + 1, 3 prog[r] + 2 (s, s', s''; prog[r] < 0: a
-   speed motor); a non-finite value stops the Newton solve and writes t to lag_info[1] */
-static __thread const long *lag_prog = 0, *lag_pops, *lag_pstart;
-static __thread const double *lag_pargs;
+/* motors prescribing their position by an expression of t (expressions_c.py): row r runs
+   the programs at lag_pdata + prog[r] (s, s', s'' one after the other; prog[r] < 0: a speed
+   motor); a non-finite value stops the Newton solve and writes t to lag_info[1] */
+static __thread const long *lag_prog = 0;
+static __thread const double *lag_pdata;
 static __thread int lag_bad = 0;
 
-int lagrange_positions(const long *prog, const long *ops, const double *args, const long *start) {
-    lag_prog = prog; lag_pops = ops; lag_pargs = args; lag_pstart = start;
+int lagrange_positions(const long *prog, const double *programs) {
+    lag_prog = prog; lag_pdata = programs;
     return 0;
 }
 
-static double lag_program(long i, double t) {
-    const long a = lag_pstart[i];
-    const double v = mbc_stack_eval(lag_pops + a, lag_pargs + a, lag_pstart[i + 1] - a, t);
+/* Program k (0: s, 1: s', 2: s'') of motor row r at time t. */
+static double lag_program(long r, int k, double t) {
+    const double *pc = lag_pdata + lag_prog[r];
+    for (int j = 0; j < k; ++j) pc += 1 + 2 * (long)pc[0];
+    const double v = mb_program(&pc, t);
     if (!isfinite(v)) {
         lag_bad = 1;
         if (lag_info) lag_info[1] = t;
@@ -188,10 +190,9 @@ static int lag_values(double t, const double *q, const double *qd, const double 
             for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
             Jr[lag_mv[r]] = 1.0;
             if (lag_prog && lag_prog[r] >= 0) {  /* q_k - s(t) */
-                const long i = 3 * lag_prog[r];
-                lag_g[r] = q[lag_mq[r]] - lag_program(i, t);
-                lag_gt[r] = -lag_program(i + 1, t);
-                lag_bias[r] = -lag_program(i + 2, t);
+                lag_g[r] = q[lag_mq[r]] - lag_program(r, 0, t);
+                lag_gt[r] = -lag_program(r, 1, t);
+                lag_bias[r] = -lag_program(r, 2, t);
             } else {
                 lag_g[r] = q[lag_mq[r]] - lag_offset[r] - lag_speed[r] * t;
                 lag_gt[r] = -lag_speed[r];

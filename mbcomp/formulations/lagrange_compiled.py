@@ -15,7 +15,7 @@ A model without degrees of freedom (every coordinate driven or dependent) has no
 integrate: ``prescribed`` evaluates the motion at the output times in C.
 
 Motors that prescribe their position by an expression of t (``expressions.Expression``, as
-model files give it) run in C as stack programs (``expression_c.py``: the expression and its
+model files give it) run in C as postfix programs (``expressions_c.py``: the expression and its
 exact first and second derivatives, ``motor_programs``); a position given as a Python
 callable keeps the run in Python stepping (``LagrangeFormulation.compiled_loop`` says so).
 """
@@ -26,7 +26,7 @@ import ctypes
 import numpy as np
 
 from ..errors import SimulationError
-from ..expression_c import NotCompilable, StackPrograms, stack_programs
+from ..expressions_c import NotCompilable, programs as compile_programs
 from ..integrators import PAUSED, TRIAL_FAILED
 from .compiled_watch import ContactWatching, EventStepFunctions, pointer
 
@@ -39,15 +39,16 @@ _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctype
 _ptr = pointer
 
 
-def motor_programs(constraints) -> tuple[np.ndarray, StackPrograms] | None:
-    """The stack programs of the motors that prescribe their position (None when there are
-    none): ``prog[r]`` (nc entries, -1 for other rows) numbers motor row r's programs
-    ``3 prog[r]`` (position s, m or rad), ``3 prog[r] + 1`` (s', per s) and ``3 prog[r] + 2``
-    (s'', per s^2): the exact derivatives Python stepping uses (``ConstraintSet``).
+def motor_programs(constraints) -> tuple[np.ndarray, np.ndarray] | None:
+    """The programs (``expressions_c``) of the motors that prescribe their position (None when
+    there are none): ``(prog, programs)``, motor row r's programs start at ``programs[prog[r]]``
+    (nc entries, -1 for other rows): the position s (m or rad), s' (per s) and s'' (per s^2)
+    one after the other, the exact derivatives Python stepping uses (``ConstraintSet``).
     ``NotCompilable`` (naming the motor) for a position given as a Python callable or an
     expression the C evaluator cannot run."""
     prog = np.full(constraints.nc, -1, dtype=np.int64)
-    trees: list[tuple] = []
+    parts: list[np.ndarray] = []
+    size = 0
     for r in constraints.coordinate_rows:
         eq = constraints.equations[r]
         if eq.speed is not None:
@@ -56,16 +57,18 @@ def motor_programs(constraints) -> tuple[np.ndarray, StackPrograms] | None:
         exact = constraints.exact_derivatives.get(r)
         nodes = [getattr(f, "node", None) for f in (eq.position, *(exact or ()))]
         if exact is None or any(node is None for node in nodes):
-            raise NotCompilable(f"motor {name!r} prescribes its position by a Python callable, which is evaluated in "
-                                f"Python (a position given as an expression of t, as model files write it, runs "
-                                f"compiled)")
+            raise NotCompilable(f"Motor {name!r}", "prescribes its position by a Python callable, which is evaluated in "
+                                "Python (a position given as an expression of t, as model files write it, runs "
+                                "compiled)")
         try:
-            stack_programs(nodes)
+            part = compile_programs(nodes, "")
         except NotCompilable as exc:
-            raise NotCompilable(f"motor {name!r}: its position expression is evaluated in Python ({exc})") from None
-        prog[r] = len(trees) // 3
-        trees += nodes
-    return None if not trees else (prog, stack_programs(trees))
+            raise NotCompilable(f"Motor {name!r}", f"its position expression is evaluated in Python "
+                                f"({exc})") from None
+        prog[r] = size
+        parts.append(part)
+        size += part.size
+    return None if not parts else (prog, np.concatenate(parts))
 
 
 class ReducedRun(ContactWatching):
@@ -122,9 +125,9 @@ class ReducedRun(ContactWatching):
         self._configure()
         if self.programs is not None:  # (after configuring: the C side reports into self.info)
             positions = lib.lagrange_positions
-            positions.argtypes, positions.restype = [_VOID] * 4, ctypes.c_int
+            positions.argtypes, positions.restype = [_VOID] * 2, ctypes.c_int
             prog, programs = self.programs
-            positions(_ptr(prog), _ptr(programs.ops), _ptr(programs.args), _ptr(programs.start))
+            positions(_ptr(prog), _ptr(programs))
         drives = lib.lagrange_drives
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
         drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
@@ -156,16 +159,7 @@ class ReducedRun(ContactWatching):
         t = float(self.info[1])
         if t != t or self.programs is None:
             return
-        constraints = self.formulation.constraints
-        for r in np.flatnonzero(self.programs[0] >= 0):
-            eq = constraints.equations[r]
-            try:
-                for f in (eq.position, *constraints.exact_derivatives[r]):
-                    f(t)  # (an Expression raises SimulationError saying why)
-            except Exception as exc:  # as ConstraintSet.evaluate reports it
-                raise SimulationError(f"position({t:g}) failed: {exc}", constraints.groups_by_row(r)) from None
-        raise SimulationError(f"a motor's prescribed position is not finite at t = {t:.6g} s in compiled code: "
-                              f"motors {[constraints.owner[r] for r in np.flatnonzero(self.programs[0] >= 0)]}")
+        self.formulation.constraints.explain_position_failure(np.flatnonzero(self.programs[0] >= 0), t)
 
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)

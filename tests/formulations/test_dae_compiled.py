@@ -12,7 +12,7 @@ import pytest
 
 import mbcomp as mb
 from mbcomp.expressions import Expression, parse_expression
-from mbcomp.expressions_c import compile_position, compile_program, run_program
+from mbcomp.expressions_c import STACK, compile_position, compile_program, run_program
 
 LIBRARY = Path(__file__).resolve().parents[2] / "library"
 
@@ -118,8 +118,8 @@ def test_motor_programs_evaluate_as_the_expressions(text):
 
 def test_motor_program_rejects_what_it_cannot_run():
     node = ("t",)
-    for _ in range(70):
-        node = ("+", ("t",), node)  # 71 entries on the stack
+    for _ in range(STACK):
+        node = ("+", ("t",), node)  # STACK + 1 entries on the stack
     with pytest.raises(mb.ModelError, match="stack"):
         compile_program(node)
     assert compile_position(lambda t: t) is None  # a Python callable stays in Python

@@ -1,5 +1,5 @@
 """Motors that prescribe their position by an expression of t, in the lagrange formulation's
-compiled loop (``expression_c.py`` stack programs run from ``formulations/lagrange_c.py``):
+compiled loop (``expressions_c.py`` programs run from ``formulations/lagrange_c.py``):
 closed-form kinematics without degrees of freedom, the motor's work equal to the change of
 energy, its torque equal to inverse dynamics, the same motion as scipy stepping."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ from scipy.integrate import simpson
 
 import mbcomp as mb
 from conftest import fourbar
-from mbcomp.expression_c import STACK_SIZE, NotCompilable, stack_programs
+from mbcomp.expressions_c import STACK, NotCompilable, programs as stack_programs, run_program
 from mbcomp.expressions import Expression, differentiate, parse_expression
 
 G, L, MASS = 9.81, 0.8, 2.0
@@ -59,17 +59,16 @@ class TestStackPrograms:
         node = parse_expression(text, {}, allow_t=True)
         trees = [node, differentiate(node), differentiate(differentiate(node))]
         programs = stack_programs(trees)
-        assert len(programs) == 3
         for i, tree in enumerate(trees):
             f = Expression(text, tree)
             for t in (0.0, 0.37, 1.9):
-                assert programs.evaluate(i, t) == pytest.approx(f(t), rel=1e-15, abs=1e-15)
+                assert run_program(programs, t, i) == pytest.approx(f(t), rel=1e-15, abs=1e-15)
 
     def test_what_the_evaluator_cannot_run(self):
         with pytest.raises(NotCompilable, match="linked parameter"):
             stack_programs([("+", ("t",), ("obj", object()))])
         deep = ("t",)
-        for _ in range(STACK_SIZE + 1):  # right-nested: every level keeps one value on the stack
+        for _ in range(STACK + 1):  # right-nested: every level keeps one value on the stack
             deep = ("+", ("num", 1.0), deep)
         with pytest.raises(NotCompilable, match="stack"):
             stack_programs([deep])
