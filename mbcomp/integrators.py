@@ -101,7 +101,7 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
 def _instance(run: str, init: str, reduced: bool) -> str:
     """One DOP853 loop: on the tree state (``rhs``) or on the lagrange formulation's reduced
     state (``lagrange_rhs``; full output rows)."""
-    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni)\n"
+    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni + NZ)\n"
               "#define LOOP_RHS(tt, yy, ff) lagrange_rhs(tt, yy, ff, p, tau)\n" if reduced else
               "#define LOOP_REDUCED 0\n#define LOOP_NY NY\n#define LOOP_RHS(tt, yy, ff) rhs(tt, yy, ff, p, tau, work)\n")
     return (macros + _LOOP.replace("@RUN@", run).replace("@INIT@", init)
@@ -283,6 +283,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                 if (t_out[*i_out] == t_new) dense = y_new;
                 const int os_ = lagrange_full(t_out[*i_out], dense, out, out + NCOORD, p);
                 if (os_) { status = os_; goto done; }
+                for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[2 * lag_ni + i];  /* the drive states */
 #else
                 normalize_state(out);
                 if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * LOOP_NY);
@@ -875,11 +876,13 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
     if session is not None:
         if method != "DOP853":
             raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
-        if session.ni == 0:  # nothing to integrate: the motion follows from the constraints
+        if session.ni == 0 and not kernel.compiled.drives.nz:  # nothing to integrate: the motion follows from the constraints
             times, values, stats = session.prescribed(t_end, t_eval, max_step)
             return times, values, stats, time.perf_counter() - started
         run = bind_reduced(lib)
-        full0, y = y, session.y0
+        full0, y = y, np.ascontiguousarray(np.concatenate((session.y0, z0)), dtype=float)  # [q_i, qd_i, z]
+        if z0.size:
+            session.drive_states(z0)  # (the accepted state's, where a retreat goes back to)
     else:
         full0 = y.copy()  # (the loop advances y in place)
     if method == "RK4":

@@ -193,8 +193,8 @@ class LagrangeFormulation(Formulation):
         topology = self.compiled.topology
         if not topology.state_map.identity:
             return "the lagrange formulation steps constrained models with ball or free joints in Python"
-        if self.compiled.drives.nz:
-            return "the lagrange formulation steps constrained models with drive states in Python"
+        if self.compiled.drives.nz and topology.contacts:
+            return "the lagrange formulation steps models with drive states and contacts in Python"
         from ..expressions_c import NotCompilable
         from .lagrange_compiled import motor_programs
         try:

@@ -91,7 +91,9 @@ static double lag_program(long r, int k, double t) {
     return v;
 }
 
-/* drive elements without states (nz = 0, no callables): their forces join tau */
+/* drive elements (no callables): their forces join tau; their LAG_NZ states follow the
+   mechanical ones in the reduced state, y = [q_i, qd_i, z] */
+#define LAG_NZ (DRIVES_SIZE - DRIVES_RATES_OFF)
 static __thread int lag_drives = 0;
 static __thread double lag_dv[DRIVES_SIZE + 1];
 
@@ -100,13 +102,16 @@ int lagrange_drives(int on) {
     return 0;
 }
 
-/* The drive elements' forces at (t, q, qd) into lag_dv (zero without drive elements). */
-static const double *lag_drive_forces(double t, const double *q, const double *qd, const double *p) {
+/* The drive elements' forces (and their states' rates) at (t, q, qd, z) into lag_dv (zero
+   without drive elements). */
+static const double *lag_drive_forces(double t, const double *q, const double *qd, const double *z,
+                                      const double *p) {
     if (!lag_drives) {
-        for (int i = 0; i < NQ; ++i) lag_dv[DRIVES_FORCES_OFF + i] = 0.0;
+        for (int i = 0; i < DRIVES_SIZE; ++i) lag_dv[i] = 0.0;
     } else {
-        double u[1];
+        double u[1 + LAG_NZ];
         u[0] = t;
+        for (int k = 0; k < LAG_NZ; ++k) u[1 + k] = z[k];
         drives(q, qd, p, u, lag_dv);
     }
     return lag_dv + DRIVES_FORCES_OFF;
@@ -126,7 +131,7 @@ int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, doubl
    geo[r]: the generated constraint row of equation r, -1 for a motor row with coordinate
    mq[r], speed index mv[r], speed speed[r] and start value offset[r], or -2 - k for the gap
    of contact k (held closed).
-   rows (nr), dep (nr), ind (ni): the partition.  acc: [t, q, qd] of the last accepted
+   rows (nr), dep (nr), ind (ni): the partition.  acc: [t, q, qd, z] of the last accepted
    state (read and written).  info: [condition of the last accepted state, time at which a
    motor's prescribed position was not finite (written then)]. */
 int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, const double *speed,
@@ -286,7 +291,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
-    const double *drive = lag_drive_forces(t, q, qd, p);
+    const double *drive = lag_drive_forces(t, q, qd, y + 2 * ni, p);
     double *X = lag_X, *col = lag_v, *h = lag_h;
     for (int k = 0; k <= ni; ++k) {  /* X = J_d^-1 [J_i, bias] (column k stored X[a * (ni + 1) + k]) */
         for (int a = 0; a < nr; ++a)
@@ -334,6 +339,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     for (int i = 0; i < ni; ++i) { double s = r[i]; for (int k = 0; k < i; ++k) s -= Mr[i * ni + k] * r[k]; r[i] = s / Mr[i * ni + i]; }
     for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
     for (int k = 0; k < ni; ++k) f[k] = y[ni + k];
+    for (int k = 0; k < LAG_NZ; ++k) f[2 * ni + k] = lag_dv[DRIVES_RATES_OFF + k];
     return 0;
 }
 
@@ -400,7 +406,7 @@ static double lag_condition(void) {
 }
 
 /* After an accepted step to (t, y): the full state becomes the accepted one (written to
-   out, NQ + NQ, when out is not NULL); returns LAG_PAUSED when the dependent block's
+   out, NQ + NQ + LAG_NZ, when out is not NULL); returns LAG_PAUSED when the dependent block's
    condition reached the limit (Python looks for a better partition), 0, or LAG_TRIAL. */
 int lagrange_accept(double t, const double *y, double *out, const double *p) {
     double *q = lag_q + NQ, *qd = lag_qd + NQ;
@@ -409,7 +415,12 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
     lag_acc[0] = t;
     memcpy(lag_acc + 1, q, sizeof(double) * NQ);
     memcpy(lag_acc + 1 + NQ, qd, sizeof(double) * NQ);
-    if (out) { memcpy(out, q, sizeof(double) * NQ); memcpy(out + NQ, qd, sizeof(double) * NQ); }
+    for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + 2 * NQ + k] = y[2 * lag_ni + k];
+    if (out) {
+        memcpy(out, q, sizeof(double) * NQ);
+        memcpy(out + NQ, qd, sizeof(double) * NQ);
+        for (int k = 0; k < LAG_NZ; ++k) out[2 * NQ + k] = y[2 * lag_ni + k];
+    }
     if (!lag_nr) return 0;
     const double condition = lag_condition();  /* J at q from lagrange_full */
     lag_info[0] = condition;
@@ -489,7 +500,7 @@ static void lag_dense(double s, double t_old, double h, const double *y_old, con
    the step (the accepted state is its start). */
 double lagrange_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
                        const double *p) {
-    double y[2 * NQ + 1];
+    double y[2 * NQ + LAG_NZ + 1];
     lag_dense(s, t_old, h, y_old, F, ny, y);
     double *q = lag_q + NQ, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
@@ -499,7 +510,7 @@ double lagrange_gap_at(double s, double t_old, double h, const double *y_old, co
 
 double lagrange_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
                          const double *p, const double *tau) {
-    double y[2 * NQ + 1], *lam;
+    double y[2 * NQ + LAG_NZ + 1], *lam;
     lag_dense(s, t_old, h, y_old, F, ny, y);
     if (lag_held_forces(s, y, p, tau, &lam)) return NAN;
     for (int a = 0; a < lag_nr; ++a) if (lag_rows[a] == row) return lam[a];

@@ -111,7 +111,8 @@ class ReducedRun(ContactWatching):
                     self.offset[r] = self.workspace.offsets[r]
         for j, k in enumerate(self.contacts):
             self.geo[nm + j] = -2 - k
-        self.acc = np.concatenate(([t0], q0, qd0))
+        self.nz = kernel.compiled.drives.nz  #: drive states, after [q_i, qd_i] in the reduced state
+        self.acc = np.concatenate(([t0], q0, qd0, np.zeros(self.nz)))
         self.info = np.array([0.0, np.nan])  # [condition, time of a non-finite motor position]
         self.programs = None if constraints is None else motor_programs(constraints)
         self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
@@ -130,7 +131,7 @@ class ReducedRun(ContactWatching):
             positions(_ptr(prog), _ptr(programs))
         drives = lib.lagrange_drives
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
-        drives(int(bool(kernel.compiled.drives.elements)))  # (stateless: the reduced loop has no z)
+        drives(int(bool(kernel.compiled.drives.elements)))  # (their states follow [q_i, qd_i] in y)
 
     def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
         """The gaps and held contacts' forces on the event step the loop stopped at, in C
@@ -184,7 +185,12 @@ class ReducedRun(ContactWatching):
     def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
         """``(t, q, qd)`` of the last accepted state (as the C loop left it)."""
         n = self.n
-        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:].copy()
+        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:1 + 2 * n].copy()
+
+    def drive_states(self, z: np.ndarray) -> None:
+        """The drive states of the accepted state (at the start: the run's ``z0``); the loop
+        writes them after every accepted step."""
+        self.acc[1 + 2 * self.n:] = z
 
     def sync(self) -> None:
         """The Python workspace's accepted state becomes the loop's."""
@@ -210,6 +216,7 @@ class ReducedRun(ContactWatching):
         (``state`` is updated in place: a restart sets a new first step)."""
         ws = self.workspace
         self.sync()
+        z = self.acc[1 + 2 * self.n:].copy()  # the accepted drive states
         if status == PAUSED:
             t, q, qd = self.accepted()
             y_new = ws.repartition(t, q, qd)
@@ -217,7 +224,7 @@ class ReducedRun(ContactWatching):
                 return y, f  # no clearly better choice: carry on with the same step size
             self._configure()
             self.restarts += 1
-            y = np.ascontiguousarray(y_new, dtype=float)
+            y = np.ascontiguousarray(np.concatenate((y_new, z)), dtype=float)
             state[:] = (t, 0.0)  # a new start, as a new scipy solver would make
             return y, np.empty_like(y)
         if status != TRIAL_FAILED:
@@ -234,7 +241,7 @@ class ReducedRun(ContactWatching):
         self.t_retry = t_back
         self._configure()
         self.restarts += 1
-        y = np.ascontiguousarray(y_back, dtype=float)
+        y = np.ascontiguousarray(np.concatenate((y_back, z)), dtype=float)
         f = self.rhs(t_back, y)
         counts[0] += 1
         state[:] = (t_back, max(h / 4, 1e-12))
