@@ -533,6 +533,28 @@ class _Drawing:
     def _segments(points: np.ndarray, pairs: Iterable[tuple]) -> list[np.ndarray]:
         return [np.array([points[p[0]], points[p[1]]]) for p in pairs]
 
+    def moving(self) -> list:
+        """The artists that change from frame to frame (the rest is drawn once)."""
+        return [a for a in (self.sticks, self.links, self.springs, self.joint_line, *self.balls, self.title)
+                if a is not None]
+
+    def draw_moving(self) -> None:
+        """Draw the moving artists over the restored background, in the order a full draw of
+        the 3D axes gives them (collections sorted by depth, as ``Axes3D.draw`` does)."""
+        ax = self.ax
+        artists = [a for a in self.moving() if a is not self.title]
+        collections = [a for a in artists if hasattr(a, "do_3d_projection") and not hasattr(a, "set_data_3d")]
+        if ax.computed_zorder and collections:
+            base = max(axis.get_zorder() for axis in ax._axis_map.values()) + 1
+            for i, artist in enumerate(sorted(collections, key=lambda a: a.do_3d_projection(), reverse=True)):
+                artist.zorder = base + i
+        else:
+            for artist in collections:
+                artist.do_3d_projection()
+        for artist in sorted(artists, key=lambda a: a.get_zorder()):
+            ax.draw_artist(artist)
+        ax.figure.draw_artist(self.title)
+
     def update(self, points: np.ndarray, t: float) -> None:
         scene = self.scene
         for collection, pairs in ((self.sticks, scene.sticks), (self.links, scene.links),
@@ -716,12 +738,43 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
     drawing = _Drawing(ax, scene, points[0], centre, half, normal)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    with writer.saving(fig, str(path), dpi):
-        for k, time in enumerate(times):
-            drawing.update(points[k], float(time))
-            writer.grab_frame()
+    if suffix == ".gif":
+        _write_gif(fig, drawing, points, times, path, fps, dpi)
+    else:
+        with writer.saving(fig, str(path), dpi):
+            for k, time in enumerate(times):
+                drawing.update(points[k], float(time))
+                writer.grab_frame()
     _close(fig)
     return path
+
+
+def _write_gif(fig, drawing: "_Drawing", points: np.ndarray, times: np.ndarray, path: Path, fps: float,
+               dpi: float) -> None:
+    """The GIF of the animation: the still parts (axes, ticks, labels, legend, ground) are
+    drawn once and each frame draws only the moving artists over them (blitting), which
+    takes a third to a fifth of the time of drawing every frame in full."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import Image
+
+    fig.set_dpi(dpi)
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    moving = drawing.moving()
+    drawing.update(points[0], float(times[0]))
+    for artist in moving:
+        artist.set_animated(True)
+    canvas.draw()                                  # the background, without the moving artists
+    background = canvas.copy_from_bbox(fig.bbox)
+    frames = []
+    for k, time in enumerate(times):
+        canvas.restore_region(background)
+        drawing.update(points[k], float(time))
+        drawing.draw_moving()
+        image = Image.fromarray(np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3]), "RGB")
+        frames.append(image.convert("P", palette=Image.Palette.ADAPTIVE))  # as Pillow's GIF writer does
+    for artist in moving:
+        artist.set_animated(False)
+    frames[0].save(path, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
 
 
 def _close(fig) -> None:
