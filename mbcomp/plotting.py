@@ -545,7 +545,7 @@ class _Drawing:
         artists = [a for a in self.moving() if a is not self.title]
         collections = [a for a in artists if hasattr(a, "do_3d_projection") and not hasattr(a, "set_data_3d")]
         if ax.computed_zorder and collections:
-            base = max(axis.get_zorder() for axis in ax._axis_map.values()) + 1
+            base = max(axis.get_zorder() for axis in (ax.xaxis, ax.yaxis, ax.zaxis)) + 1
             for i, artist in enumerate(sorted(collections, key=lambda a: a.do_3d_projection(), reverse=True)):
                 artist.zorder = base + i
         else:
