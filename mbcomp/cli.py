@@ -315,15 +315,15 @@ def numeric_equations(system, simplify: bool = False):
     """``(M, f)`` with the parameter values substituted as exact rationals, in a canonical
     expanded form; speeds renamed ``<coord>'`` (sympy's ASCII pretty printer shows them plainly)."""
     import sympy as sp
-    M, f = system.equations()
-    symbols = {str(s): s for s in M.free_symbols | f.free_symbols}
-    values = {}
+    numbers = {}
     for key, value in system.parameters.items():
         entries = value if isinstance(value, (tuple, list)) else (value,)
         for i, x in enumerate(entries):
             name = f"{key}[{i}]" if isinstance(value, (tuple, list)) else key
-            if name in symbols:
-                values[symbols[name]] = sp.nsimplify(float(x), rational=True)
+            numbers[name] = sp.nsimplify(float(x), rational=True)
+    M, f = system.equations(numbers)  # (the numbers go in while expanding: small expressions)
+    symbols = {str(s): s for s in M.free_symbols | f.free_symbols}
+    values = {}
     for coord in system.coords:
         speed = symbols.get(f"\\dot{{{coord}}}")
         if speed is not None:

@@ -87,9 +87,11 @@ class Program:
         keep.reverse()
         return keep
 
-    def expand(self, exprs: list) -> list:
+    def expand(self, exprs: list, substitute: dict | None = None) -> list:
         """``exprs`` with every intermediate substituted back (for display of small models):
-        each needed intermediate is expanded once, in order, from the ones before it."""
+        each needed intermediate is expanded once, in order, from the ones before it.
+        ``substitute``: values of inputs (symbol -> number) put in as the intermediates are
+        expanded, so that numbers fold on the way and the expressions stay small."""
         exprs = [sp.sympify(e) for e in exprs]
         wanted = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
         needed = []
@@ -97,7 +99,7 @@ class Program:
             if symbol in wanted:
                 needed.append((symbol, value))
                 wanted |= value.free_symbols
-        expanded: dict = {}
+        expanded: dict = dict(substitute or {})
         for symbol, value in reversed(needed):
             expanded[symbol] = value.xreplace(expanded)
         return [e.xreplace(expanded) for e in exprs]

@@ -562,14 +562,18 @@ class System:
         return inverse_dynamics(self, q, qd, qdd, t=t, actuated=actuated)
 
     # -- display ----------------------------------------------------------------------------------
-    def equations(self):
+    def equations(self, values: Mapping[str, Any] | None = None):
         """Symbolic ``(M, f)`` with ``M qdd = f`` in terms of q, the speeds and parameter symbols
-        (a screw coordinate's speed is shown as its rate)."""
+        (a screw coordinate's speed is shown as its rate).  ``values``: numbers (or sympy
+        numbers) for parameter symbols by name (``"top.mass"``, ``"gravity[2]"``), put in while
+        the equations are expanded, which keeps them small."""
         import sympy as sp
         prog = self._compiled.program
         n = self.nv
         tri = prog.outputs["mass_matrix"]
-        values = prog.expand(list(tri) + list(prog.outputs["forces"]))
+        by_name = {str(s): s for s in prog.p}
+        substitute = {by_name[k]: sp.sympify(v) for k, v in (values or {}).items() if k in by_name}
+        values = prog.expand(list(tri) + list(prog.outputs["forces"]), substitute)
         M = sp.zeros(n, n)
         k = 0
         for i in range(n):
