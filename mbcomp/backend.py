@@ -92,8 +92,26 @@ class CFunctions:
         self._accelerations.restype = ctypes.c_int
         self._empty = np.zeros(1)
         self._local = threading.local()
+        #: For a library built without the dense dynamics (``CompiledModel.lazy_dense``): a
+        #: callable giving the library of ``dynamics_dense``, loaded on the first call of
+        #: ``dynamics`` (which until then writes NaN).
+        self.dense_loader = None
+        self._dense = None
+        self._dense_lock = threading.Lock()
+
+    def _ensure_dense(self) -> None:
+        """Load the dense dynamics (once) and point this library's ``dynamics`` at them."""
+        with self._dense_lock:
+            if self._dense is None:
+                dense = self.dense_loader()
+                setter = self.lib.set_dense_dynamics
+                setter.argtypes, setter.restype = [ctypes.c_void_p], None
+                setter(ctypes.cast(dense.dynamics_dense, ctypes.c_void_p))
+                self._dense = dense  # (kept loaded while this library is)
 
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
+        if name == "dynamics" and self.dense_loader is not None and self._dense is None:
+            self._ensure_dense()
         out = np.empty(self.sizes[name])
         q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
         self._fns[name](q.ctypes.data, qd.ctypes.data, p.ctypes.data,
@@ -103,6 +121,8 @@ class CFunctions:
     def many(self, name: str, q: np.ndarray, qd: np.ndarray, p: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``name`` at every row of ``q``, ``qd`` in one call of the compiled code (``u``: one
         row for all) -> (m, size).  A Python loop over ``__call__`` costs ~20 us per row."""
+        if name == "dynamics" and self.dense_loader is not None and self._dense is None:
+            self._ensure_dense()
         q = np.ascontiguousarray(q, dtype=float)
         qd = np.ascontiguousarray(qd, dtype=float)
         m = len(q)
@@ -317,6 +337,17 @@ def compile_c(source: str, compiler: str) -> bytes | None:
     build = CBuild(compiler)
     build.add("model", source, C_FLAGS)
     return build.finish()
+
+
+def load_library_bytes(data: bytes) -> ctypes.CDLL:
+    """Load library bytes (not cached) from a private temporary directory, removed once loaded."""
+    tmp = tempfile.mkdtemp(prefix="mbcomp-")
+    try:
+        path = Path(tmp) / "library.so"
+        path.write_bytes(data)
+        return ctypes.CDLL(str(path))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def load_private(data: bytes, sizes: dict) -> "CFunctions":

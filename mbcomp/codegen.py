@@ -337,6 +337,22 @@ MANY_TEMPLATE = """void {name}_many(long m, const double *q, long sq, const doub
 """
 
 
+def c_dense_stub() -> str:
+    """C of ``dynamics`` (and ``dynamics_many``) for a library built without the dense
+    dynamics: it calls the separately built ``dynamics_dense`` once Python has set it
+    (``set_dense_dynamics``), and writes NaN before (a caller's finiteness check then sends it
+    to the path that builds them: ``CFunctions``)."""
+    return """#include <math.h>
+typedef void (*mb_dense_fn)(const double *, const double *, const double *, const double *, double *);
+static mb_dense_fn mb_dense = 0;
+void set_dense_dynamics(mb_dense_fn f) { mb_dense = f; }
+void dynamics(const double *q, const double *qd, const double *p, const double *u, double *out) {
+    if (mb_dense) { mb_dense(q, qd, p, u, out); return; }
+    for (int i = 0; i < DYNAMICS_SIZE; ++i) out[i] = NAN;
+}
+""" + MANY_TEMPLATE.format(name="dynamics", size="DYNAMICS_SIZE")
+
+
 def c_accelerations(nq: int) -> str:
     """C source of ``int accelerations(q, qd, p, u, tau, qdd, work)``: the tree's
     ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed

@@ -1,6 +1,8 @@
 """Compilation: model -> topology, parameter layout and generated numeric functions (cached)."""
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import hashlib
 import time
 from typing import Any
@@ -71,6 +73,9 @@ class CompiledModel:
         self.tril = np.tril_indices(self.topology.nv)
         #: How the tree accelerations are computed: "dense" or "recursive" (recursive.py).
         self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}", formulation)
+        #: The C library leaves out the dense dynamics (mass matrix, forces), which the
+        #: recursive right-hand side never calls, and builds them on first use (``dense_library``).
+        self.lazy_dense = "dynamics" in recursive.cold_functions(self.dynamics, self.topology)
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
                                              len(self.topology.contacts), self.drives.nz)
@@ -102,10 +107,11 @@ class CompiledModel:
             self._build_program()
         return self._program
 
-    def _build_program(self, ready=None) -> None:
+    def _build_program(self, ready=None, dense: bool = True):
         """Build the symbolic program (sympy: only when code is generated); ``ready(prog,
         names)``: called with the outputs as they become final (``build_program``), the
-        parameter symbols already in place."""
+        parameter symbols already in place.  ``dense=False``: without the dense dynamics
+        (``lazy_dense``), returned and not kept (``program`` is always the whole one)."""
         from .equations import build_program
         equations = [] if self.constraint_set is None else self.constraint_set.equations
         parameters = [s for key in self.layout.entries for s in _as_list(self.layout.symbols(key))]
@@ -116,14 +122,18 @@ class CompiledModel:
 
         program = build_program(self.topology, self.layout, self.inputs, equations, self.drives,
                                 recursive=self.dynamics == "recursive", factors=bool(self.geometric_rows),
-                                ready=with_parameters if ready else None)
+                                ready=with_parameters if ready else None, dense=dense)
         self._check_layout(program)
         program.p = parameters
-        self._program = program
+        if dense:
+            self._program = program
+        return program
 
     def _check_layout(self, program) -> None:
         """The program's outputs must fill the output layout exactly (C and Python read them by it)."""
         for function, names in FUNCTIONS.items():
+            if not all(name in program.outputs for name in names) and function == "dynamics" and self.lazy_dense:
+                continue  # built on first use
             written = sum(len(program.outputs[name]) for name in names)
             if written != self.output_layout.size(function):
                 raise ModelError(f"Model {self.model_name!r}", f"internal error: {function} writes {written} values, "
@@ -161,7 +171,7 @@ class CompiledModel:
         reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
         if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
-        return (reduced + self.output_layout.c_defines() + tree
+        return (reduced + self.output_layout.c_defines() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
@@ -183,10 +193,12 @@ class CompiledModel:
                 try:
                     functions = CFunctions(path, self.sizes)
                     self.cache_hit = True
-                    return functions
+                    return self._with_dense_loader(functions, compiler, use_cache)
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
         functions = self._functions()
+        if self.lazy_dense:
+            functions = {f: outs for f, outs in functions.items() if f != "dynamics"}
         cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
         build = CBuild(compiler)
         try:
@@ -217,18 +229,52 @@ class CompiledModel:
                 done.update(now)
                 compile_units(stream.add(now))
 
-            if self._program is None:
-                self._build_program(ready)
+            program = self._program
+            if program is None:
+                program = self._build_program(ready, dense=not self.lazy_dense)
             if stream is None:
-                stream = codegen.UnitStream(self.program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
-                                                 halve=HALVE_STATEMENTS)
+                stream = codegen.UnitStream(program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
+                                            halve=HALVE_STATEMENTS)
             compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
             compile_units(stream.flush())
         except BaseException:
             build.cancel()
             raise
         inputs = {**tools, "cold_flags": list(COLD_FLAGS), "source_sha256": digest.hexdigest()}
-        return c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
+        functions = c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
+        return None if functions is None else self._with_dense_loader(functions, compiler, use_cache)
+
+    def _with_dense_loader(self, functions: CFunctions, compiler: str, use_cache: bool) -> CFunctions:
+        """Give a library without the dense dynamics the means to build them on first use."""
+        if self.lazy_dense:
+            functions.dense_loader = lambda: self.dense_library(compiler, use_cache)
+        return functions
+
+    def dense_library(self, compiler: str, use_cache: bool = True):
+        """The dense dynamics (``dynamics_dense``: mass matrix and forces) of a model whose
+        library leaves them out (``lazy_dense``), as a library of their own: from the cache, or
+        generated (sympy) and compiled now, once; its own cache entry, keyed by the model's."""
+        tools = cache.toolchain(compiler, COLD_FLAGS)
+        key = cache.entry_key(self.description + "\ndense dynamics", self.key + codegen.generator_text(), tools)
+        with cache.building(f"build-{key}") if use_cache else contextlib.nullcontext():
+            path = cache.verified(key, ".so", tools) if use_cache else None
+            if path is not None:
+                try:
+                    return ctypes.CDLL(str(path))
+                except OSError:
+                    cache.discard(key, ".so")
+            source = codegen.c_source(self.program, {"dynamics_dense": FUNCTIONS["dynamics"]})
+            build = CBuild(compiler)
+            build.add("dense", source, COLD_FLAGS)
+            data = build.finish()
+            if data is None:
+                raise ModelError(f"Model {self.model_name!r}", "the C compiler failed on the dense dynamics")
+            inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
+            path = cache.store(key, ".so", data, inputs) if use_cache else None
+            if path is not None:
+                return ctypes.CDLL(str(path))
+            from .backend import load_library_bytes
+            return load_library_bytes(data)
 
     def _load_python(self, use_cache: bool):
         tools = cache.toolchain()

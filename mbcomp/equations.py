@@ -285,7 +285,7 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
 
 
 def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(), drives=None,
-                  recursive: bool = False, factors: bool = False, ready=None) -> Program:
+                  recursive: bool = False, factors: bool = False, ready=None, dense: bool = True) -> Program:
     """The whole model as one straight-line program over coordinates ``q`` (nq) and
     speeds ``qd`` (nv; a screw coordinate's speed is its rate).
 
@@ -296,6 +296,10 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     also ``"aba"`` (``recursive.aba_outputs``: the accelerations by the O(N)
     articulated-body recursion, with the run-time generalised forces as extra inputs; with
     ``factors`` also what the dae formulation's KKT solve needs).
+
+    ``dense=False`` (with ``recursive``) leaves out the dense ``"mass_matrix"`` and
+    ``"forces"`` (the composite-inertia pass): a compiled program whose right-hand side is
+    the recursion builds them only when they are first asked for (``CompiledModel``).
 
     ``ready(prog, names)``, when given, is called as soon as the outputs ``names`` are final
     (the rest of the program only appends assignments), so that a code generator can print
@@ -397,7 +401,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
         wrench[body.name] = prog.lets(body_force)
     own_wrench = dict(wrench)  # each body's own, before the subtree sums (recursive program)
-    for body in reversed(topology.bodies):
+    for body in reversed(topology.bodies) if dense else ():
         parent = topology.parent_of[body.name].name
         if parent != ground:
             composite[parent] = (composite[parent] + composite[body.name]).materialise(prog)
@@ -412,7 +416,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         columns_of_chain[body.name] = topology.speed_indices_of_body(body)
     M = {}
     forces = []
-    for i in range(nv):
+    for i in range(nv) if dense else ():
         body = owner[i]
         F = prog.lets(composite[body.name].apply(kin.S[i]))
         for j in columns_of_chain[body.name]:
@@ -424,11 +428,13 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         for joint, value in element.armature(kin) if hasattr(element, "armature") else ():
             i = topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed index
             armature[i] = armature.get(i, 0) + value
-            M[i, i] = prog.let(M[i, i] + value)
+            if dense:
+                M[i, i] = prog.let(M[i, i] + value)
             kinetic.append(value * prog.qd[i] ** 2 / 2)
-    prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
-    prog.outputs["forces"] = forces
-    ready(prog, ["mass_matrix", "forces"])
+    if dense:
+        prog.outputs["mass_matrix"] = [M.get((i, j), sp.Integer(0)) for i in range(nv) for j in range(i + 1)]
+        prog.outputs["forces"] = forces
+        ready(prog, ["mass_matrix", "forces"])
     prog.outputs["energy"] = [prog.let(sp.Add(*kinetic)), prog.let(sp.Add(*potential))]
     ready(prog, ["energy"])
     if recursive:

@@ -1,0 +1,86 @@
+"""A model whose right-hand side is the recursive program builds its dense dynamics (mass
+matrix, forces) only when they are first asked for: compiling and simulating never build
+them, the first ``mass_matrix`` does (once, cached), with the numbers of an eager build."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mbcomp.backend import c_compiler
+from conftest import pendulum_chain
+
+pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
+              pytest.mark.xdist_group("lazy-dense")]
+
+ROOT = Path(__file__).resolve().parents[1]
+N = 12  # the recursive program is chosen from 12 speeds
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch):
+    path = tmp_path / "cache"
+    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(path))
+    return path
+
+
+def state():
+    return np.linspace(0.1, 0.6, N), np.linspace(-0.3, 0.4, N)
+
+
+def libraries(path: Path) -> set[str]:
+    return {p.name for p in path.glob("*.so")}
+
+
+def test_compile_and_simulate_never_build_the_dense_dynamics_and_mass_matrix_does(cache_dir):
+    system = pendulum_chain(N).compile(backend="c")
+    compiled = system._compiled
+    assert compiled.dynamics == "recursive" and compiled.lazy_dense
+    q, qd = state()
+    system.simulate(0.2, q, qd)
+    system.accelerations(q, qd)
+    before = libraries(cache_dir)
+    assert system._compiled.functions._dense is None
+    dense = pendulum_chain(N).compile(backend="c", dynamics="dense", cache=False)
+    M = system.mass_matrix(q)
+    assert len(libraries(cache_dir) - before) == 1          # the dense dynamics' own entry
+    np.testing.assert_array_equal(M, dense.mass_matrix(q))
+    np.testing.assert_array_equal(system.holding_forces(q), dense.holding_forces(q))
+    # the recursive accelerations solve the dense equations
+    a = system.accelerations(q, qd)
+    np.testing.assert_allclose(M @ a, M @ dense.accelerations(q, qd), rtol=1e-10, atol=1e-10)
+
+
+def test_a_new_process_loads_the_dense_dynamics_from_the_cache(cache_dir):
+    q, _ = state()
+    expected = pendulum_chain(N).compile(backend="c").mass_matrix(q)  # builds and caches both
+    code = ("import json, sys; sys.path.insert(0, 'tests'); import numpy as np\n"
+            "from conftest import pendulum_chain\n"
+            f"s = pendulum_chain({N}).compile(backend='c')\n"
+            f"M = s.mass_matrix(np.linspace(0.1, 0.6, {N}))\n"
+            "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules, 'M': M.tolist()}))\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["hit"] and not out["sympy"]
+    np.testing.assert_array_equal(np.array(out["M"]), expected)
+
+
+def test_a_damaged_dense_entry_is_rebuilt(cache_dir):
+    q, _ = state()
+    before = libraries(cache_dir)
+    expected = pendulum_chain(N).compile(backend="c").mass_matrix(q)
+    model_and_dense = libraries(cache_dir) - before
+    system = pendulum_chain(N).compile(backend="c")     # a cache hit: the model's library
+    dense_entry = (model_and_dense - {Path(str(system._compiled.functions.path)).name}).pop()
+    damaged = cache_dir / dense_entry
+    damaged.unlink()                      # (a new file: the loaded library keeps its own pages)
+    damaged.write_bytes(b"not a library")
+    damaged.chmod(0o600)
+    np.testing.assert_array_equal(system.mass_matrix(q), expected)
