@@ -1,7 +1,9 @@
 """Shared fixtures: a private code cache for the test session, and small models."""
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 
 import numpy as np
 import pytest
@@ -27,6 +29,21 @@ def _private_cache(tmp_path_factory):
         os.environ.pop("MBCOMP_CACHE_DIR", None)
     else:
         os.environ["MBCOMP_CACHE_DIR"] = old
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """Raise TimeoutError when the block runs longer than ``seconds`` (a hang is a failure;
+    SIGALRM, whose handler a compiled loop's step hook runs like Ctrl-C's)."""
+    def handler(signum, frame):
+        raise TimeoutError(f"took longer than {seconds} s (hangs)")
+    old = signal.signal(signal.SIGALRM, handler)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
 
 
 def assert_close(actual, expected, rtol=1e-10, atol=1e-12, name="value"):

@@ -10,18 +10,17 @@ event location, persistent contacts and energy bookkeeping.
 """
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
 import pathlib
 import re
-import signal
 
 import numpy as np
 import pytest
 from scipy.special import ellipk
 
 import mbcomp as mb
+from conftest import time_limit
 
 G = 9.81
 FORMULATIONS = ("lagrange", "dae")
@@ -67,20 +66,6 @@ def event_states(result, event):
     i = np.flatnonzero(result.t == event.time)
     assert len(i) >= 1, f"no sample at the event time {event.time}"
     return result.q[i[0]], result.qd[i[0]], result.qd[i[-1]]
-
-
-@contextlib.contextmanager
-def time_limit(seconds: float):
-    """Raise TimeoutError when the block runs longer than ``seconds`` (a hang is a failure)."""
-    def handler(signum, frame):
-        raise TimeoutError(f"took longer than {seconds} s (hangs)")
-    old = signal.signal(signal.SIGALRM, handler)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
 
 
 # ----------------------------------------------------------------------------------------------

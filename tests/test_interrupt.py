@@ -12,7 +12,7 @@ import pytest
 import mbcomp as mb
 from mbcomp import integrators
 from mbcomp.backend import c_compiler
-from conftest import pendulum_chain
+from conftest import pendulum_chain, time_limit
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.skipif(not hasattr(signal, "pthread_kill") or not hasattr(signal, "setitimer"),
@@ -31,17 +31,12 @@ def _own_sigint_handler_and_a_time_limit():
     """Each test starts with Python's own Ctrl-C handler (no other test's left behind), and
     an interrupt that does not stop its run fails the test after ``TIME_LIMIT`` s (SIGALRM,
     whose handler the compiled loop's hook runs like Ctrl-C's) instead of running for hours."""
-    def too_long(signum, frame):
-        raise TimeoutError(f"the run was not interrupted within {TIME_LIMIT} s")
-    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
-    previous_alarm = signal.signal(signal.SIGALRM, too_long)
-    signal.setitimer(signal.ITIMER_REAL, TIME_LIMIT)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        yield
+        with time_limit(TIME_LIMIT):
+            yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous_alarm)
-        signal.signal(signal.SIGINT, previous_int)
+        signal.signal(signal.SIGINT, previous)
 
 
 @pytest.fixture(scope="module")
