@@ -416,29 +416,37 @@ def _lagrange(projected: Equations, rigid: list, potential: sp.Expr, q: list, pa
     Body kinematics are taken from ``projected``.
     """
     n = len(q)
-    mass_matrix = sp.zeros(n, n)
+    parts = []  # per body: m, I (body frame), J_r, J_w; M = sum m J_r^T J_r + J_w^T I J_w in numpy
     for mass, inertia, com, R in rigid:
         J_r = com.jacobian(q)
         J_w = sp.zeros(3, n)
         for k, qk in enumerate(q):
             W = R.T * R.diff(qk)                                # skew-symmetric: [column k]x
             J_w[:, k] = sp.Matrix([W[2, 1], W[0, 2], W[1, 0]])
-        mass_matrix += mass * J_r.T * J_r + J_w.T * inertia * J_w
+        parts += [mass, inertia, J_r, J_w]
     gradient = sp.Matrix([potential]).jacobian(q).T
-    function = sp.lambdify([q, params.symbols], [mass_matrix, gradient, potential], modules="numpy",
+    function = sp.lambdify([q, params.symbols], [gradient, potential] + parts, modules="numpy",
                            use_imps=False, cse=lambda exprs: sp.cse(exprs, order="none"))
     values = np.asarray(params.values, dtype=float)
     step = 1e-30
 
     def mass(qv):
-        return np.asarray(function(qv, values)[0], dtype=complex).reshape(n, n)
+        """M at (possibly complex) q: plain transposes, no conjugates, so that M stays
+        analytic in q for the complex-step derivatives below."""
+        out = function(qv, values)[2:]
+        M = np.zeros((n, n), dtype=complex)
+        for m, inertia, J_r, J_w in zip(*[iter(out)] * 4):
+            J_r = np.asarray(J_r, dtype=complex).reshape(3, n)
+            J_w = np.asarray(J_w, dtype=complex).reshape(3, n)
+            M += complex(m) * J_r.T @ J_r + J_w.T @ np.asarray(inertia, dtype=complex).reshape(3, 3) @ J_w
+        return M
 
     def evaluate(qv, qdv):
         qv, qdv = _as_vector(qv, n), _as_vector(qdv, n)
         M = mass(qv).real
         M_dot = mass(qv + 1j * step * qdv).imag / step
         dT_dq = np.array([qdv @ (mass(qv + 1j * step * e).imag / step) @ qdv / 2 for e in np.eye(n)])
-        _, grad_V, V = function(qv, values)
+        grad_V, V = function(qv, values)[:2]
         F = -np.asarray(grad_V, dtype=float).reshape(n) - M_dot @ qdv + dT_dq
         return M, F, float(qdv @ M @ qdv / 2), float(V), projected._evaluate(qv, qdv)[4]
 

@@ -1,5 +1,6 @@
 """URDF import: real robots against Pinocchio's own URDF reader, and the mapping piece by piece
 on a small hand-written robot."""
+import importlib.util
 import warnings
 
 import numpy as np
@@ -8,8 +9,14 @@ import pytest
 import mbcomp as mb
 from mbcomp.library import library_robots
 
-pin = pytest.importorskip("pinocchio", reason="Pinocchio is a test dependency (pip install pin)")
-pytest.importorskip("yourdfpy", reason="yourdfpy is the URDF parser (pip install yourdfpy)")
+# Checked without importing them (about 1 s): a test worker that runs none of these tests
+# does not pay for Pinocchio and yourdfpy at collection.
+pytestmark = [
+    pytest.mark.skipif(importlib.util.find_spec("pinocchio") is None,
+                       reason="Pinocchio is a test dependency (pip install pin)"),
+    pytest.mark.skipif(importlib.util.find_spec("yourdfpy") is None,
+                       reason="yourdfpy is the URDF parser (pip install yourdfpy)"),
+]
 
 ROBOTS = library_robots()
 
@@ -18,6 +25,7 @@ def pinocchio_check(path, system, states=3, seed=0):
     """Largest relative differences of the mass matrix and of the forward dynamics (ABA) at
     random states, mbcomp against Pinocchio (joints matched by name; a continuous joint is
     (cos, sin) in Pinocchio's q)."""
+    import pinocchio as pin
     model = pin.buildModelFromUrdf(str(path))
     data = model.createData()
     joints = list(model.joints)[1:]
