@@ -6,7 +6,8 @@ program writes its outputs in this order, the C templates take their offsets fro
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Literal, Mapping
 
@@ -34,23 +35,24 @@ def body_fields(rows: np.ndarray) -> dict[str, np.ndarray]:
 class Block:
     """One named quantity of a function's output: ``shape`` stored from ``offset`` on,
     ``"dense"`` (row-major) or ``"tril"`` (the lower triangle of a symmetric square matrix,
-    row by row)."""
+    row by row).  ``size`` and ``stop`` are computed once: ``unpack`` runs on every
+    right-hand side of a scipy-stepped run."""
 
     name: str
     offset: int
     shape: tuple[int, ...]
     packing: Literal["dense", "tril"] = "dense"
+    size: int = field(init=False, repr=False, compare=False)
+    stop: int = field(init=False, repr=False, compare=False)
 
-    @property
-    def size(self) -> int:
+    def __post_init__(self):
         if self.packing == "tril":
             n = self.shape[0]
-            return n * (n + 1) // 2
-        return int(np.prod(self.shape, dtype=int))
-
-    @property
-    def stop(self) -> int:
-        return self.offset + self.size
+            size = n * (n + 1) // 2
+        else:
+            size = math.prod(self.shape)
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "stop", self.offset + size)
 
 
 @lru_cache(maxsize=64)
