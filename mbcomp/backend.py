@@ -215,6 +215,7 @@ class CBuild:
         self._running: list = []   # (process, name)
         self._objects: list[str] = []
         self._linked_last: list[str] = []
+        self._link_sources: list[str] = []  # small C units compiled by the link step itself
         self._failure: str | None = None
         self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
         # Reaps finished compilers and starts waiting units while the caller is busy (building
@@ -252,6 +253,13 @@ class CBuild:
         if self._watcher is None:
             self._watcher = threading.Thread(target=self._watch, name="mbcomp-cbuild", daemon=True)
             self._watcher.start()
+
+    def link_source(self, name: str, text: str) -> None:
+        """Add ``text`` as unit ``name``, compiled (unoptimised, position independent) by the
+        link command itself: for a unit of data only, which is not worth a compiler run."""
+        path = self._tmp / f"{name}.c"
+        path.write_text(text)
+        self._link_sources.append(str(path))
 
     def _watch(self) -> None:
         """The watcher thread: pump every few milliseconds until ``finish`` or ``cancel``."""
@@ -304,8 +312,8 @@ class CBuild:
                 for obj, key, inputs in self._shared:
                     cache.store(key, ".o", obj.read_bytes(), inputs)
                 out = self._tmp / "model.so"
-                done = subprocess.run([self.compiler, "-shared", *self._objects, *self._linked_last, "-o", str(out),
-                                       "-lm"],
+                done = subprocess.run([self.compiler, "-shared", "-fPIC", *self._link_sources, *self._objects,
+                                       *self._linked_last, "-o", str(out), "-lm"],
                                       capture_output=True, timeout=600, check=False)
                 if done.returncode == 0:
                     return out.read_bytes()

@@ -353,16 +353,15 @@ void dynamics(const double *q, const double *qd, const double *p, const double *
 """ + MANY_TEMPLATE.format(name="dynamics", size="DYNAMICS_SIZE")
 
 
-def c_accelerations(nq: int) -> str:
+def c_accelerations(nq: int | None = None) -> str:
     """C source of ``int accelerations(q, qd, p, u, tau, qdd, work)``: the tree's
     ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed
     lower triangle that ``dynamics`` writes.  Returns 0, or k + 1 when pivot k shows
     the mass matrix is not positive definite (same threshold as the Python path).
     ``work`` holds ``DYNAMICS_SIZE`` doubles (the offsets come from ``OutputLayout.c_defines``);
-    ``tau`` may be NULL.
+    ``tau`` may be NULL.  ``nq``: define ``NQ`` here (None: the model's ``c_sizes`` unit gives it).
     """
-    return f"""
-#define NQ {nq}
+    return ("" if nq is None else f"#define NQ {nq}\n") + f"""
 #define IDX(i, j) ((i) * ((i) + 1) / 2 + (j))
 /* M = L L^T in place on the packed lower triangle; 0, or k + 1 when pivot k is not
    positive against the largest diagonal entry. */

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from . import cache, codegen, recursive
+from .c_sizes import CSizes
 from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
                       UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
                       c_compiler, c_library)
@@ -160,33 +161,47 @@ class CompiledModel:
                 raise ModelError(f"Model {self.model_name!r}", "backend 'c' needs a working C compiler (set $CC)")
         return self._load_python(cache)
 
-    def _c_templates(self) -> str:
-        """The hand-written C emitted with every model: the output layout's offsets, the tree
-        accelerations, the formulations' code and the integrators."""
-        from .integrators import c_integrators
+    def _c_sizes(self) -> CSizes:
+        """The model's sizes, offsets and index tables for the C templates (``c_sizes``)."""
         nv, ng = self.topology.nv, len(self.geometric_rows)  # the mass matrix and accelerations are in speed space
-        tree = codegen.c_accelerations(nv)
+        aba, parents = None, ()
+        if self.dynamics == "recursive":
+            aba, parents = recursive.aba_sizes(self.topology, self.n_inputs, factors=bool(ng))
+        return CSizes.of(self.output_layout, nq=nv, ng=ng, state_map=self.topology.state_map, nz=self.drives.nz,
+                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents)
+
+    def _c_templates(self, sizes: CSizes) -> str:
+        """The hand-written C linked into every model: the tree accelerations, the
+        formulations' code and the integrators.  Its text depends on the kind of model
+        (``sizes.flags``, the formulations, dense or recursive), not on its sizes, which
+        ``sizes.header`` declares and the model's own unit (``sizes.unit``) defines: models
+        of one kind share one compiled object."""
+        from .integrators import c_integrators
+        nv, ng = self.topology.nv, len(self.geometric_rows)
+        tree = codegen.c_accelerations()
         if self.dynamics == "recursive":  # the tree solve, and the dae KKT solve, by the recursive program
             tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
         reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
         if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
-        return (reduced + self.output_layout.c_defines() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
-                + "".join(snippet(nv, ng) for snippet in self.c_snippets)
-                + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
-                + "\n#ifndef NG\n#define NG 0\n#endif\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
-                + c_integrators(self.topology.state_map, self.drives.nz, bool(self.drives.elements)))
+        return sizes.check_generic(
+            reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
+            + "".join(snippet(nv, ng) for snippet in self.c_snippets)
+            + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
+            + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
+            + c_integrators())
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()
         if compiler is None:
             return None
-        templates = self._c_templates()
+        sizes = self._c_sizes()
+        templates, sizes_unit = self._c_templates(sizes), sizes.unit()
         tools = cache.toolchain(compiler, C_FLAGS)
         plan = (f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit, "
                 f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final, "
                 f"hot functions of more than {HALVE_STATEMENTS} in two halves")  # how the C is built
-        self.key = cache.entry_key(self.description, templates + plan + codegen.generator_text(), tools)
+        self.key = cache.entry_key(self.description, templates + sizes_unit + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
             if path is not None:
@@ -208,7 +223,8 @@ class CompiledModel:
             # loops changes their speed by up to 15 % (N = 5 chain).
             build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True,
                       shared=tools if use_cache else None)
-            digest = hashlib.sha256(templates.encode())
+            build.link_source("sizes", sizes_unit)  # compiled by the link step: no compiler run of its own
+            digest = hashlib.sha256((templates + sizes_unit).encode())
 
             def compile_units(units):
                 for unit in units:

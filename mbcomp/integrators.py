@@ -61,16 +61,16 @@ def _dop853_from_file():
         return None
 
 
-def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
-    """C source of ``dop853_run`` and ``rk4_run`` for a tree with the given coordinates and
-    speeds (``statemap.StateMap``): the state is ``y = [q, v, z]``, its rate
-    ``[q'(q, v), v', z']``; quaternions are normalised after every accepted step.  With
-    ``drives``, the ``nz`` states of drive elements follow the mechanical ones
-    (``drive_equations``: their forces join ``tau``, their rates come from ``drives``).
+def c_integrators() -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree whose coordinates, speeds and
+    quaternion and screw indices the model's sizes unit gives (``c_sizes.CSizes``: ``NCOORD``,
+    ``NV``, ``QUAT_Q``, ...): the state is ``y = [q, v, z]``, its rate ``[q'(q, v), v', z']``;
+    quaternions are normalised after every accepted step.  With ``HAS_DRIVES``, the ``NZ``
+    states of drive elements follow the mechanical ones (``drive_equations``: their forces
+    join ``tau``, their rates come from ``drives``).
     Where ``REDUCED_LOOP`` is defined (a constrained model the lagrange formulation steps
     in compiled code), also ``dop853_reduced_run``: the same loop on the reduced state of
     ``formulations/lagrange_c.py``."""
-    nq, nv = state_map.nq, state_map.nv
     lines = [
         "#include <stdlib.h>",
         "#include <string.h>",
@@ -78,21 +78,11 @@ def c_integrators(state_map, nz: int = 0, drives: bool = False) -> str:
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
-        f"#define NCOORD {nq}",
         f"#define LOOP_EVENT {EVENT}",
-        f"#define NV {nv}",
-        f"#define NMECH {nq + nv}",
-        f"#define NZ {nz}",
-        f"#define HAS_DRIVES {int(bool(drives))}",
         "#define NY (NMECH + NZ)",
-        f"#define NQUAT {state_map.quat_q.size}",
         "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
         *_dop853_tables(),
     ]
-    if not state_map.identity:
-        ints = lambda name, values: f"static const int {name}[] = {{{', '.join(str(int(v)) for v in values) or '0'}}};"
-        lines += [f"#define NSCREW {state_map.screw_q.size}", ints("SCREW_Q", state_map.screw_q),
-                  ints("SCREW_V", state_map.screw_v), ints("QUAT_Q", state_map.quat_q), ints("QUAT_V", state_map.quat_v)]
     loops = [_instance("dop853_run", "initial_step", reduced=False),
              "#ifdef REDUCED_LOOP", _instance("dop853_reduced_run", "reduced_initial_step", reduced=True), "#endif"]
     return "\n".join(lines + [_C_BODY.replace("@LOOPS@", "\n".join(loops))])
@@ -306,7 +296,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         memcpy(y, y_new, sizeof(double) * LOOP_NY);
         memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
-#if defined(DAE_LOOP) && NQUAT == 0 && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+#if defined(DAE_LOOP) && !MB_HAS_QUAT && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
         if (dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
@@ -347,7 +337,7 @@ static double dummy_input[1];
 static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
     const double *v = y + NCOORD;
-#if NQUAT > 0
+#if MB_HAS_QUAT
     for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
     for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
         const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
@@ -372,7 +362,7 @@ static int mech_rhs(double t, const double *y, double *f, const double *p, const
 
 /* Quaternions back to unit length (after each accepted step). */
 static void normalize_state(double *y) {
-#if NQUAT > 0
+#if MB_HAS_QUAT
     for (int k = 0; k < NQUAT; ++k) {
         double *a = y + QUAT_Q[k];
         const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);

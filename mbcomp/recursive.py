@@ -189,6 +189,15 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
         prog.outputs["aba"] += [w for k in range(nv) for w in W[k]] + [x for k in range(nv) for x in kin.S[k]]
 
 
+def aba_sizes(topology, n_inputs: int, factors: bool) -> tuple[tuple[int, int, int], tuple[int, ...]]:
+    """``((ABA_NV, ABA_NU, ABA_OUT), ABA_PRED)`` of the C templates for the recursive program:
+    speeds, inputs, length of ``aba``'s output (with the factors the dae KKT solve reads when
+    ``factors``) and each speed's parent speed (-1 at a root)."""
+    nv = topology.nv
+    pred, _ = speed_tree(topology)
+    return (nv, n_inputs, 14 * nv if factors else 2 * nv), tuple(-1 if k is None else int(k) for k in pred)
+
+
 def c_dae(topology, ng: int) -> str:
     """C source of the dae formulation's compiled KKT solve on the recursive program, for a
     model with ``ng`` geometric constraint rows (placed after the formulation's own code, whose
@@ -198,11 +207,8 @@ def c_dae(topology, ng: int) -> str:
     as the dense code, with the same row selection, Baumgarte terms and rank handling."""
     if ng == 0:
         return ""
-    nv = topology.nv
-    pred, _ = speed_tree(topology)
-    table = ", ".join(str(-1 if k is None else k) for k in pred) or "-1"
     return f"""
-static const int ABA_PRED[ABA_NV] = {{{table}}};
+/* ABA_PRED: the parent speed of each speed (-1 at a root), a table of the sizes unit (aba_sizes) */
 
 /* x = M^-1 b from the factors of an aba call (D, W = U / D and S, speed-major): the
    articulated-body recursion without velocity terms.  pa: 6 ABA_NV doubles of scratch. */
@@ -288,9 +294,7 @@ def c_accelerations(nv: int, n_inputs: int, dense: str, factors: bool = False) -
     if renamed.count("int dense_accelerations(") != 1:
         raise AssertionError("the dense accelerations template changed: cannot rename it")
     return renamed + ("\n#define MBCOMP_RECURSIVE_DAE 1" if factors else "") + f"""
-#define ABA_NV {nv}
-#define ABA_NU {n_inputs}
-#define ABA_OUT {14 * nv if factors else 2 * nv}
+/* ABA_NV speeds, ABA_NU inputs, ABA_OUT outputs of aba: the model's sizes unit (aba_sizes) */
 int accelerations(const double *q, const double *qd, const double *p, const double *u,
                   const double *tau, double *qdd, double *work) {{
     double ue[ABA_NU + ABA_NV + 1], out[ABA_OUT + 1];

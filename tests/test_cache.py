@@ -264,7 +264,7 @@ class TestKey:
     def test_a_changed_template_gives_a_new_entry(self, cache_dir, monkeypatch):
         first = _compile_arm()
         original = codegen.c_accelerations
-        monkeypatch.setattr(codegen, "c_accelerations", lambda nq: original(nq) + "\n/* changed */\n")
+        monkeypatch.setattr(codegen, "c_accelerations", lambda *nq: original(*nq) + "\n/* changed */\n")
         second = _compile_arm()
         assert not second._compiled.cache_hit and second._compiled.key != first._compiled.key
 

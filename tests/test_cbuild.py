@@ -166,6 +166,24 @@ class TestSharedUnits:
         moon = heavier.compile(backend="python", cache=False)
         np.testing.assert_allclose(second.accelerations(q, qd), moon.accelerations(q, qd), rtol=1e-12)
 
+    def test_models_of_other_sizes_link_the_same_templates_object(self, tmp_path, monkeypatch):
+        """The templates read sizes from the model's own unit (c_sizes): chains of 2 and 5
+        links link one object, and each simulates as its scipy-stepped Python twin."""
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+        calls = self._count_compiles(monkeypatch)
+        small = pendulum_chain(2).compile(backend="c")
+        calls.clear()
+        large = pendulum_chain(5).compile(backend="c")
+        assert calls and not any("templates.c" in " ".join(c) for c in calls)
+        assert len(list(tmp_path.glob("*.o"))) == 1
+        for system, n in ((small, 2), (large, 5)):
+            q0 = np.linspace(0.4, -0.3, n)
+            compiled = system.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
+            twin = pendulum_chain(n).compile(backend="python", cache=False)
+            stepped = twin.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
+            assert compiled.t.size > 5
+
     def test_a_damaged_object_is_rebuilt_not_linked(self, tmp_path, monkeypatch):
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
         pendulum_chain(2).compile(backend="c")

@@ -21,7 +21,7 @@ LAYERS = {
     "components": 2, "model": 2, "compose": 2, "servo": 2,
     # 3 build: flattening, topology, symbolic program, layouts; files <-> models
     "flatten": 3, "topology": 3, "constraint_set": 3, "equations": 3, "layout": 3, "io": 3,
-    "fileform": 3,
+    "fileform": 3, "c_sizes": 3,
     "urdf": 3, "drive_equations": 3, "param_layout": 3, "recursive": 3,
     # 4 generated code: printers, C templates, compilers, cache
     "codegen": 4, "backend": 4, "cache": 4, "integrators": 4, "formulations.dae_c": 4,

@@ -10,11 +10,13 @@ contact watch reads the held contacts' normal forces from them.
 """
 from __future__ import annotations
 
+from ..c_sizes import DAE_SPEC_LONGS
+
 #: Row kinds of the configured KKT rows (the first entry of each row's spec).
 ROW_GEOMETRIC, ROW_MOTOR, ROW_CONTACT = 0, 1, 2
 #: Longs per row in the spec (kind, index, coordinate, speed index, program start or -1) and
 #: doubles per row in the data (speed, offset).
-SPEC_LONGS, DATA_DOUBLES = 5, 2
+SPEC_LONGS, DATA_DOUBLES = DAE_SPEC_LONGS, 2
 
 
 def c_dae_accelerations(nq: int, ng: int) -> str:
@@ -31,7 +33,6 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     from ..events_c import C_BRENTQ, MAX_ITERATIONS
     from ..expressions_c import C_PROGRAM
     return f"""
-#define NG {ng}
 #ifdef DAE_LOOP
 #include <stdlib.h>
 #define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
@@ -46,14 +47,14 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
 {C_PROGRAM}
 {C_BRENTQ}
 static __thread int dae_nr = -1;
-static __thread long dae_rows[DAE_NR];            /* legacy configuration: geometric rows */
-static __thread long dae_legacy[{SPEC_LONGS} * DAE_NR];
+/* dae_rows (DAE_NR: legacy configuration, geometric rows), dae_legacy ({SPEC_LONGS} DAE_NR) and
+   dae_lam (DAE_NR + 1: multipliers of the last solve, per configured row) are per-thread
+   buffers of the model's sizes unit (c_sizes.py). */
 static __thread const long *dae_spec;             /* per row: kind, index, coordinate, speed index, program */
 static __thread const double *dae_data;           /* per row: speed, offset */
 static __thread const double *dae_programs;
 static __thread double dae_alpha, dae_beta, dae_scale, dae_tol = 1e-9;
 static __thread double dae_time = 0.0;            /* the time of the state being evaluated */
-static __thread double dae_lam[DAE_NR + 1];       /* multipliers of the last solve, per configured row */
 static __thread int dae_has_geo, dae_has_contacts;
 static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
 
@@ -97,10 +98,10 @@ void dae_configure(int nr, const long *rows, double alpha, double beta, double s
 static void dae_rows_eval(const double *q, const double *qd, const double *p, const double *u, double *work) {{
     double *c = work + DAE_C_OFF, *kc = work + DAE_K_OFF;
     double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
-#if NG > 0
+#if MB_HAS_NG
     if (dae_has_geo) constraints(q, qd, p, u, c);
 #endif
-#if DAE_NK > 0
+#if MB_HAS_CONTACTS
     if (dae_has_contacts) contacts(q, qd, p, u, kc);
 #endif
     (void)c; (void)kc;
@@ -317,7 +318,7 @@ static int dae_event(double t, const double *y, const double *p) {{
     double kc[CONTACTS_SIZE + 1], u[1] = {{0.0}};
     (void)t;
     int event = 0;
-#if DAE_NK > 0
+#if MB_HAS_CONTACTS
     contacts(y, y + NQ, p, u, kc);
     for (int k = 0; k < dae_nk; ++k) {{
         if (dae_held[k]) continue;
@@ -354,7 +355,7 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
                   const double *p) {{
     double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {{0.0}};
     dae_dense(s, t_old, h, y_old, F, ny, y);
-#if DAE_NK > 0
+#if MB_HAS_CONTACTS
     contacts(y, y + NQ, p, u, kc);
     return kc[CONTACTS_GAP_OFF + k];
 #else

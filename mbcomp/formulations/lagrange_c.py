@@ -95,7 +95,7 @@ static double lag_program(long r, int k, double t) {
    mechanical ones in the reduced state, y = [q_i, qd_i, z] */
 #define LAG_NZ (DRIVES_SIZE - DRIVES_RATES_OFF)
 static __thread int lag_drives = 0;
-static __thread double lag_dv[DRIVES_SIZE + 1];
+/* lag_dv (DRIVES_SIZE + 1): a per-thread buffer of the model's sizes unit (c_sizes.py) */
 
 int lagrange_drives(int on) {
     lag_drives = on;
@@ -120,7 +120,7 @@ static const double *lag_drive_forces(double t, const double *q, const double *q
    step (updated), tolerance; ev: [t_new, y_new, f_new, F (7 rows)] of an event step */
 static __thread int lag_nk = 0;
 static __thread const long *lag_held;
-static __thread double *lag_gaps, *lag_ev, lag_gap_tol, lag_kc[CONTACTS_SIZE + 1];
+static __thread double *lag_gaps, *lag_ev, lag_gap_tol;  /* lag_kc (CONTACTS_SIZE + 1): c_sizes.py */
 
 int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, double *ev) {
     lag_nk = nk; lag_held = held; lag_gaps = gaps; lag_gap_tol = gap_tol; lag_ev = ev;

@@ -1,0 +1,54 @@
+"""c_sizes: the model's sizes leave the C templates, whose text then serves every model of a kind."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import fourbar, pendulum_chain
+from mbcomp.c_sizes import CSizes
+from mbcomp.layout import OutputLayout
+from mbcomp.statemap import StateMap
+
+
+def _templates(model, **options):
+    compiled = model.compile(backend="python", cache=False, **options)._compiled
+    return compiled._c_templates(compiled._c_sizes()), compiled._c_sizes()
+
+
+def test_chains_of_any_length_share_the_templates_text_and_differ_in_their_unit():
+    text3, sizes3 = _templates(pendulum_chain(3))
+    text7, sizes7 = _templates(pendulum_chain(7))
+    assert text3 == text7
+    assert sizes3.values["NQ"] == 3 and sizes7.values["NQ"] == 7
+    assert sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.values["NMECH"] == 14
+    assert "mb_NQ = 7;" in sizes7.unit() and "mb_NQ = 3;" in sizes3.unit()
+
+
+def test_a_loop_and_a_tree_are_different_kinds():
+    tree, _ = _templates(pendulum_chain(4), formulation="dae")
+    loop, sizes = _templates(fourbar(), formulation="dae")
+    rows = len(fourbar().compile(backend="python", cache=False)._compiled.geometric_rows)
+    assert tree != loop and sizes.flags["MB_HAS_NG"] == 1 and sizes.values["NG"] == rows > 0
+    assert "#define MB_HAS_NG 1" in loop and "#define MB_HAS_NG 0" in tree
+
+
+def test_buffers_and_tables_get_their_lengths_in_the_unit():
+    layout = OutputLayout.of(nv=4, n_bodies=2, n_constraint_rows=3, n_contacts=2, n_drive_states=1)
+    state_map = StateMap(4, 4, np.arange(4), np.arange(4), np.arange(0), np.arange(0))
+    sizes = CSizes.of(layout, nq=4, ng=3, state_map=state_map, nz=1, drives=True)
+    unit = sizes.unit()
+    # DAE_NR = ng + nq + contacts = 9 rows; 5 longs per row of the spec; drives: 4 forces + 1 rate
+    assert "dae_rows[9];" in unit and "dae_legacy[45];" in unit and "dae_lam[10];" in unit
+    assert "lag_dv[6];" in unit and "lag_kc[13];" in unit  # contacts: 2 gaps, 2 x 4 Jacobian, 2 biases
+    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0}
+
+
+def test_a_preprocessor_test_of_a_size_is_refused():
+    _, sizes = _templates(pendulum_chain(2))
+    with pytest.raises(AssertionError, match="NQ"):
+        sizes.check_generic("#if NQ > 2\n#endif\n")
+    with pytest.raises(AssertionError, match="DAE_NR"):  # through a macro defined from sizes
+        sizes.check_generic("#define DAE_NR (NG + NQ)\n#if DAE_NR > 0\n#endif\n")
+    with pytest.raises(AssertionError, match="as a number"):
+        sizes.check_generic("#define NV 3\n")
+    assert sizes.check_generic("#if MB_HAS_QUAT\n#endif\n") == "#if MB_HAS_QUAT\n#endif\n"
