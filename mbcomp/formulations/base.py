@@ -295,12 +295,20 @@ class Formulation:
         def position(x):  # x: a step in speed space from the guess (the coordinates themselves for screws)
             return x if state_map.identity else state_map.integrate(base, x)
 
+        last = [None, None]  # the solver asks for the Jacobian where it just had the residual
+
+        def values(x):
+            key = x.tobytes()
+            if last[0] != key:
+                last[:] = key, self.constraint_values(kernel, t, position(x), zero, offsets)
+            return last[1]
+
         def residual(x):
-            g = self.constraint_values(kernel, t, position(x), zero, offsets).g
+            g = values(x).g
             return np.where(np.isfinite(g), g, 0.0)
 
         def jacobian(x):
-            cv = self.constraint_values(kernel, t, position(x), zero, offsets)
+            cv = values(x)
             return np.where(np.isfinite(cv.g)[:, None], cv.J, 0.0)
 
         q = q.copy()
