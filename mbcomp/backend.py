@@ -1,6 +1,7 @@
 """Numeric backends for the generated program: plain Python, or C compiled and loaded with ctypes."""
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import shutil
@@ -218,6 +219,8 @@ class CBuild:
         self._link_sources: list[str] = []  # small C units compiled by the link step itself
         self._failure: str | None = None
         self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
+        self._held = contextlib.ExitStack()  # build locks of the shared units this build compiles
+        self._deferred: list = []  # shared units another process is compiling: (add's arguments, key)
         # Reaps finished compilers and starts waiting units while the caller is busy (building
         # the rest of the program in Python): a free core never waits for the next ``add``.
         self._lock = threading.Lock()
@@ -232,19 +235,35 @@ class CBuild:
         ``shared``: the toolchain inputs of the code cache (``cache.toolchain``) for a unit
         many models have in common (the hand-written templates of one model structure): its
         object file is taken from the cache when a signed copy is there, and stored after
-        compiling otherwise, so models of the same sizes compile it once."""
+        compiling otherwise, so models of the same kind compile it once.  While one process
+        compiles it (under its build lock), another leaves it to the end of its own build
+        (``finish``) and then links the first one's object."""
         obj = self._tmp / f"{name}.o"
         (self._linked_last if last else self._objects).append(str(obj))  # link order
         if shared is not None:
             key = cache.entry_key(f"object {name}", text + " ".join(flags), shared)
-            path = cache.verified(key, ".o", shared)
-            if path is not None:
-                try:
-                    shutil.copyfile(path, obj)
-                    return
-                except OSError:
-                    pass
+            if self._copy_cached(key, shared, obj):
+                return
+            if not self._held.enter_context(cache.building(f"object-{key}", wait=0)):
+                self._deferred.append(((name, text, flags, statements, shared), key))
+                return
             self._shared.append((obj, key, shared))
+        self._queue(name, text, flags, statements)
+
+    @staticmethod
+    def _copy_cached(key: str, shared: dict, obj: Path) -> bool:
+        """Copy the signed cached object ``key`` to ``obj``; False when there is none."""
+        path = cache.verified(key, ".o", shared)
+        if path is None:
+            return False
+        try:
+            shutil.copyfile(path, obj)
+            return True
+        except OSError:
+            return False
+
+    def _queue(self, name: str, text: str, flags: tuple[str, ...], statements: int) -> None:
+        """Write unit ``name`` and queue it for a free compiler slot."""
         (self._tmp / f"{name}.c").write_text(text)
         with self._lock:
             self._waiting.append((statements, name, tuple(flags)))
@@ -308,9 +327,17 @@ class CBuild:
         """Wait for every unit, link them, remove the directory; the library's bytes or None."""
         try:
             self._pump(block=True)
+            self._store_shared()
+            for (name, text, flags, statements, shared), key in self._deferred:
+                obj = self._tmp / f"{name}.o"
+                with cache.building(f"object-{key}"):  # the other process is done with it
+                    if self._copy_cached(key, shared, obj):
+                        continue
+                self._shared.append((obj, key, shared))  # it failed or gave up: compile it here
+                self._queue(name, text, flags, statements)
+            self._pump(block=True)
+            self._store_shared()
             if self._failure is None:
-                for obj, key, inputs in self._shared:
-                    cache.store(key, ".o", obj.read_bytes(), inputs)
                 out = self._tmp / "model.so"
                 done = subprocess.run([self.compiler, "-shared", "-fPIC", *self._link_sources, *self._objects,
                                        *self._linked_last, "-o", str(out), "-lm"],
@@ -326,8 +353,17 @@ class CBuild:
         finally:
             self.cancel()
 
+    def _store_shared(self) -> None:
+        """Store the shared units compiled so far in the cache and release their build locks."""
+        if self._failure is None:
+            for obj, key, inputs in self._shared:
+                cache.store(key, ".o", obj.read_bytes(), inputs)
+        self._shared = []
+        self._held.close()
+
     def cancel(self) -> None:
         """Stop every compiler still running and remove the build directory."""
+        self._held.close()
         self._stop.set()
         if self._watcher is not None and self._watcher is not threading.current_thread():
             self._watcher.join()

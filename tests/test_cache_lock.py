@@ -123,3 +123,35 @@ class TestOneBuildPerModel:
             outs.append(json.loads(stdout.strip().splitlines()[-1]))
         assert sorted(o["hit"] for o in outs) == [False, True]
         assert outs[0]["a"] == outs[1]["a"]
+
+
+def test_threads_compiling_models_of_one_kind_compile_the_templates_once(cache_dir, monkeypatch):
+    """Chains of 1, 2 and 3 links compiled at once share the templates' build lock: one
+    compiles them, the others link its object (c_sizes: the templates carry no sizes)."""
+    from conftest import pendulum_chain
+    from mbcomp import backend
+    calls, real = [], backend.subprocess.Popen
+
+    def popen(cmd, *args, **kwargs):
+        calls.append(" ".join(map(str, cmd)))
+        return real(cmd, *args, **kwargs)
+    monkeypatch.setattr(backend.subprocess, "Popen", popen)
+    systems, errors = {}, []
+
+    def compile_one(n):
+        try:
+            systems[n] = pendulum_chain(n).compile(backend="c")
+        except Exception as exc:  # surfaced below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=compile_one, args=(n,)) for n in (1, 2, 3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors
+    assert sum("templates.c" in c for c in calls) == 1 and len(list(cache_dir.glob("*.o"))) == 1
+    for n, system in systems.items():
+        q, qd = np.linspace(0.3, -0.2, n), np.linspace(-0.1, 0.4, n)
+        twin = pendulum_chain(n).compile(backend="python", cache=False)
+        np.testing.assert_allclose(system.accelerations(q, qd), twin.accelerations(q, qd), rtol=1e-12)
