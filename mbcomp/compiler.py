@@ -184,12 +184,11 @@ class CompiledModel:
         reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
         if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
-        return sizes.check_generic(
-            reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
-            + "".join(snippet(nv, ng) for snippet in self.c_snippets)
-            + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
-            + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
-            + c_integrators())
+        return (reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
+                + "".join(snippet(nv, ng) for snippet in self.c_snippets)
+                + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
+                + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
+                + c_integrators())
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()
@@ -211,6 +210,7 @@ class CompiledModel:
                     return self._with_dense_loader(functions, compiler, use_cache)
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
+        sizes.check_generic(templates)  # before compiling: a size in an #if would read as 0
         functions = self._functions()
         if self.lazy_dense:
             functions = {f: outs for f, outs in functions.items() if f != "dynamics"}
