@@ -111,13 +111,29 @@ class CFunctions:
                 self._dense = dense  # (kept loaded while this library is)
 
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
+        """The packed output of generated function ``name`` at ``(q, qd)`` with parameters ``p``
+        and inputs ``u`` (a new array).  The arguments are copied into this thread's buffers,
+        whose pointers are bound once: taking an array's pointer costs 1.6 us, a copy 0.3 us."""
         if name == "dynamics" and self.dense_loader is not None and self._dense is None:
             self._ensure_dense()
-        out = np.empty(self.sizes[name])
-        q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
-        self._fns[name](q.ctypes.data, qd.ctypes.data, p.ctypes.data,
-                        (u if len(u) else self._empty).ctypes.data, out.ctypes.data)
-        return out
+        local = self._local
+        calls = getattr(local, "calls", None)
+        if calls is None:
+            calls = local.calls = {}
+            local.p = (None, None)
+        bound = calls.get(name)
+        if bound is None or len(bound[2]) < len(u):
+            arrays = (np.empty(self.nq), np.empty(self.nv), np.zeros(max(len(u), 1)), np.empty(self.sizes[name]))
+            bound = calls[name] = (*arrays, [ctypes.c_void_p(a.ctypes.data) for a in arrays])
+        q_in, qd_in, u_in, out, pointers = bound
+        q_in[:] = q
+        qd_in[:] = qd
+        if len(u):
+            u_in[:len(u)] = u
+        if local.p[0] is not p:  # the kernel's parameter vector: the same object call after call
+            local.p = (p, ctypes.c_void_p(p.ctypes.data))
+        self._fns[name](pointers[0], pointers[1], local.p[1], pointers[2], pointers[3])
+        return out.copy()
 
     def many(self, name: str, q: np.ndarray, qd: np.ndarray, p: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``name`` at every row of ``q``, ``qd`` in one call of the compiled code (``u``: one

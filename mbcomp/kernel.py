@@ -165,12 +165,20 @@ class Kernel:
         return fast or None
 
     # -- the tree solve ----------------------------------------------------------------------------
+    @staticmethod
+    def cholesky(M: np.ndarray) -> np.ndarray | None:
+        """Lower Cholesky factor of a small symmetric matrix, or None when it is not positive
+        definite.  LAPACK's ``dpotrf`` directly: numpy's wrapper costs 6 us per call on a 3 x 3
+        matrix, this 1 us, and the scipy-stepped right-hand side factors twice per evaluation."""
+        if M.size == 0:
+            return M.copy()
+        from scipy.linalg import lapack  # imported by the scipy-stepped path anyway, not by mbcomp
+        L, info = lapack.dpotrf(M, lower=1, clean=1)
+        return L if info == 0 else None
+
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Lower Cholesky factor of ``M``, or a ``SimulationError`` naming why M is singular."""
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            L = None
+        L = self.cholesky(M)
         scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
         if L is None or (M.size and np.min(np.diag(L)) ** 2 < SINGULAR_PIVOT * scale):
             raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {self.diagnose(q)}")
@@ -178,8 +186,12 @@ class Kernel:
 
     @staticmethod
     def inverse(L: np.ndarray) -> np.ndarray:
-        """``M^-1`` from its Cholesky factor (small dense matrices: cheaper than repeated solves)."""
-        Linv = np.linalg.inv(L)
+        """``M^-1`` from its Cholesky factor (small dense matrices: cheaper than repeated solves);
+        the triangular inverse by LAPACK's ``dtrtri`` (1 us against numpy's 8 us for 3 x 3)."""
+        if L.size == 0:
+            return L.copy()
+        from scipy.linalg import lapack
+        Linv, _ = lapack.dtrtri(L, lower=1)
         return Linv.T @ Linv
 
     def tree_solve(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:

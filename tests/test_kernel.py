@@ -77,3 +77,33 @@ def test_the_system_is_a_facade_over_its_kernel(pendulum):
     assert isinstance(kernel, Kernel)
     np.testing.assert_array_equal(pendulum.mass_matrix(q), kernel.dynamics(0.0, q, qd)[0])
     np.testing.assert_array_equal(pendulum.accelerations(q, qd), kernel.tree_accelerations(0.0, q, qd, None))
+
+
+def test_cholesky_and_inverse_agree_with_numpy_and_refuse_an_indefinite_matrix():
+    rng = np.random.default_rng(3)
+    for n in (1, 3, 7):
+        A = rng.normal(size=(n, n))
+        M = A @ A.T + n * np.eye(n)
+        L = Kernel.cholesky(M)
+        np.testing.assert_allclose(L, np.linalg.cholesky(M), rtol=1e-14, atol=1e-14)
+        assert np.all(np.triu(L, 1) == 0.0)
+        np.testing.assert_allclose(Kernel.inverse(L), np.linalg.inv(M), rtol=1e-12, atol=1e-14)
+    assert Kernel.cholesky(np.diag([1.0, -1e-3, 2.0])) is None
+    assert Kernel.cholesky(np.zeros((0, 0))).shape == (0, 0) and Kernel.inverse(np.zeros((0, 0))).shape == (0, 0)
+
+
+def test_generated_calls_return_new_arrays_and_follow_new_parameters(pendulum):
+    """The compiled calls copy into bound buffers: each result is a new array, and a new
+    parameter vector (twice the mass) is seen at once."""
+    system = pendulum
+    kernel = system.kernel
+    q, qd = np.array([0.4]), np.array([0.0])
+    first = kernel.call("energy", q, qd)
+    second = kernel.call("energy", q, qd)
+    assert first is not second and np.array_equal(first, second)
+    second[:] = 0.0
+    assert np.array_equal(kernel.call("energy", q, qd), first)
+    heavier = system.with_parameters({name: 2 * value for name, value in system.parameters.items()
+                                      if name.endswith(".mass")})
+    ratio = heavier.kernel.call("energy", q, qd)[1] / first[1]  # potential energy: twice the mass
+    assert ratio == pytest.approx(2.0, rel=1e-12)

@@ -192,19 +192,17 @@ class Formulation:
             Js = J[rows]
             Minv_JT = Minv @ Js.T
             A = Js @ Minv_JT
-            try:
-                LA = np.linalg.cholesky(A)
+            LA = kernel.cholesky(A)
+            if LA is not None:
                 diag = np.diag(LA)
                 if np.min(diag) > RANK_TOLERANCE * max(np.max(diag), self.schur_scale):
                     break
-            except np.linalg.LinAlgError:
-                pass
             if attempt:
                 raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
                                       f"{self.row_names(rows, contacts)}")
             rows = None
-        LAinv = np.linalg.inv(LA)
-        lam_s = LAinv.T @ (LAinv @ (rhs[rows] - Js @ Minv_f))
+        LAinv = kernel.inverse(LA)
+        lam_s = LAinv @ (rhs[rows] - Js @ Minv_f)
         lam[rows] = lam_s
         return Minv_f + Minv_JT @ lam_s, lam
 
