@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -48,7 +49,11 @@ class TestUnits:
             head = f"void {fname}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
             defining = [u for u in units if head in u.text]
             assert len(defining) == 1, fname
-            assert defining[0].hot == (fname not in COLD_FUNCTIONS), fname
+            if fname in COLD_FUNCTIONS or defining[0].hot:
+                assert defining[0].hot == (fname not in COLD_FUNCTIONS), fname
+            else:  # a hot function in a tiny pack (the empty constraints of a chain) goes cold
+                needed = compiled.program.needed(FUNCTIONS[fname], codegen._free_symbols(compiled.program))
+                assert len(needed) <= codegen.UnitStream.TINY_HOT, fname
         dynamics = [u for u in units if u.name.startswith("dynamics")]
         needed = len(compiled.program.needed(FUNCTIONS["dynamics"]))
         assert len(dynamics) == -(-needed // 40)  # chunks of 10 statements, 4 to a unit
@@ -183,6 +188,28 @@ class TestSharedUnits:
             stepped = twin.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
             assert compiled.t.size > 5
+
+    def test_the_empty_hot_functions_of_a_tree_take_no_compiler_run_of_their_own(self, tmp_path, monkeypatch):
+        """A chain has no constraints and no drives: those empty functions join the cold
+        unit (UnitStream.TINY_HOT) instead of an optimised compiler run of their own."""
+        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+        units, real = [], CBuild.add
+
+        def add(self, name, text, flags, *args, **kwargs):
+            units.append((name, text, tuple(flags)))
+            return real(self, name, text, flags, *args, **kwargs)
+        monkeypatch.setattr(CBuild, "add", add)
+        system = pendulum_chain(6).compile(backend="c")
+        head = "void {}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
+        for fname in ("constraints", "drives"):
+            (where,) = [(name, flags) for name, text, flags in units if head.format(fname) in text]
+            assert where[1] == COLD_FLAGS, (fname, where)
+        assert all(head.format("dynamics") not in text or flags == C_FLAGS for _, text, flags in units)
+        q, qd = np.linspace(0.3, -0.2, 6), np.linspace(0.1, -0.4, 6)
+        assert system.kernel.call("constraints", q, qd).size == 0
+        np.testing.assert_allclose(system.accelerations(q, qd),
+                                   pendulum_chain(6).compile(backend="python", cache=False).accelerations(q, qd),
+                                   rtol=1e-12)
 
     def test_a_damaged_object_is_rebuilt_not_linked(self, tmp_path, monkeypatch):
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
