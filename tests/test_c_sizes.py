@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import mbcomp as mb
+
 from conftest import fourbar, pendulum_chain
 from mbcomp.c_sizes import CSizes
 from mbcomp.layout import OutputLayout
@@ -15,13 +17,25 @@ def _templates(model, **options):
     return compiled._c_templates(compiled._c_sizes()), compiled._c_sizes()
 
 
-def test_chains_of_any_length_share_the_templates_text_and_differ_in_their_unit():
-    text3, sizes3 = _templates(pendulum_chain(3))
-    text7, sizes7 = _templates(pendulum_chain(7))
-    assert text3 == text7
-    assert sizes3.values["NQ"] == 3 and sizes7.values["NQ"] == 7
-    assert sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.values["NMECH"] == 14
-    assert "mb_NQ = 7;" in sizes7.unit() and "mb_NQ = 3;" in sizes3.unit()
+def _two_balls_as_euler_pairs() -> mb.Model:
+    """Two rods on xy Euler-angle joints: 4 coordinates like a 4-link chain, with 2 bodies."""
+    m = mb.Model("two_xy", gravity=(0, 0, -9.81))
+    upper = m.add(mb.Body("upper", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    lower = m.add(mb.Body("lower", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy"))
+    m.add(mb.Spherical("elbow", upper, lower, sequence="xy", parent_point=(0, 0, -0.5)))
+    return m
+
+
+def test_models_with_one_state_length_share_the_templates_text_and_differ_in_their_unit():
+    chain, chain_sizes = _templates(pendulum_chain(4))
+    pairs, pair_sizes = _templates(_two_balls_as_euler_pairs())
+    assert chain == pairs  # 4 bodies against 2: other layouts, one state length
+    assert chain_sizes.values["KINEMATICS_SIZE"] != pair_sizes.values["KINEMATICS_SIZE"]
+    assert chain_sizes.values["NQ"] == pair_sizes.values["NQ"] == 4 and chain_sizes.flags["NMECH"] == 8
+    assert f"mb_KINEMATICS_SIZE = {chain_sizes.values['KINEMATICS_SIZE']};" in chain_sizes.unit()
+    longer, sizes7 = _templates(pendulum_chain(7))
+    assert longer != chain and sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.flags["NMECH"] == 14
 
 
 def test_a_loop_and_a_tree_are_different_kinds():
@@ -40,7 +54,7 @@ def test_buffers_and_tables_get_their_lengths_in_the_unit():
     # DAE_NR = ng + nq + contacts = 9 rows; 5 longs per row of the spec; drives: 4 forces + 1 rate
     assert "dae_rows[9];" in unit and "dae_legacy[45];" in unit and "dae_lam[10];" in unit
     assert "lag_dv[6];" in unit and "lag_kc[13];" in unit  # contacts: 2 gaps, 2 x 4 Jacobian, 2 biases
-    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0}
+    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0, "NMECH": 8, "NZ": 1}
 
 
 def test_a_preprocessor_test_of_a_size_is_refused():

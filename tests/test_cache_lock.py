@@ -126,9 +126,9 @@ class TestOneBuildPerModel:
 
 
 def test_threads_compiling_models_of_one_kind_compile_the_templates_once(cache_dir, monkeypatch):
-    """Chains of 1, 2 and 3 links compiled at once share the templates' build lock: one
-    compiles them, the others link its object (c_sizes: the templates carry no sizes)."""
-    from conftest import pendulum_chain
+    """Three chains of 2 links, axes in other orders (three models of one kind and state
+    length), compiled at once share the templates' build lock: one compiles them, the
+    others link its object."""
     from mbcomp import backend
     calls, real = [], backend.subprocess.Popen
 
@@ -138,20 +138,29 @@ def test_threads_compiling_models_of_one_kind_compile_the_templates_once(cache_d
     monkeypatch.setattr(backend.subprocess, "Popen", popen)
     systems, errors = {}, []
 
-    def compile_one(n):
+    def chain(axes):
+        m = mb.Model(f"chain_{axes}", gravity=(0, 0, -9.81))
+        parent = m.ground
+        for i, axis in enumerate(axes):
+            body = m.add(mb.Body(f"link{i}", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+            m.add(mb.Revolute(f"joint{i}", parent, body, axis=axis, parent_point=(0, 0, -0.5) if i else (0, 0, 0)))
+            parent = body
+        return m
+
+    def compile_one(axes):
         try:
-            systems[n] = pendulum_chain(n).compile(backend="c")
+            systems[axes] = chain(axes).compile(backend="c")
         except Exception as exc:  # surfaced below
             errors.append(exc)
 
-    threads = [threading.Thread(target=compile_one, args=(n,)) for n in (1, 2, 3)]
+    threads = [threading.Thread(target=compile_one, args=(axes,)) for axes in ("xy", "yx", "xx")]
     for t in threads:
         t.start()
     for t in threads:
         t.join(120)
     assert not errors
     assert sum("templates.c" in c for c in calls) == 1 and len(list(cache_dir.glob("*.o"))) == 1
-    for n, system in systems.items():
-        q, qd = np.linspace(0.3, -0.2, n), np.linspace(-0.1, 0.4, n)
-        twin = pendulum_chain(n).compile(backend="python", cache=False)
+    for axes, system in systems.items():
+        q, qd = np.array([0.3, -0.2]), np.array([-0.1, 0.4])
+        twin = chain(axes).compile(backend="python", cache=False)
         np.testing.assert_allclose(system.accelerations(q, qd), twin.accelerations(q, qd), rtol=1e-12)

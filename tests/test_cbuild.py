@@ -141,6 +141,16 @@ def _chain_about(axes: str) -> mb.Model:
 
 
 @needs_cc
+def _xy_pairs() -> mb.Model:
+    """Two rods on xy Euler-angle joints: 4 coordinates, like a 4-link chain, 2 bodies."""
+    m = mb.Model("xy_pairs", gravity=(0, 0, -9.81))
+    upper = m.add(mb.Body("upper", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    lower = m.add(mb.Body("lower", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy"))
+    m.add(mb.Spherical("elbow", upper, lower, sequence="xy", parent_point=(0, 0, -0.5)))
+    return m
+
+
 class TestSharedUnits:
     """The hand-written templates of one model structure compile once: later models with the
     same sizes link the cached object (signed like every cache entry)."""
@@ -172,20 +182,20 @@ class TestSharedUnits:
         np.testing.assert_allclose(second.accelerations(q, qd), moon.accelerations(q, qd), rtol=1e-12)
 
     def test_models_of_other_sizes_link_the_same_templates_object(self, tmp_path, monkeypatch):
-        """The templates read sizes from the model's own unit (c_sizes): chains of 2 and 5
-        links link one object, and each simulates as its scipy-stepped Python twin."""
+        """The templates read the layout's sizes from the model's own unit (c_sizes): a chain
+        of 4 links and 2 links on xy Euler-angle joints (the same state length, other
+        layouts) link one object, and each simulates as its scipy-stepped Python twin."""
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
         calls = self._count_compiles(monkeypatch)
-        small = pendulum_chain(2).compile(backend="c")
+        chain = pendulum_chain(4).compile(backend="c")
         calls.clear()
-        large = pendulum_chain(5).compile(backend="c")
+        pairs = _xy_pairs().compile(backend="c")
         assert calls and not any("templates.c" in " ".join(c) for c in calls)
         assert len(list(tmp_path.glob("*.o"))) == 1
-        for system, n in ((small, 2), (large, 5)):
-            q0 = np.linspace(0.4, -0.3, n)
+        q0 = np.array([0.4, -0.3, 0.2, 0.1])
+        for system, model in ((chain, pendulum_chain(4)), (pairs, _xy_pairs())):
             compiled = system.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
-            twin = pendulum_chain(n).compile(backend="python", cache=False)
-            stepped = twin.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
+            stepped = model.compile(backend="python", cache=False).simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
             assert compiled.t.size > 5
 
