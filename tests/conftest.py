@@ -75,6 +75,17 @@ def pendulum_chain(n: int, *, gravity=(0, 0, -9.81), length: float = 0.5) -> mb.
     return m
 
 
+def xy_pairs() -> mb.Model:
+    """Two rods on xy Euler-angle joints: 4 coordinates like a 4-link chain, with 2 bodies
+    (the same state length, another output layout)."""
+    m = mb.Model("xy_pairs", gravity=(0, 0, -9.81))
+    upper = m.add(mb.Body("upper", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    lower = m.add(mb.Body("lower", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
+    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy"))
+    m.add(mb.Spherical("elbow", upper, lower, sequence="xy", parent_point=(0, 0, -0.5)))
+    return m
+
+
 @pytest.fixture
 def arm():
     return arm_model().compile()

@@ -4,9 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import mbcomp as mb
-
-from conftest import fourbar, pendulum_chain
+from conftest import fourbar, pendulum_chain, xy_pairs
 from mbcomp.c_sizes import CSizes
 from mbcomp.layout import OutputLayout
 from mbcomp.statemap import StateMap
@@ -17,19 +15,9 @@ def _templates(model, **options):
     return compiled._c_templates(compiled._c_sizes()), compiled._c_sizes()
 
 
-def _two_balls_as_euler_pairs() -> mb.Model:
-    """Two rods on xy Euler-angle joints: 4 coordinates like a 4-link chain, with 2 bodies."""
-    m = mb.Model("two_xy", gravity=(0, 0, -9.81))
-    upper = m.add(mb.Body("upper", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
-    lower = m.add(mb.Body("lower", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
-    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy"))
-    m.add(mb.Spherical("elbow", upper, lower, sequence="xy", parent_point=(0, 0, -0.5)))
-    return m
-
-
 def test_models_with_one_state_length_share_the_templates_text_and_differ_in_their_unit():
     chain, chain_sizes = _templates(pendulum_chain(4))
-    pairs, pair_sizes = _templates(_two_balls_as_euler_pairs())
+    pairs, pair_sizes = _templates(xy_pairs())
     assert chain == pairs  # 4 bodies against 2: other layouts, one state length
     assert chain_sizes.values["KINEMATICS_SIZE"] != pair_sizes.values["KINEMATICS_SIZE"]
     assert chain_sizes.values["NQ"] == pair_sizes.values["NQ"] == 4 and chain_sizes.flags["NMECH"] == 8

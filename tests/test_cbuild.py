@@ -12,7 +12,7 @@ import pytest
 import mbcomp as mb
 from mbcomp import backend, codegen
 from mbcomp.backend import C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CBuild, c_compiler, c_functions, c_library
-from conftest import pendulum_chain
+from conftest import pendulum_chain, xy_pairs
 
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
 
@@ -141,16 +141,6 @@ def _chain_about(axes: str) -> mb.Model:
 
 
 @needs_cc
-def _xy_pairs() -> mb.Model:
-    """Two rods on xy Euler-angle joints: 4 coordinates, like a 4-link chain, 2 bodies."""
-    m = mb.Model("xy_pairs", gravity=(0, 0, -9.81))
-    upper = m.add(mb.Body("upper", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
-    lower = m.add(mb.Body("lower", mass=1.0, com=(0, 0, -0.25), inertia=(0.02, 0.02, 1e-4)))
-    m.add(mb.Spherical("shoulder", m.ground, upper, sequence="xy"))
-    m.add(mb.Spherical("elbow", upper, lower, sequence="xy", parent_point=(0, 0, -0.5)))
-    return m
-
-
 class TestSharedUnits:
     """The hand-written templates of one model structure compile once: later models with the
     same sizes link the cached object (signed like every cache entry)."""
@@ -189,11 +179,11 @@ class TestSharedUnits:
         calls = self._count_compiles(monkeypatch)
         chain = pendulum_chain(4).compile(backend="c")
         calls.clear()
-        pairs = _xy_pairs().compile(backend="c")
+        pairs = xy_pairs().compile(backend="c")
         assert calls and not any("templates.c" in " ".join(c) for c in calls)
         assert len(list(tmp_path.glob("*.o"))) == 1
         q0 = np.array([0.4, -0.3, 0.2, 0.1])
-        for system, model in ((chain, pendulum_chain(4)), (pairs, _xy_pairs())):
+        for system, model in ((chain, pendulum_chain(4)), (pairs, xy_pairs())):
             compiled = system.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             stepped = model.compile(backend="python", cache=False).simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
