@@ -48,11 +48,7 @@ class CSizes:
         (``drives``: it has drive elements), and for the recursive program ``aba`` =
         (speeds, inputs, output length) with ``aba_parents`` (parent speed per speed, -1 at
         the root) when the dae KKT solve runs on it."""
-        values = {}
-        for function, blocks in layout.functions.items():
-            for block in blocks:
-                values[f"{function.upper()}_{block.name.upper()}_OFF"] = block.offset
-            values[f"{function.upper()}_SIZE"] = layout.size(function)
+        values = layout.c_names()
         ncoord, nv = state_map.nq, state_map.nv
         nk = layout.block("contacts", "gap").shape[0]
         values.update(NQ=nq, NG=ng, NCOORD=ncoord, NV=nv,

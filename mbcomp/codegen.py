@@ -370,7 +370,7 @@ def c_accelerations(nq: int | None = None) -> str:
     ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed
     lower triangle that ``dynamics`` writes.  Returns 0, or k + 1 when pivot k shows
     the mass matrix is not positive definite (same threshold as the Python path).
-    ``work`` holds ``DYNAMICS_SIZE`` doubles (the offsets come from ``OutputLayout.c_defines``);
+    ``work`` holds ``DYNAMICS_SIZE`` doubles (the offsets come from ``OutputLayout.c_names``);
     ``tau`` may be NULL.  ``nq``: define ``NQ`` here (None: the model's ``c_sizes`` unit gives it).
     """
     return ("" if nq is None else f"#define NQ {nq}\n") + f"""

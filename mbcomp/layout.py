@@ -122,15 +122,20 @@ class OutputLayout:
                 out[block.name] = values.reshape(block.shape)
         return out
 
-    def c_defines(self) -> str:
-        """``#define``s of every block's offset and every function's size, e.g.
-        ``DYNAMICS_FORCES_OFF`` and ``DYNAMICS_SIZE``: the C templates use nothing else."""
-        lines = []
+    def c_names(self) -> dict[str, int]:
+        """Every block's offset and every function's size by its C name, e.g.
+        ``DYNAMICS_FORCES_OFF`` and ``DYNAMICS_SIZE``: the C templates use nothing else
+        (``c_sizes.CSizes`` declares them for the shared templates)."""
+        names = {}
         for function, blocks in self.functions.items():
             for block in blocks:
-                lines.append(f"#define {function.upper()}_{block.name.upper()}_OFF {block.offset}")
-            lines.append(f"#define {function.upper()}_SIZE {self.size(function)}")
-        return "\n".join(lines) + "\n"
+                names[f"{function.upper()}_{block.name.upper()}_OFF"] = block.offset
+            names[f"{function.upper()}_SIZE"] = self.size(function)
+        return names
+
+    def c_defines(self) -> str:
+        """``c_names`` as ``#define``s, for C compiled on its own with one model's layout."""
+        return "".join(f"#define {name} {value}\n" for name, value in self.c_names().items())
 
     def description(self) -> str:
         """Text of the whole layout (for the cache key)."""
