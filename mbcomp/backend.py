@@ -27,6 +27,11 @@ FUNCTIONS = {
 }
 #: Called per output sample or step, not per right-hand side: compiled without optimisation.
 COLD_FUNCTIONS = ("energy", "kinematics", "contacts")
+#: Evaluated on results (energies, body states), never while stepping: each is compiled into a
+#: library of its own when first called (``CompiledModel.output_library``), so a compile
+#: returns once the right-hand side is ready and a model pays only for the outputs it uses.
+#: The model's library calls them through ``codegen.c_output_stubs``.
+OUTPUT_FUNCTIONS = ("energy", "kinematics")
 
 
 class PythonFunctions:
@@ -93,29 +98,36 @@ class CFunctions:
         self._accelerations.restype = ctypes.c_int
         self._empty = np.zeros(1)
         self._local = threading.local()
-        #: For a library built without the dense dynamics (``CompiledModel.lazy_dense``): a
-        #: callable giving the library of ``dynamics_dense``, loaded on the first call of
-        #: ``dynamics`` (which until then writes NaN).
-        self.dense_loader = None
-        self._dense = None
-        self._dense_lock = threading.Lock()
+        #: Functions this library calls through a stub until their own library is loaded
+        #: (``codegen.c_late_stub``): ``{name: (loader, setter, symbol)}``, the loader giving
+        #: the library that defines ``symbol``, called on the first call of ``name`` (the
+        #: stub writes NaN until then): the dense dynamics of ``CompiledModel.lazy_dense``
+        #: and the ``OUTPUT_FUNCTIONS``.
+        self.late: dict = {}
+        #: The late functions loaded so far: ``{name: library}``.
+        self.loaded: dict = {}
+        self._late_lock = threading.Lock()
 
-    def _ensure_dense(self) -> None:
-        """Load the dense dynamics (once) and point this library's ``dynamics`` at them."""
-        with self._dense_lock:
-            if self._dense is None:
-                dense = self.dense_loader()
-                setter = self.lib.set_dense_dynamics
+    def ensure(self, name: str) -> None:
+        """Load the library of the late function ``name`` (once) and point this library's
+        stub at it; nothing for a function of this library."""
+        if name not in self.late or name in self.loaded:
+            return
+        with self._late_lock:
+            if name not in self.loaded:
+                loader, setter_name, symbol = self.late[name]
+                library = loader()
+                setter = getattr(self.lib, setter_name)
                 setter.argtypes, setter.restype = [ctypes.c_void_p], None
-                setter(ctypes.cast(dense.dynamics_dense, ctypes.c_void_p))
-                self._dense = dense  # (kept loaded while this library is)
+                setter(ctypes.cast(getattr(library, symbol), ctypes.c_void_p))
+                self.loaded[name] = library  # (kept loaded while this library is)
 
     def __call__(self, name: str, q, qd, p, u) -> np.ndarray:
         """The packed output of generated function ``name`` at ``(q, qd)`` with parameters ``p``
         and inputs ``u`` (a new array).  The arguments are copied into this thread's buffers,
         whose pointers are bound once: taking an array's pointer costs 1.6 us, a copy 0.3 us."""
-        if name == "dynamics" and self.dense_loader is not None and self._dense is None:
-            self._ensure_dense()
+        if name in self.late:
+            self.ensure(name)
         local = self._local
         calls = getattr(local, "calls", None)
         if calls is None:
@@ -138,8 +150,8 @@ class CFunctions:
     def many(self, name: str, q: np.ndarray, qd: np.ndarray, p: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``name`` at every row of ``q``, ``qd`` in one call of the compiled code (``u``: one
         row for all) -> (m, size).  A Python loop over ``__call__`` costs ~20 us per row."""
-        if name == "dynamics" and self.dense_loader is not None and self._dense is None:
-            self._ensure_dense()
+        if name in self.late:
+            self.ensure(name)
         q = np.ascontiguousarray(q, dtype=float)
         qd = np.ascontiguousarray(qd, dtype=float)
         m = len(q)
@@ -191,6 +203,10 @@ class CFunctions:
 C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno")
 #: Flags of the cold units (functions called per output sample, not per step).
 COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno")
+#: A cold unit of at most this many statements (typically a tree's empty ``contacts``,
+#: ``constraints`` and ``drives``) is compiled by the link command (``CBuild.link_source``):
+#: a compiler run of its own costs 35-40 ms of process start-up for nothing to compile.
+LINKED_STATEMENTS = 30
 #: Statements per generated translation unit (``codegen.c_units``).
 UNIT_STATEMENTS = 1500
 #: Short functions packed into one unit: a pack of this many statements starts compiling as soon
@@ -391,12 +407,58 @@ class CBuild:
         shutil.rmtree(self._tmp, ignore_errors=True)
 
 
-def compile_c(source: str, compiler: str) -> bytes | None:
-    """The shared library built from one C ``source`` with the hot flags (its bytes), or
-    None when the compiler fails (with a warning).  The build directory is removed on every path."""
-    build = CBuild(compiler)
-    build.add("model", source, C_FLAGS)
-    return build.finish()
+def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, idle: bool = False) -> bytes | None:
+    """The shared library built from one C ``source`` with ``flags`` (its bytes), or None when
+    the compiler fails (with a warning).  One compiler run compiles and links (the driver,
+    compiler and linker start once: about 40 ms less than two runs); the build directory is
+    removed on every path.  ``idle``: the compiler runs at the lowest priority (``nice``,
+    where there is one), on cores nothing else wants."""
+    tmp = Path(tempfile.mkdtemp(prefix="mbcomp-build-"))
+    try:
+        unit, out = tmp / "unit.c", tmp / "library.so"
+        unit.write_text(source)
+        nice = shutil.which("nice") if idle else None
+        command = [*([nice, "-n", "19"] if nice else []), compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
+        done = subprocess.run(command, stdin=subprocess.DEVNULL,
+                              capture_output=True, timeout=CBuild.TIMEOUT, check=False)
+        if done.returncode == 0:
+            return out.read_bytes()
+        failure = done.stderr.decode(errors="replace")[-2000:]
+    except (OSError, subprocess.SubprocessError) as exc:
+        failure = str(exc)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    warnings.warn(f"mbcomp: the C compiler failed: {failure}", RuntimeWarning, stacklevel=2)
+    return None
+
+
+class BackgroundBuild:
+    """A library compiled by ``compile_c`` on a thread of its own while the caller goes on
+    (the compiler is another process: the thread holds no GIL while it waits), at the lowest
+    priority: it takes the cores the caller's own compilers and work leave idle.  ``store``:
+    called on the thread with the bytes (e.g. to cache them), its return value kept.  The
+    thread is not a daemon: the interpreter waits for it at exit, so what it stores is whole."""
+
+    def __init__(self, source: str, compiler: str, flags: tuple[str, ...], store=None):
+        self._pid = os.getpid()
+        self._done = threading.Event()
+        self._outcome: tuple = (None, None)
+
+        def run():
+            try:
+                data = compile_c(source, compiler, flags, idle=True)
+                self._outcome = (data, store(data) if data is not None and store is not None else None)
+            finally:
+                self._done.set()
+        threading.Thread(target=run, name="mbcomp-background-build", daemon=False).start()
+
+    def result(self) -> tuple:
+        """``(bytes or None, what store returned)`` once the build is done; ``(None, None)`` in a
+        forked child, which has no copy of the thread (the caller then builds it itself)."""
+        if os.getpid() != self._pid:
+            return None, None
+        self._done.wait()
+        return self._outcome
 
 
 def load_library_bytes(data: bytes) -> ctypes.CDLL:

@@ -197,10 +197,12 @@ def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
         raise
 
 
-def store(key: str, suffix: str, data: bytes, inputs: Mapping[str, Any]) -> Path | None:
-    """Write an artefact and its signed manifest; its path, or None if the cache is unusable."""
+def store(key: str, suffix: str, data: bytes, inputs: Mapping[str, Any], directory: Path | None = None) -> Path | None:
+    """Write an artefact and its signed manifest; its path, or None if the cache is unusable.
+    ``directory``: a cache directory chosen earlier (``cache_dir()``), e.g. by a build that
+    finishes in the background; default: the one configured now."""
     try:
-        directory = cache_dir()
+        directory = directory or cache_dir()
         secret = _secret(directory)
         path = directory / f"{key}{suffix}"
         manifest = {"version": MANIFEST_VERSION, "key": key, "file": path.name, "size": len(data),

@@ -267,6 +267,12 @@ class UnitStream:
                     units.append(self._pack(hot))
         return units
 
+    def apart(self, fname: str, outputs) -> str:
+        """The C source of function ``fname`` (final ``outputs``) alone, as ``c_source``
+        prints it: for a library of its own (``OUTPUT_FUNCTIONS``), built when first used."""
+        parts, main = _c_function(self.prog, fname, outputs, self.chunk, "", self._free_symbols())
+        return "#include <math.h>\n\n" + "".join(f"static {text}\n" for text, _ in parts) + main
+
     #: A hot pack of at most this many statements left at ``flush`` (typically the empty
     #: ``constraints`` and ``drives`` of a tree) joins the cold pack: a compiler run of its own
     #: costs 40-70 ms for nothing to optimise.
@@ -349,20 +355,33 @@ MANY_TEMPLATE = """void {name}_many(long m, const double *q, long sq, const doub
 """
 
 
+def c_late_stub(name: str, size: str, setter: str) -> str:
+    """C of ``name`` (and ``name_many``) for a library built without it: it calls the
+    separately built function once Python has passed its address to ``setter``, and writes
+    NaN (``size`` values) before (a caller's finiteness check then sends it to the path that
+    builds it: ``CFunctions``)."""
+    return f"""#include <math.h>
+typedef void (*mb_late_fn)(const double *, const double *, const double *, const double *, double *);
+static mb_late_fn mb_late_{name} = 0;
+void {setter}(mb_late_fn f) {{ mb_late_{name} = f; }}
+void {name}(const double *q, const double *qd, const double *p, const double *u, double *out) {{
+    if (mb_late_{name}) {{ mb_late_{name}(q, qd, p, u, out); return; }}
+    for (int i = 0; i < {size}; ++i) out[i] = NAN;
+}}
+""" + MANY_TEMPLATE.format(name=name, size=size)
+
+
 def c_dense_stub() -> str:
-    """C of ``dynamics`` (and ``dynamics_many``) for a library built without the dense
-    dynamics: it calls the separately built ``dynamics_dense`` once Python has set it
-    (``set_dense_dynamics``), and writes NaN before (a caller's finiteness check then sends it
-    to the path that builds them: ``CFunctions``)."""
-    return """#include <math.h>
-typedef void (*mb_dense_fn)(const double *, const double *, const double *, const double *, double *);
-static mb_dense_fn mb_dense = 0;
-void set_dense_dynamics(mb_dense_fn f) { mb_dense = f; }
-void dynamics(const double *q, const double *qd, const double *p, const double *u, double *out) {
-    if (mb_dense) { mb_dense(q, qd, p, u, out); return; }
-    for (int i = 0; i < DYNAMICS_SIZE; ++i) out[i] = NAN;
-}
-""" + MANY_TEMPLATE.format(name="dynamics", size="DYNAMICS_SIZE")
+    """C of ``dynamics`` for a library built without the dense dynamics: it calls the
+    separately built ``dynamics_dense`` once Python has set it (``set_dense_dynamics``)."""
+    return c_late_stub("dynamics", "DYNAMICS_SIZE", "set_dense_dynamics")
+
+
+def c_output_stubs(names) -> str:
+    """C of the output functions ``names`` (``OUTPUT_FUNCTIONS``: energy, body kinematics),
+    which each model builds into libraries of their own on first use: each calls its
+    library's function once Python has set it (``set_<name>_impl``)."""
+    return "".join(c_late_stub(name, f"{name.upper()}_SIZE", f"set_{name}_impl") for name in names)
 
 
 def c_accelerations(nq: int | None = None) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import hashlib
+import threading
 import time
 from typing import Any
 
@@ -12,8 +13,8 @@ import numpy as np
 from . import cache, codegen, recursive
 from .c_sizes import CSizes
 from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
-                      UNIT_STATEMENTS, CBuild, CFunctions, PythonFunctions,
-                      c_compiler, c_library)
+                      LINKED_STATEMENTS, OUTPUT_FUNCTIONS, UNIT_STATEMENTS, BackgroundBuild, CBuild, CFunctions,
+                      PythonFunctions, c_compiler, c_library, compile_c, load_library_bytes)
 from .components._values import name_of
 from .param_layout import input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
@@ -85,6 +86,12 @@ class CompiledModel:
                             + "\nlayout|" + self.output_layout.description() + f"\ndynamics|{self.dynamics}")
         self.key = ""  # the cache key of the loaded code, set by _load
         self._program = None
+        #: The C of the ``OUTPUT_FUNCTIONS`` printed by this compile, its build in the
+        #: background, and their library once loaded (``output_library``).
+        self._output_source: str | None = None
+        self._outputs_build: BackgroundBuild | None = None
+        self._outputs = None
+        self._outputs_lock = threading.Lock()
         started = time.perf_counter()
         self.cache_hit = False
         self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
@@ -184,7 +191,8 @@ class CompiledModel:
         reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
         if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
-        return (reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "") + tree
+        return (reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "")
+                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
@@ -199,7 +207,8 @@ class CompiledModel:
         tools = cache.toolchain(compiler, C_FLAGS)
         plan = (f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit, "
                 f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final, "
-                f"hot functions of more than {HALVE_STATEMENTS} in two halves")  # how the C is built
+                f"hot functions of more than {HALVE_STATEMENTS} in two halves, "
+                f"cold units of at most {LINKED_STATEMENTS} compiled by the link")  # how the C is built
         self.key = cache.entry_key(self.description, templates + sizes_unit + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
@@ -207,13 +216,13 @@ class CompiledModel:
                 try:
                     functions = CFunctions(path, self.sizes)
                     self.cache_hit = True
-                    return self._with_dense_loader(functions, compiler, use_cache)
+                    return self._with_late_loaders(functions, compiler, use_cache)
                 except (OSError, AttributeError):
                     cache.discard(self.key, ".so")  # loads but is not ours to use: rebuild it
         sizes.check_generic(templates)  # before compiling: a size in an #if would read as 0
-        functions = self._functions()
-        if self.lazy_dense:
-            functions = {f: outs for f, outs in functions.items() if f != "dynamics"}
+        # Built apart, later: the dense dynamics of lazy_dense and the output functions.
+        apart = OUTPUT_FUNCTIONS + (("dynamics",) if self.lazy_dense else ())
+        functions = {f: outs for f, outs in self._functions().items() if f not in apart}
         cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
         build = CBuild(compiler)
         try:
@@ -228,7 +237,10 @@ class CompiledModel:
 
             def compile_units(units):
                 for unit in units:
-                    build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
+                    if not unit.hot and unit.statements <= LINKED_STATEMENTS:
+                        build.link_source(unit.name, unit.text)
+                    else:
+                        build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
                     digest.update(unit.text.encode())
 
             # Each function's units are printed and start compiling as soon as its outputs are
@@ -253,18 +265,84 @@ class CompiledModel:
                                             halve=HALVE_STATEMENTS)
             compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
             compile_units(stream.flush())
+            # Printed while the compilers run, and compiled in the background (not waited for).
+            self._output_source = "\n".join(stream.apart(name, FUNCTIONS[name]) for name in OUTPUT_FUNCTIONS)
+            if use_cache:
+                key, tools_out = self._output_key(compiler)
+                cache.store(key, ".c", self._output_source.encode(), tools_out)
+            self._build_outputs(compiler, use_cache)
         except BaseException:
             build.cancel()
             raise
         inputs = {**tools, "cold_flags": list(COLD_FLAGS), "source_sha256": digest.hexdigest()}
         functions = c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
-        return None if functions is None else self._with_dense_loader(functions, compiler, use_cache)
+        return None if functions is None else self._with_late_loaders(functions, compiler, use_cache)
 
-    def _with_dense_loader(self, functions: CFunctions, compiler: str, use_cache: bool) -> CFunctions:
-        """Give a library without the dense dynamics the means to build them on first use."""
+    def _build_outputs(self, compiler: str, use_cache: bool) -> None:
+        """Start compiling the output functions' library in the background, at the lowest
+        priority: it takes the cores the model's own units leave idle, the compile returns
+        without waiting for it (the first ``energy``/``body_state`` waits for what is left),
+        and it is stored in this compile's cache directory."""
+        key, tools = self._output_key(compiler)
+        inputs = {**tools, "source_sha256": hashlib.sha256(self._output_source.encode()).hexdigest()}
+        store = None
+        if use_cache:
+            directory = cache.cache_dir()
+            store = lambda data: cache.store(key, ".so", data, inputs, directory=directory)  # noqa: E731
+        self._outputs_build = BackgroundBuild(self._output_source, compiler, COLD_FLAGS, store)
+
+    def wait_for_background(self) -> None:
+        """Wait until the output functions' library being built in the background is done
+        (it is then cached; for tests and benchmarks that look at the cache)."""
+        build = self._outputs_build
+        if build is not None:
+            build.result()
+
+    def _with_late_loaders(self, functions: CFunctions, compiler: str, use_cache: bool) -> CFunctions:
+        """Give the library the means to build what it leaves out on first use: the output
+        functions, and the dense dynamics of ``lazy_dense``."""
+        for name in OUTPUT_FUNCTIONS:
+            functions.late[name] = (lambda: self.output_library(compiler, use_cache), f"set_{name}_impl", name)
         if self.lazy_dense:
-            functions.dense_loader = lambda: self.dense_library(compiler, use_cache)
+            functions.late["dynamics"] = (lambda: self.dense_library(compiler, use_cache), "set_dense_dynamics",
+                                          "dynamics_dense")
         return functions
+
+    def _output_key(self, compiler: str) -> tuple[str, dict]:
+        """The cache key of the output functions' library and of their C, with the toolchain."""
+        tools = cache.toolchain(compiler, COLD_FLAGS)
+        return cache.entry_key(self.description + "\noutput functions", self.key + codegen.generator_text(), tools), tools
+
+    def output_library(self, compiler: str, use_cache: bool = True):
+        """The library of the ``OUTPUT_FUNCTIONS`` (energy, body kinematics), loaded when one
+        of them is first called, once: the one this compile built in the background, else the
+        cached one, else compiled from the C the compile printed or the cache kept (no sympy),
+        else generated again from the program."""
+        with self._outputs_lock:
+            if self._outputs is None:
+                self._outputs = self._background_outputs()
+            if self._outputs is None:
+                key, tools = self._output_key(compiler)
+
+                def source() -> str:
+                    text = self._output_source or (cache.read_text(key, ".c", tools) if use_cache else None)
+                    return text or codegen.c_source(self.program, {name: FUNCTIONS[name] for name in OUTPUT_FUNCTIONS})
+                self._outputs = self._side_library(key, tools, source, "the output functions", use_cache)
+            return self._outputs
+
+    def _background_outputs(self):
+        """The output functions' library built in the background by this compile (waiting
+        for it), or None (none started, it failed, or this is a forked child)."""
+        build, self._outputs_build = self._outputs_build, None
+        data, path = build.result() if build is not None else (None, None)
+        if data is None:
+            return None
+        if path is not None:
+            try:
+                return ctypes.CDLL(str(path))
+            except OSError:
+                pass
+        return load_library_bytes(data)
 
     def dense_library(self, compiler: str, use_cache: bool = True):
         """The dense dynamics (``dynamics_dense``: mass matrix and forces) of a model whose
@@ -272,6 +350,13 @@ class CompiledModel:
         generated (sympy) and compiled now, once; its own cache entry, keyed by the model's."""
         tools = cache.toolchain(compiler, COLD_FLAGS)
         key = cache.entry_key(self.description + "\ndense dynamics", self.key + codegen.generator_text(), tools)
+        return self._side_library(key, tools, lambda: codegen.c_source(self.program, {"dynamics_dense": FUNCTIONS["dynamics"]}),
+                                  "the dense dynamics", use_cache)
+
+    def _side_library(self, key: str, tools: dict, source, what: str, use_cache: bool):
+        """A library of its own beside the model's (``CFunctions.late``), compiled without
+        optimisation from ``source()`` unless the cache has it (entry ``key``), once."""
+        compiler = tools["compiler"]
         with cache.building(f"build-{key}") if use_cache else contextlib.nullcontext():
             path = cache.verified(key, ".so", tools) if use_cache else None
             if path is not None:
@@ -279,17 +364,14 @@ class CompiledModel:
                     return ctypes.CDLL(str(path))
                 except OSError:
                     cache.discard(key, ".so")
-            source = codegen.c_source(self.program, {"dynamics_dense": FUNCTIONS["dynamics"]})
-            build = CBuild(compiler)
-            build.add("dense", source, COLD_FLAGS)
-            data = build.finish()
+            text = source()
+            data = compile_c(text, compiler, COLD_FLAGS)
             if data is None:
-                raise ModelError(f"Model {self.model_name!r}", "the C compiler failed on the dense dynamics")
-            inputs = {**tools, "source_sha256": hashlib.sha256(source.encode()).hexdigest()}
+                raise ModelError(f"Model {self.model_name!r}", f"the C compiler failed on {what}")
+            inputs = {**tools, "source_sha256": hashlib.sha256(text.encode()).hexdigest()}
             path = cache.store(key, ".so", data, inputs) if use_cache else None
             if path is not None:
                 return ctypes.CDLL(str(path))
-            from .backend import load_library_bytes
             return load_library_bytes(data)
 
     def _load_python(self, use_cache: bool):

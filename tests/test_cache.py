@@ -306,6 +306,7 @@ class TestBuild:
         scratch.mkdir()
         monkeypatch.setattr(tempfile, "tempdir", str(scratch))
         sys_ = arm_model().compile(backend="c", cache=False)
+        sys_._compiled.wait_for_background()    # (the output functions' library)
         assert list(scratch.iterdir()) == [] and not cache_dir.exists()
         assert_close(sys_.accelerations(Q, QD), expected_accelerations, rtol=1e-12, name="qdd")
 

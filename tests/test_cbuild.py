@@ -189,21 +189,31 @@ class TestSharedUnits:
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
             assert compiled.t.size > 5
 
-    def test_the_empty_hot_functions_of_a_tree_take_no_compiler_run_of_their_own(self, tmp_path, monkeypatch):
-        """A chain has no constraints and no drives: those empty functions join the cold
-        unit (UnitStream.TINY_HOT) instead of an optimised compiler run of their own."""
+    def test_the_empty_functions_of_a_tree_take_no_compiler_run_of_their_own(self, tmp_path, monkeypatch):
+        """A chain has no constraints, contacts or drives: those empty functions join the cold
+        unit (UnitStream.TINY_HOT), which the link command compiles (LINKED_STATEMENTS)
+        instead of a compiler run of its own; the output functions are not built at all."""
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
-        units, real = [], CBuild.add
+        units, linked = [], []
+        real_add, real_link = CBuild.add, CBuild.link_source
 
         def add(self, name, text, flags, *args, **kwargs):
             units.append((name, text, tuple(flags)))
-            return real(self, name, text, flags, *args, **kwargs)
+            return real_add(self, name, text, flags, *args, **kwargs)
+
+        def link_source(self, name, text):
+            linked.append((name, text))
+            return real_link(self, name, text)
         monkeypatch.setattr(CBuild, "add", add)
+        monkeypatch.setattr(CBuild, "link_source", link_source)
         system = pendulum_chain(6).compile(backend="c")
         head = "void {}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
-        for fname in ("constraints", "drives"):
-            (where,) = [(name, flags) for name, text, flags in units if head.format(fname) in text]
-            assert where[1] == COLD_FLAGS, (fname, where)
+        for fname in ("constraints", "contacts", "drives"):
+            assert not any(head.format(fname) in text for _, text, _ in units), fname
+            (where,) = [name for name, text in linked if head.format(fname) in text]
+        generated = [text for name, text in [*linked, *((n, t) for n, t, _ in units)] if name != "templates"]
+        for fname in ("energy", "kinematics"):   # (the templates hold their stubs)
+            assert not any(head.format(fname) in text for text in generated)
         assert all(head.format("dynamics") not in text or flags == C_FLAGS for _, text, flags in units)
         q, qd = np.linspace(0.3, -0.2, 6), np.linspace(0.1, -0.4, 6)
         assert system.kernel.call("constraints", q, qd).size == 0
