@@ -27,10 +27,10 @@ FUNCTIONS = {
 }
 #: Called per output sample or step, not per right-hand side: compiled without optimisation.
 COLD_FUNCTIONS = ("energy", "kinematics", "contacts")
-#: Evaluated on results (energies, body states), never while stepping: each is compiled into a
-#: library of its own when first called (``CompiledModel.output_library``), so a compile
-#: returns once the right-hand side is ready and a model pays only for the outputs it uses.
-#: The model's library calls them through ``codegen.c_output_stubs``.
+#: Evaluated on results (energies, body states), never while stepping: compiled into a library
+#: of their own in the background, at the lowest priority (``CompiledModel.output_library``),
+#: so a compile returns once the right-hand side is ready.  The model's library calls them
+#: through ``codegen.c_output_stubs``.
 OUTPUT_FUNCTIONS = ("energy", "kinematics")
 
 

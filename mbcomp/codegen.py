@@ -379,7 +379,7 @@ def c_dense_stub() -> str:
 
 def c_output_stubs(names) -> str:
     """C of the output functions ``names`` (``OUTPUT_FUNCTIONS``: energy, body kinematics),
-    which each model builds into libraries of their own on first use: each calls its
+    which each model builds into a library of their own (in the background): each calls its
     library's function once Python has set it (``set_<name>_impl``)."""
     return "".join(c_late_stub(name, f"{name.upper()}_SIZE", f"set_{name}_impl") for name in names)
 
