@@ -203,10 +203,6 @@ class CFunctions:
 C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno")
 #: Flags of the cold units (functions called per output sample, not per step).
 COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno")
-#: A cold unit of at most this many statements (typically a tree's empty ``contacts``,
-#: ``constraints`` and ``drives``) is compiled by the link command (``CBuild.link_source``):
-#: a compiler run of its own costs 35-40 ms of process start-up for nothing to compile.
-LINKED_STATEMENTS = 30
 #: Statements per generated translation unit (``codegen.c_units``).
 UNIT_STATEMENTS = 1500
 #: Short functions packed into one unit: a pack of this many statements starts compiling as soon
@@ -248,7 +244,6 @@ class CBuild:
         self._running: list = []   # (process, name)
         self._objects: list[str] = []
         self._linked_last: list[str] = []
-        self._link_sources: list[str] = []  # small C units compiled by the link step itself
         self._failure: str | None = None
         self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
         self._held = contextlib.ExitStack()  # build locks of the shared units this build compiles
@@ -304,13 +299,6 @@ class CBuild:
         if self._watcher is None:
             self._watcher = threading.Thread(target=self._watch, name="mbcomp-cbuild", daemon=True)
             self._watcher.start()
-
-    def link_source(self, name: str, text: str) -> None:
-        """Add ``text`` as unit ``name``, compiled (unoptimised, position independent) by the
-        link command itself: for a unit of data only, which is not worth a compiler run."""
-        path = self._tmp / f"{name}.c"
-        path.write_text(text)
-        self._link_sources.append(str(path))
 
     def _watch(self) -> None:
         """The watcher thread: pump every few milliseconds until ``finish`` or ``cancel``."""
@@ -371,7 +359,7 @@ class CBuild:
             self._store_shared()
             if self._failure is None:
                 out = self._tmp / "model.so"
-                done = subprocess.run([self.compiler, "-shared", "-fPIC", *self._link_sources, *self._objects,
+                done = subprocess.run([self.compiler, "-shared", "-fPIC", *self._objects,
                                        *self._linked_last, "-o", str(out), "-lm"],
                                       capture_output=True, timeout=600, check=False)
                 if done.returncode == 0:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import functools
 import inspect
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -288,6 +288,19 @@ class UnitStream:
             hot_texts.clear()
             hot_size[0] = 0
         return [self._pack(hot) for hot, (texts, _) in self._packed.items() if texts]
+
+
+def with_unit_text(units: list, name: str, text: str) -> list:
+    """``units`` with ``text`` (C that needs no optimisation, e.g. a model's sizes) put in
+    front of the last cold one, or as a cold unit ``name`` of its own where there is none:
+    each compiler run costs 20-40 ms of start-up, and C compiled by the link command would
+    sit on the build's critical path."""
+    units = list(units)
+    for k in range(len(units) - 1, -1, -1):
+        if not units[k].hot:
+            units[k] = replace(units[k], text=text + units[k].text)
+            return units
+    return units + [CUnit(name, text, False, 0)]
 
 
 def _free_symbols(prog) -> dict:

@@ -13,7 +13,7 @@ import numpy as np
 from . import cache, codegen, recursive
 from .c_sizes import CSizes
 from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
-                      LINKED_STATEMENTS, OUTPUT_FUNCTIONS, UNIT_STATEMENTS, BackgroundBuild, CBuild, CFunctions,
+                      OUTPUT_FUNCTIONS, UNIT_STATEMENTS, BackgroundBuild, CBuild, CFunctions,
                       PythonFunctions, c_compiler, c_library, compile_c, load_library_bytes)
 from .components._values import name_of
 from .param_layout import input_layout, parameter_layout, parameter_values
@@ -208,7 +208,7 @@ class CompiledModel:
         plan = (f"cold units {' '.join(COLD_FLAGS)}; {UNIT_STATEMENTS} statements per unit, "
                 f"packs of {EAGER_STATEMENTS} compiled as soon as their functions are final, "
                 f"hot functions of more than {HALVE_STATEMENTS} in two halves, "
-                f"cold units of at most {LINKED_STATEMENTS} compiled by the link")  # how the C is built
+                "the sizes with the last cold unit")  # how the C is built
         self.key = cache.entry_key(self.description, templates + sizes_unit + plan + codegen.generator_text(), tools)
         if use_cache:
             path = cache.verified(self.key, ".so", tools)
@@ -232,15 +232,11 @@ class CompiledModel:
             # loops changes their speed by up to 15 % (N = 5 chain).
             build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True,
                       shared=tools if use_cache else None)
-            build.link_source("sizes", sizes_unit)  # compiled by the link step: no compiler run of its own
             digest = hashlib.sha256((templates + sizes_unit).encode())
 
             def compile_units(units):
                 for unit in units:
-                    if not unit.hot and unit.statements <= LINKED_STATEMENTS:
-                        build.link_source(unit.name, unit.text)
-                    else:
-                        build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
+                    build.add(unit.name, unit.text, C_FLAGS if unit.hot else COLD_FLAGS, unit.statements)
                     digest.update(unit.text.encode())
 
             # Each function's units are printed and start compiling as soon as its outputs are
@@ -264,7 +260,7 @@ class CompiledModel:
                 stream = codegen.UnitStream(program, cold=cold, unit=UNIT_STATEMENTS, eager=EAGER_STATEMENTS,
                                             halve=HALVE_STATEMENTS)
             compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
-            compile_units(stream.flush())
+            compile_units(codegen.with_unit_text(stream.flush(), "sizes", sizes_unit))
             # Printed while the compilers run, and compiled in the background (not waited for).
             self._output_source = "\n".join(stream.apart(name, FUNCTIONS[name]) for name in OUTPUT_FUNCTIONS)
             if use_cache:

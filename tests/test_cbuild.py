@@ -189,29 +189,24 @@ class TestSharedUnits:
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
             assert compiled.t.size > 5
 
-    def test_the_empty_functions_of_a_tree_take_no_compiler_run_of_their_own(self, tmp_path, monkeypatch):
+    def test_the_empty_functions_of_a_tree_share_one_unoptimised_run_with_the_sizes(self, tmp_path, monkeypatch):
         """A chain has no constraints, contacts or drives: those empty functions join the cold
-        unit (UnitStream.TINY_HOT), which the link command compiles (LINKED_STATEMENTS)
-        instead of a compiler run of its own; the output functions are not built at all."""
+        unit (UnitStream.TINY_HOT), which also holds the model's sizes (one compiler run,
+        none of them optimised); the output functions are not in the model's units at all."""
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
-        units, linked = [], []
-        real_add, real_link = CBuild.add, CBuild.link_source
+        units, real_add = [], CBuild.add
 
         def add(self, name, text, flags, *args, **kwargs):
             units.append((name, text, tuple(flags)))
             return real_add(self, name, text, flags, *args, **kwargs)
-
-        def link_source(self, name, text):
-            linked.append((name, text))
-            return real_link(self, name, text)
         monkeypatch.setattr(CBuild, "add", add)
-        monkeypatch.setattr(CBuild, "link_source", link_source)
         system = pendulum_chain(6).compile(backend="c")
         head = "void {}(const double *q, const double *qd, const double *p, const double *u, double *out) {{"
+        (cold,) = [(name, text) for name, text, flags in units if flags == COLD_FLAGS]
         for fname in ("constraints", "contacts", "drives"):
-            assert not any(head.format(fname) in text for _, text, _ in units), fname
-            (where,) = [name for name, text in linked if head.format(fname) in text]
-        generated = [text for name, text in [*linked, *((n, t) for n, t, _ in units)] if name != "templates"]
+            assert head.format(fname) in cold[1], fname
+        assert "const int mb_NQ = 6;" in cold[1]                # the model's sizes (c_sizes.CSizes.unit)
+        generated = [text for name, text, _ in units if name != "templates"]
         for fname in ("energy", "kinematics"):   # (the templates hold their stubs)
             assert not any(head.format(fname) in text for text in generated)
         assert all(head.format("dynamics") not in text or flags == C_FLAGS for _, text, flags in units)

@@ -232,3 +232,13 @@ class TestGeneratedPrograms:
         namespace = codegen.load_python(source, "test")
         assert set(FUNCTIONS) <= set(namespace)
         assert "import" in source.splitlines()[0] and "mbcomp" not in source
+
+
+def test_with_unit_text_joins_the_last_cold_unit_or_makes_its_own():
+    from mbcomp.codegen import CUnit, with_unit_text
+    hot, cold = CUnit("functions0", "int h;\n", True, 40), CUnit("functions1", "int c;\n", False, 3)
+    joined = with_unit_text([hot, cold], "sizes", "int s;\n")
+    assert [u.name for u in joined] == ["functions0", "functions1"]
+    assert joined[1].text == "int s;\nint c;\n" and not joined[1].hot and joined[0] == hot
+    alone = with_unit_text([hot], "sizes", "int s;\n")
+    assert alone[1] == CUnit("sizes", "int s;\n", False, 0) and alone[0] == hot
