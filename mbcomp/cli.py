@@ -338,29 +338,12 @@ def numeric_equations(system, simplify: bool = False):
             w, x, y, z = quat
             values[w * w + x * x + y * y + z * z] = sp.Integer(1)
             units.append((w, 1 - x * x - y * y - z * z))
-    canonical = functools.partial(_canonical, units=tuple(units))
+    from .normal_form import canonical as normal_form
+    canonical = functools.partial(normal_form, units=tuple(units))
     M, f = M.xreplace(values).applyfunc(canonical), f.xreplace(values).applyfunc(canonical)
     if simplify:
         M, f = M.applyfunc(sp.trigsimp), f.applyfunc(sp.trigsimp)
     return M, f
-
-
-def _canonical(expr, units: tuple = ()):
-    """Expanded, with every sin(x)**2 written as 1 - cos(x)**2: a cheap canonical form in
-    which sin^2 + cos^2 terms cancel (trigsimp gives the same result 30 times slower).
-    ``units``: ``(w, 1 - x^2 - y^2 - z^2)`` of each unit quaternion, w^2 rewritten likewise."""
-    import sympy as sp
-    squares = {w: rest for w, rest in units}
-
-    def is_even_power(e):
-        return (e.is_Pow and e.exp.is_Integer and e.exp >= 2
-                and (isinstance(e.base, sp.sin) or e.base in squares))
-
-    def rewrite(e):
-        n = int(e.exp)
-        square = squares[e.base] if e.base in squares else 1 - sp.cos(e.base.args[0]) ** 2
-        return square ** (n // 2) * e.base ** (n % 2)
-    return sp.expand(sp.expand(expr).replace(is_even_power, rewrite))
 
 
 def cmd_info(args: argparse.Namespace) -> int:
