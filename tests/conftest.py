@@ -2,8 +2,12 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -73,6 +77,20 @@ def pendulum_chain(n: int, *, gravity=(0, 0, -9.81), length: float = 0.5) -> mb.
                           parent_point=(0, 0, -length) if i else (0, 0, 0)))
         parent = body
     return m
+
+
+def run_in_new_process(code: str) -> dict:
+    """Run ``code`` in a new Python process (the project's tree first on the path, numpy as
+    ``np`` and conftest's ``pendulum_chain`` imported) and return the JSON object its last
+    printed line holds."""
+    root = Path(__file__).resolve().parents[1]
+    header = ("import json, sys; sys.path.insert(0, 'tests'); import numpy as np\n"
+              "from conftest import pendulum_chain\n")
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    done = subprocess.run([sys.executable, "-c", header + code], cwd=root, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def xy_pairs() -> mb.Model:

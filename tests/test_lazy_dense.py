@@ -3,22 +3,17 @@ matrix, forces) only when they are first asked for: compiling and simulating nev
 them, the first ``mass_matrix`` does (once, cached), with the numbers of an eager build."""
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mbcomp.backend import c_compiler
-from conftest import pendulum_chain
+from conftest import pendulum_chain, run_in_new_process
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("lazy-dense")]
 
-ROOT = Path(__file__).resolve().parents[1]
 N = 12  # the recursive program is chosen from 12 speeds
 
 
@@ -60,15 +55,10 @@ def test_compile_and_simulate_never_build_the_dense_dynamics_and_mass_matrix_doe
 def test_a_new_process_loads_the_dense_dynamics_from_the_cache(cache_dir):
     q, _ = state()
     expected = pendulum_chain(N).compile(backend="c").mass_matrix(q)  # builds and caches both
-    code = ("import json, sys; sys.path.insert(0, 'tests'); import numpy as np\n"
-            "from conftest import pendulum_chain\n"
-            f"s = pendulum_chain({N}).compile(backend='c')\n"
-            f"M = s.mass_matrix(np.linspace(0.1, 0.6, {N}))\n"
-            "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules, 'M': M.tolist()}))\n")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    out = json.loads(done.stdout.strip().splitlines()[-1])
+    out = run_in_new_process(f"s = pendulum_chain({N}).compile(backend='c')\n"
+                             f"M = s.mass_matrix(np.linspace(0.1, 0.6, {N}))\n"
+                             "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules,"
+                             " 'M': M.tolist()}))\n")
     assert out["hit"] and not out["sympy"]
     np.testing.assert_array_equal(np.array(out["M"]), expected)
 

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -16,12 +14,11 @@ import numpy as np
 import pytest
 
 from mbcomp.backend import OUTPUT_FUNCTIONS, c_compiler
-from conftest import pendulum_chain
+from conftest import pendulum_chain, run_in_new_process
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("output-library")]
 
-ROOT = Path(__file__).resolve().parents[1]
 N = 4
 
 
@@ -142,16 +139,10 @@ def test_a_new_process_builds_them_from_the_cached_source_without_sympy(cache_di
     for name in libraries(cache_dir) - {own}:       # every library but the model's own
         (cache_dir / name).unlink()
         (cache_dir / f"{name}.json").unlink()
-    code = ("import json, sys; sys.path.insert(0, 'tests'); import numpy as np\n"
-            "from conftest import pendulum_chain\n"
-            f"s = pendulum_chain({N}).compile(backend='c')\n"
-            f"e = s.energy(np.linspace(0.2, 0.8, {N}), np.linspace(-0.5, 0.7, {N}))\n"
-            "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules,"
-            " 'e': [e.kinetic, e.potential]}))\n")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    out = json.loads(done.stdout.strip().splitlines()[-1])
+    out = run_in_new_process(f"s = pendulum_chain({N}).compile(backend='c')\n"
+                             f"e = s.energy(np.linspace(0.2, 0.8, {N}), np.linspace(-0.5, 0.7, {N}))\n"
+                             "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules,"
+                             " 'e': [e.kinetic, e.potential]}))\n")
     assert out["hit"] and not out["sympy"]
     assert out["e"] == [expected.kinetic, expected.potential]
     assert len(libraries(cache_dir) - {own}) == 1     # rebuilt and cached again
