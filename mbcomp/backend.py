@@ -28,7 +28,7 @@ FUNCTIONS = {
 #: Called per output sample or step, not per right-hand side: compiled without optimisation.
 COLD_FUNCTIONS = ("energy", "kinematics", "contacts")
 #: Evaluated on results (energies, body states), never while stepping: compiled into a library
-#: of their own in the background, at the lowest priority (``CompiledModel.output_library``),
+#: of their own in the background, at a low priority (``CompiledModel.output_library``),
 #: so a compile returns once the right-hand side is ready.  The model's library calls them
 #: through ``codegen.c_output_stubs``.
 OUTPUT_FUNCTIONS = ("energy", "kinematics")
@@ -395,18 +395,25 @@ class CBuild:
         shutil.rmtree(self._tmp, ignore_errors=True)
 
 
+#: The niceness of a background build: about a tenth of a core where every core is busy (CFS
+#: weights 110 against 1024), so it barely slows the model's own compilers, yet a caller who
+#: waits for it on a machine loaded by others waits a few times its compile time, not the
+#: seventy times of the lowest priority (19).
+BACKGROUND_NICE = 10
+
+
 def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, idle: bool = False) -> bytes | None:
     """The shared library built from one C ``source`` with ``flags`` (its bytes), or None when
     the compiler fails (with a warning).  One compiler run compiles and links (the driver,
     compiler and linker start once: about 40 ms less than two runs); the build directory is
-    removed on every path.  ``idle``: the compiler runs at the lowest priority (``nice``,
-    where there is one), on cores nothing else wants."""
+    removed on every path.  ``idle``: the compiler runs at a low priority (``nice -n
+    BACKGROUND_NICE``, where there is a ``nice``), mostly on cores nothing else wants."""
     tmp = Path(tempfile.mkdtemp(prefix="mbcomp-build-"))
     try:
         unit, out = tmp / "unit.c", tmp / "library.so"
         unit.write_text(source)
         nice = shutil.which("nice") if idle else None
-        command = [*([nice, "-n", "19"] if nice else []), compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
+        command = [*([nice, "-n", str(BACKGROUND_NICE)] if nice else []), compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
         done = subprocess.run(command, stdin=subprocess.DEVNULL,
                               capture_output=True, timeout=CBuild.TIMEOUT, check=False)
         if done.returncode == 0:
@@ -422,8 +429,9 @@ def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, i
 
 class BackgroundBuild:
     """A library compiled by ``compile_c`` on a thread of its own while the caller goes on
-    (the compiler is another process: the thread holds no GIL while it waits), at the lowest
-    priority: it takes the cores the caller's own compilers and work leave idle.  ``store``:
+    (the compiler is another process: the thread holds no GIL while it waits), at a low
+    priority (``BACKGROUND_NICE``): it takes mostly the cores the caller's own compilers and
+    work leave idle.  ``store``:
     called on the thread with the bytes (e.g. to cache them), its return value kept.  The
     thread is not a daemon: the interpreter waits for it at exit, so what it stores is whole."""
 

@@ -275,8 +275,8 @@ class CompiledModel:
         return None if functions is None else self._with_late_loaders(functions, compiler, use_cache)
 
     def _build_outputs(self, compiler: str, use_cache: bool) -> None:
-        """Start compiling the output functions' library in the background, at the lowest
-        priority: it takes the cores the model's own units leave idle, the compile returns
+        """Start compiling the output functions' library in the background, at a low
+        priority (``BACKGROUND_NICE``): it takes mostly the cores the model's own units leave idle, the compile returns
         without waiting for it (the first ``energy``/``body_state`` waits for what is left),
         and it is stored in this compile's cache directory."""
         key, tools = self._output_key(compiler)

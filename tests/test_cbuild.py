@@ -318,3 +318,33 @@ def test_a_hot_function_is_compiled_in_two_halves_with_the_same_numbers(chain):
     for seed in range(3):
         q, qd = _states(compiled, seed)
         assert np.array_equal(split("dynamics", q, qd, p, np.zeros(0)), whole("dynamics", q, qd, p, np.zeros(0)))
+
+
+class TestBackgroundBuild:
+    @pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
+    def test_a_background_build_runs_niced_and_gives_a_loadable_library(self, monkeypatch):
+        import ctypes
+        import shutil
+        import subprocess
+        commands, real_run = [], subprocess.run
+
+        def run(command, *args, **kwargs):
+            commands.append(list(command))
+            return real_run(command, *args, **kwargs)
+        monkeypatch.setattr(subprocess, "run", run)
+        stored = []
+        build = backend.BackgroundBuild("double twice(double x) { return 2.0 * x; }\n", c_compiler(), COLD_FLAGS,
+                                        store=lambda data: stored.append(len(data)) or "stored")
+        data, kept = build.result()
+        assert kept == "stored" and stored == [len(data)]
+        if shutil.which("nice"):
+            assert commands[0][1:3] == ["-n", str(backend.BACKGROUND_NICE)]
+        library = backend.load_library_bytes(data)
+        library.twice.restype, library.twice.argtypes = ctypes.c_double, [ctypes.c_double]
+        assert library.twice(1.25) == 2.5
+
+    @pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
+    def test_a_failed_background_build_gives_nothing_and_warns(self):
+        with pytest.warns(RuntimeWarning, match="compiler failed"):
+            build = backend.BackgroundBuild("this is not C\n", c_compiler(), COLD_FLAGS)
+            assert build.result() == (None, None)

@@ -1,5 +1,5 @@
 """The output functions (energy, body kinematics) are compiled into a library of their own,
-in the background at the lowest priority: a compile returns once the right-hand side is
+in the background at a low priority: a compile returns once the right-hand side is
 ready, the first ``energy``/``body_state`` waits for what is left of that build (once,
 cached), and a later process without it compiles the C the compile cached, without sympy;
 the numbers are those of the generated Python."""
