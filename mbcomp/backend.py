@@ -413,7 +413,8 @@ def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, i
         unit, out = tmp / "unit.c", tmp / "library.so"
         unit.write_text(source)
         nice = shutil.which("nice") if idle else None
-        command = [*([nice, "-n", str(BACKGROUND_NICE)] if nice else []), compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
+        command = [*([nice, "-n", str(BACKGROUND_NICE)] if nice else []),
+                   compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
         done = subprocess.run(command, stdin=subprocess.DEVNULL,
                               capture_output=True, timeout=CBuild.TIMEOUT, check=False)
         if done.returncode == 0:
@@ -431,9 +432,9 @@ class BackgroundBuild:
     """A library compiled by ``compile_c`` on a thread of its own while the caller goes on
     (the compiler is another process: the thread holds no GIL while it waits), at a low
     priority (``BACKGROUND_NICE``): it takes mostly the cores the caller's own compilers and
-    work leave idle.  ``store``:
-    called on the thread with the bytes (e.g. to cache them), its return value kept.  The
-    thread is not a daemon: the interpreter waits for it at exit, so what it stores is whole."""
+    work leave idle.  ``store``: called on the thread with the bytes (e.g. to cache them), its
+    return value kept.  The thread is not a daemon: the interpreter waits for it at exit, so
+    what it stores is whole."""
 
     def __init__(self, source: str, compiler: str, flags: tuple[str, ...], store=None):
         self._pid = os.getpid()

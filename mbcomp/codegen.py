@@ -269,7 +269,7 @@ class UnitStream:
 
     def apart(self, fname: str, outputs) -> str:
         """The C source of function ``fname`` (final ``outputs``) alone, as ``c_source``
-        prints it: for a library of its own (``OUTPUT_FUNCTIONS``), built when first used."""
+        prints it: for a library of its own (``OUTPUT_FUNCTIONS``, built in the background)."""
         parts, main = _c_function(self.prog, fname, outputs, self.chunk, "", self._free_symbols())
         return "#include <math.h>\n\n" + "".join(f"static {text}\n" for text, _ in parts) + main
 

@@ -275,10 +275,10 @@ class CompiledModel:
         return None if functions is None else self._with_late_loaders(functions, compiler, use_cache)
 
     def _build_outputs(self, compiler: str, use_cache: bool) -> None:
-        """Start compiling the output functions' library in the background, at a low
-        priority (``BACKGROUND_NICE``): it takes mostly the cores the model's own units leave idle, the compile returns
-        without waiting for it (the first ``energy``/``body_state`` waits for what is left),
-        and it is stored in this compile's cache directory."""
+        """Start compiling the output functions' library in the background, at a low priority
+        (``BACKGROUND_NICE``): it takes mostly the cores the model's own units leave idle, the
+        compile returns without waiting for it (the first ``energy``/``body_state`` waits for
+        what is left), and it is stored in this compile's cache directory."""
         key, tools = self._output_key(compiler)
         inputs = {**tools, "source_sha256": hashlib.sha256(self._output_source.encode()).hexdigest()}
         store = None
@@ -307,7 +307,8 @@ class CompiledModel:
     def _output_key(self, compiler: str) -> tuple[str, dict]:
         """The cache key of the output functions' library and of their C, with the toolchain."""
         tools = cache.toolchain(compiler, COLD_FLAGS)
-        return cache.entry_key(self.description + "\noutput functions", self.key + codegen.generator_text(), tools), tools
+        key = cache.entry_key(self.description + "\noutput functions", self.key + codegen.generator_text(), tools)
+        return key, tools
 
     def output_library(self, compiler: str, use_cache: bool = True):
         """The library of the ``OUTPUT_FUNCTIONS`` (energy, body kinematics), loaded when one
@@ -346,8 +347,8 @@ class CompiledModel:
         generated (sympy) and compiled now, once; its own cache entry, keyed by the model's."""
         tools = cache.toolchain(compiler, COLD_FLAGS)
         key = cache.entry_key(self.description + "\ndense dynamics", self.key + codegen.generator_text(), tools)
-        return self._side_library(key, tools, lambda: codegen.c_source(self.program, {"dynamics_dense": FUNCTIONS["dynamics"]}),
-                                  "the dense dynamics", use_cache)
+        source = lambda: codegen.c_source(self.program, {"dynamics_dense": FUNCTIONS["dynamics"]})  # noqa: E731
+        return self._side_library(key, tools, source, "the dense dynamics", use_cache)
 
     def _side_library(self, key: str, tools: dict, source, what: str, use_cache: bool):
         """A library of its own beside the model's (``CFunctions.late``), compiled without
