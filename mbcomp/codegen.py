@@ -267,11 +267,13 @@ class UnitStream:
                     units.append(self._pack(hot))
         return units
 
-    def apart(self, fname: str, outputs) -> str:
-        """The C source of function ``fname`` (final ``outputs``) alone, as ``c_source``
-        prints it: for a library of its own (``OUTPUT_FUNCTIONS``, built in the background)."""
+    def apart(self, fname: str, outputs) -> tuple[str, int]:
+        """``(C source, statements)`` of function ``fname`` (final ``outputs``) alone, as
+        ``c_source`` prints it: for a library of its own (``OUTPUT_FUNCTIONS``, built in the
+        background)."""
         parts, main = _c_function(self.prog, fname, outputs, self.chunk, "", self._free_symbols())
-        return "#include <math.h>\n\n" + "".join(f"static {text}\n" for text, _ in parts) + main
+        text = "#include <math.h>\n\n" + "".join(f"static {text}\n" for text, _ in parts) + main
+        return text, sum(size for _, size in parts)
 
     #: A hot pack of at most this many statements left at ``flush`` (typically the empty
     #: ``constraints`` and ``drives`` of a tree) joins the cold pack: a compiler run of its own

@@ -12,7 +12,8 @@ import numpy as np
 
 from . import cache, codegen, recursive
 from .c_sizes import CSizes
-from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, FUNCTIONS, HALVE_STATEMENTS,
+from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, EARLY_OUTPUT_STATEMENTS, FUNCTIONS,
+                      HALVE_STATEMENTS,
                       OUTPUT_FUNCTIONS, UNIT_STATEMENTS, BackgroundBuild, CBuild, CFunctions,
                       PythonFunctions, c_compiler, c_library, compile_c, load_library_bytes)
 from .components._values import name_of
@@ -241,7 +242,22 @@ class CompiledModel:
 
             # Each function's units are printed and start compiling as soon as its outputs are
             # final, on the other core while sympy builds the rest of the program.
-            stream, done, final = None, set(), set()
+            stream, done, final, outputs_printed = None, set(), set(), False
+
+            def print_outputs():
+                """The output functions' C, printed once their outputs are final and cached with
+                the model; compiled in the background (not waited for): at once, on a core the
+                model's compilers and sympy leave idle, when small, else once the model's
+                library is built (EARLY_OUTPUT_STATEMENTS)."""
+                nonlocal outputs_printed
+                outputs_printed = True
+                texts, statements = zip(*(stream.apart(name, FUNCTIONS[name]) for name in OUTPUT_FUNCTIONS))
+                self._output_source = "\n".join(texts)
+                if use_cache:
+                    key, tools_out = self._output_key(compiler)
+                    cache.store(key, ".c", self._output_source.encode(), tools_out)
+                if sum(statements) <= EARLY_OUTPUT_STATEMENTS:
+                    self._build_outputs(compiler, use_cache)
 
             def ready(prog, names):
                 nonlocal stream
@@ -252,6 +268,8 @@ class CompiledModel:
                 now = {f: outs for f, outs in functions.items() if f not in done and set(outs) <= final}
                 done.update(now)
                 compile_units(stream.add(now))
+                if not outputs_printed and all(set(FUNCTIONS[name]) <= final for name in OUTPUT_FUNCTIONS):
+                    print_outputs()
 
             program = self._program
             if program is None:
@@ -261,24 +279,25 @@ class CompiledModel:
                                             halve=HALVE_STATEMENTS)
             compile_units(stream.add({f: outs for f, outs in functions.items() if f not in done}))
             compile_units(codegen.with_unit_text(stream.flush(), "sizes", sizes_unit))
-            # Printed while the compilers run, and compiled in the background (not waited for).
-            self._output_source = "\n".join(stream.apart(name, FUNCTIONS[name]) for name in OUTPUT_FUNCTIONS)
-            if use_cache:
-                key, tools_out = self._output_key(compiler)
-                cache.store(key, ".c", self._output_source.encode(), tools_out)
-            self._build_outputs(compiler, use_cache)
+            if not outputs_printed:
+                print_outputs()
         except BaseException:
             build.cancel()
             raise
         inputs = {**tools, "cold_flags": list(COLD_FLAGS), "source_sha256": digest.hexdigest()}
         functions = c_library(build.finish(), self.sizes, key=self.key if use_cache else None, inputs=inputs)
-        return None if functions is None else self._with_late_loaders(functions, compiler, use_cache)
+        if functions is None:
+            return None
+        if self._outputs_build is None:
+            self._build_outputs(compiler, use_cache)
+        return self._with_late_loaders(functions, compiler, use_cache)
 
     def _build_outputs(self, compiler: str, use_cache: bool) -> None:
         """Start compiling the output functions' library in the background, at a low priority
-        (``BACKGROUND_NICE``): it takes mostly the cores the model's own units leave idle, the
-        compile returns without waiting for it (the first ``energy``/``body_state`` waits for
-        what is left), and it is stored in this compile's cache directory."""
+        (``BACKGROUND_NICE``), beside the model's own compilers or after them
+        (``EARLY_OUTPUT_STATEMENTS``): the compile returns without waiting for it, the first
+        ``energy``/``body_state`` waits for what is left, and it is stored in this compile's
+        cache directory."""
         key, tools = self._output_key(compiler)
         inputs = {**tools, "source_sha256": hashlib.sha256(self._output_source.encode()).hexdigest()}
         store = None
