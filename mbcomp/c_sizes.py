@@ -72,8 +72,16 @@ class CSizes:
         # (measured side by side; from 12 links on no difference), for no clear reason in the
         # generated code.  The templates are then shared by the models of a kind with the same
         # state length.
+        # Models with constraints or contacts spend their step in the constraint solves, where
+        # a constant state length gains nothing measurable: there it is read at run time, so one
+        # compiled templates object (1-1.5 s of C compiler at -O1 for these kinds) serves every
+        # size of the kind.
         flags = {"HAS_DRIVES": int(bool(drives)), "MB_HAS_NG": int(ng > 0), "MB_HAS_CONTACTS": int(nk > 0),
-                 "MB_HAS_QUAT": int(state_map.quat_q.size > 0), "NMECH": ncoord + nv, "NZ": nz}
+                 "MB_HAS_QUAT": int(state_map.quat_q.size > 0), "NZ": nz}
+        if ng or nk:
+            values["NMECH"] = ncoord + nv
+        else:
+            flags["NMECH"] = ncoord + nv
         return cls(values, tables, buffers, flags)
 
     def header(self) -> str:

@@ -272,6 +272,9 @@ class Equations:
     coords: list[str]
     bodies: list[str]
     _evaluate: Callable[[Any, Any], tuple] = field(repr=False)
+    #: What Lagrange's method needs of the derivation (``lagrange_of``): the bodies' mass,
+    #: inertia, COM and rotation, the potential, the coordinates and the parameters.
+    _symbolic: tuple | None = field(default=None, repr=False)
 
     def mass_matrix(self, q: Any) -> np.ndarray:
         """(n, n) mass matrix."""
@@ -361,9 +364,15 @@ def derive(description: dict, method: str = "virtual_power") -> Equations:
     if method not in ("virtual_power", "lagrange"):
         raise ValueError(f"unknown method {method!r}")
     projected = _numeric(coords, bodies, params, (q, qd), mass_matrix, forcing, kinetic, potential, kinematics)
-    if method == "lagrange":
-        return _lagrange(projected, rigid, potential, q, params)
-    return projected
+    projected._symbolic = (rigid, potential, q, params)
+    return lagrange_of(projected) if method == "lagrange" else projected
+
+
+def lagrange_of(projected: Equations) -> Equations:
+    """The same model's equations by Lagrange's method (``derive(..., method="lagrange")``),
+    from the geometry the virtual-power derivation ``projected`` already built: the
+    positions and rotations are shared, the velocities and equations are not."""
+    return _lagrange(projected, *projected._symbolic)
 
 
 def _numeric(coords, bodies, params, variables, mass_matrix, forcing, kinetic, potential, kinematics) -> Equations:

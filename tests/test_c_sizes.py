@@ -4,7 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import fourbar, pendulum_chain, xy_pairs
+import mbcomp as mb
+
+from conftest import bar, fourbar, pendulum_chain, xy_pairs
 from mbcomp.c_sizes import CSizes
 from mbcomp.layout import OutputLayout
 from mbcomp.statemap import StateMap
@@ -34,6 +36,22 @@ def test_a_loop_and_a_tree_are_different_kinds():
     assert "#define MB_HAS_NG 1" in loop and "#define MB_HAS_NG 0" in tree
 
 
+def test_loops_of_every_size_share_the_templates_text():
+    """With constraints the state length is read at run time: a four-bar (3 coordinates) and
+    a five-bar (4 coordinates, another output layout) compile one templates object."""
+    four, four_sizes = _templates(fourbar())
+    five_bar = mb.Model("fivebar", gravity=(0, -9.81, 0))
+    a, b, c, d = (five_bar.add(bar(n, L)) for n, L in (("a", 0.3), ("b", 0.8), ("c", 0.7), ("d", 0.4)))
+    five_bar.add(mb.Revolute("A", five_bar.ground, a, axis="z"))
+    five_bar.add(mb.Revolute("B", a, b, axis="z", parent_point=(0.3, 0, 0)))
+    five_bar.add(mb.Revolute("E", five_bar.ground, d, axis="z", parent_point=(1.0, 0, 0)))
+    five_bar.add(mb.Revolute("D", d, c, axis="z", parent_point=(0.4, 0, 0)))
+    five_bar.add(mb.Revolute("C", b, c, axis="z", parent_point=(0.8, 0, 0), child_point=(0.7, 0, 0)))
+    five, five_sizes = _templates(five_bar)
+    assert four == five
+    assert four_sizes.values["NMECH"] != five_sizes.values["NMECH"] and "NMECH" not in four_sizes.flags
+
+
 def test_buffers_and_tables_get_their_lengths_in_the_unit():
     layout = OutputLayout.of(nv=4, n_bodies=2, n_constraint_rows=3, n_contacts=2, n_drive_states=1)
     state_map = StateMap(4, 4, np.arange(4), np.arange(4), np.arange(0), np.arange(0))
@@ -42,7 +60,8 @@ def test_buffers_and_tables_get_their_lengths_in_the_unit():
     # DAE_NR = ng + nq + contacts = 9 rows; 5 longs per row of the spec; drives: 4 forces + 1 rate
     assert "dae_rows[9];" in unit and "dae_legacy[45];" in unit and "dae_lam[10];" in unit
     assert "lag_dv[6];" in unit and "lag_kc[13];" in unit  # contacts: 2 gaps, 2 x 4 Jacobian, 2 biases
-    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0, "NMECH": 8, "NZ": 1}
+    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0, "NZ": 1}
+    assert sizes.values["NMECH"] == 8 and "mb_NMECH = 8;" in unit  # constraints: the state length at run time
 
 
 def test_a_preprocessor_test_of_a_size_is_refused():
