@@ -48,3 +48,25 @@ def test_dot_and_cross_are_the_sums_of_products():
     values = {t1: 0.3, t2: -1.2, t10: 2.0, q0: 0.7}
     va, vb = [float(sp.sympify(x).subs(values)) for x in a], [float(sp.sympify(x).subs(values)) for x in b]
     assert float(dot(a, b).subs(values)) == pytest.approx(sum(x * y for x, y in zip(va, vb)))
+
+
+def _rodrigues(axis, c, s):
+    """The general formula, term by term through sympy's own arithmetic."""
+    x, y, z = axis
+    k = 1 - c
+    return [[c + x * x * k, x * y * k - z * s, x * z * k + y * s],
+            [y * x * k + z * s, c + y * y * k, y * z * k - x * s],
+            [z * x * k - y * s, z * y * k + x * s, c + z * z * k]]
+
+
+@pytest.mark.parametrize("axis", [(1, 0, 0), (0, 1, 0), (0, 0, 1), (-1, 0, 0), (0, -1, 0), (0, 0, -1),
+                                  (0.6, 0.0, 0.8), (0.0, -0.6, 0.8)])
+def test_rotation_about_an_axis_is_rodrigues_formula(axis):
+    """Written down directly about a coordinate axis, by the formula otherwise: the same
+    expressions either way (so the same program and generated code)."""
+    from mbcomp.equations import exact, rotation_about
+    c, s = sp.symbols("c3 s3")
+    exact_axis = [exact(a) for a in axis]
+    for row, expected in zip(rotation_about(exact_axis, c, s), _rodrigues(exact_axis, c, s)):
+        for entry, want in zip(row, expected):
+            assert _same(sp.sympify(entry), sp.sympify(want)), (axis, entry, want)
