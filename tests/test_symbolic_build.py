@@ -17,7 +17,14 @@ def _same(a, b) -> bool:
 
 @pytest.mark.parametrize("x, y", [(t1, t2), (t2, t1), (t10, t2), (q0, t1), (t1, t1), (t1, sp.Integer(0)),
                                   (sp.Integer(1), t2), (sp.Float(2.5), t1), (-t1, t2), (t1 * t2, u3),
-                                  (sp.Integer(3), sp.Integer(4))])
+                                  (sp.Integer(3), sp.Integer(4)),
+                                  # exact 0 and 1, built directly, except where sympy's 0 * x is nan
+                                  (sp.Integer(0), t1 * t2 + 1), (t1 * t2 + 1, sp.Integer(1)), (sp.Integer(1), -t1),
+                                  (sp.Integer(0), sp.Integer(0)), (sp.Integer(0), sp.sin(q0)), (sp.Integer(1), sp.pi),
+                                  (sp.oo, sp.Integer(0)), (sp.Integer(0), sp.zoo), (sp.Integer(0), sp.Float("inf")),
+                                  # a number times a symbol, times another symbol: built directly
+                                  (-t2, t1), (t1, -t2), (-t1, t10), (sp.Float(0.5) * u3, q0), (q0, 3 * t1),
+                                  (-t1, t1), (sp.Rational(1, 3) * t2, t1), (2 * t1 * t2, u3)])
 def test_product_is_sympys_product(x, y):
     assert _same(product(x, y), x * y)
 
