@@ -114,13 +114,13 @@ class SpatialInertia:
     def apply(self, V):
         """Momentum ``I V = (Ibar w + h x v, m v - h x w)`` of spatial velocity ``V = (w, v)``."""
         w, v = V[:3], V[3:]
-        n = [a + b for a, b in zip(matvec(self.Ibar, w), cross(self.h, v))]
-        f = [self.mass * a - b for a, b in zip(v, cross(self.h, w))]
+        n = [total([a, b]) for a, b in zip(matvec(self.Ibar, w), cross(self.h, v))]
+        f = [total([product(self.mass, a), -b]) for a, b in zip(v, cross(self.h, w))]
         return n + f
 
     def __add__(self, other):
-        return SpatialInertia(self.mass + other.mass, [a + b for a, b in zip(self.h, other.h)],
-                              [[a + b for a, b in zip(r1, r2)] for r1, r2 in zip(self.Ibar, other.Ibar)])
+        return SpatialInertia(self.mass + other.mass, [total([a, b]) for a, b in zip(self.h, other.h)],
+                              [[total([a, b]) for a, b in zip(r1, r2)] for r1, r2 in zip(self.Ibar, other.Ibar)])
 
     def materialise(self, prog: Program):
         Ibar = [[None] * 3 for _ in range(3)]
@@ -350,13 +350,13 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
                 R = [[prog.let(dot(R[r], [local[m][col] for m in range(3)])) for col in range(3)] for r in range(3)]
             else:
                 S = [sp.Integer(0)] * 3 + axis_world
-                pos = prog.lets([x + a * prog.q[i] for x, a in zip(pos, axis_world)])
+                pos = prog.lets([total([x, product(a, prog.q[i])]) for x, a in zip(pos, axis_world)])
             kin.S[k] = S
-            A = prog.lets([a + b * prog.qd[k] for a, b in zip(A, motion_cross(V, S))])
-            V = prog.lets([a + b * prog.qd[k] for a, b in zip(V, S)])
+            A = prog.lets([total([a, product(b, prog.qd[k])]) for a, b in zip(A, motion_cross(V, S))])
+            V = prog.lets([total([a, product(b, prog.qd[k])]) for a, b in zip(V, S)])
         R = _rotate_frame(prog, R, getattr(joint, "child_rotation", None), transpose=True)
         kin.R[body.name] = R
-        kin.origin[body.name] = prog.lets([x - r for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
+        kin.origin[body.name] = prog.lets([total([x, -r]) for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
         kin.V[body.name], kin.A[body.name] = V, A
 
         mass = kin.param(body, "mass")
@@ -408,14 +408,15 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         V = kin.V[body.name]
         momentum = prog.lets(I.apply(V))
         kinetic.append(dot(V, momentum) / 2)
-        body_force = [a + b - e for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum), external[body.name])]
+        body_force = [total([total([a, b]), -e]) for a, b, e in zip(I.apply(kin.A[body.name]), force_cross(V, momentum),
+                                                                   external[body.name])]
         wrench[body.name] = prog.lets(body_force)
     own_wrench = dict(wrench)  # each body's own, before the subtree sums (recursive program)
     for body in reversed(topology.bodies) if dense else ():
         parent = topology.parent_of[body.name].name
         if parent != ground:
             composite[parent] = (composite[parent] + composite[body.name]).materialise(prog)
-            wrench[parent] = prog.lets([a + b for a, b in zip(wrench[parent], wrench[body.name])])
+            wrench[parent] = prog.lets([total([a, b]) for a, b in zip(wrench[parent], wrench[body.name])])
 
     owner = [None] * nv
     for body, joint in zip(topology.bodies, topology.tree_joints):

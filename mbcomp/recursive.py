@@ -100,7 +100,8 @@ def _inertia_matrix(I) -> list:
 
 
 def _add(A, B) -> list:
-    return [[a + b for a, b in zip(ra, rb)] for ra, rb in zip(A, B)]
+    from .symbolic import total  # sympy's own sums (zeros dropped without sympy's Add)
+    return [[total([a, b]) for a, b in zip(ra, rb)] for ra, rb in zip(A, B)]
 
 
 def _matvec(A, x) -> list:
@@ -158,7 +159,7 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
             continue  # welded to the ground: carried by no speed
         I = _inertia_matrix(inertia[body.name])
         IA[node] = I if IA[node] is None else _add(IA[node], I)
-        pA[node] = list(wrench[body.name]) if pA[node] is None else [a + b for a, b in zip(pA[node], wrench[body.name])]
+        pA[node] = list(wrench[body.name]) if pA[node] is None else [total([a, b]) for a, b in zip(pA[node], wrench[body.name])]
     U, W, D, u = [None] * nv, [None] * nv, [None] * nv, [None] * nv
     for k in reversed(range(nv)):
         if IA[k] is None:  # a massless end of the tree (every pivot of it is zero: reported)
@@ -178,7 +179,7 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
         Ia = [[total([Ik[i][j], -product(W[k][i], U[k][j])]) for j in range(6)] for i in range(6)]
         pa = [total([a, product(w, u[k])]) for a, w in zip(p, W[k])]
         IA[parent] = Ia if IA[parent] is None else _add(IA[parent], Ia)
-        pA[parent] = pa if pA[parent] is None else [a + b for a, b in zip(pA[parent], pa)]
+        pA[parent] = pa if pA[parent] is None else [total([a, b]) for a, b in zip(pA[parent], pa)]
     qdd, da = [None] * nv, [None] * nv
     for k in range(nv):
         before = zero6 if pred[k] is None else da[pred[k]]
