@@ -19,14 +19,15 @@ _ORDER = cmp_to_key(Basic.compare)  # sympy's canonical order of the arguments o
 def product(x, y):
     """``x * y``, the same expression as sympy's, built directly when both are distinct
     symbols (the common case of the program's dot products: sympy's general ``Mul``
-    takes ~8x longer to find that nothing combines), or when one is an exact 0 or 1 (the
-    entries of coordinate axes: a quarter of the products; sympy takes ~35 us for ``0 * x``)."""
+    takes ~8x longer to find that nothing combines), a product of distinct symbols (with at
+    most a number) times another symbol, or when one is an exact 0 or 1 (the entries of
+    coordinate axes: a quarter of the products; sympy takes ~35 us for ``0 * x``)."""
     if getattr(x, "is_Symbol", False) and getattr(y, "is_Symbol", False) and x != y:
         return sp.Mul(*((x, y) if Basic.compare(x, y) < 0 else (y, x)), evaluate=False)
-    if getattr(y, "is_Symbol", False) and _scaled_symbol(x, y):   # -s * x, 0.5 * a * x: a number times
-        return sp.Mul(x.args[0], *sorted((x.args[1], y), key=_ORDER), evaluate=False)  # two symbols
-    if getattr(x, "is_Symbol", False) and _scaled_symbol(y, x):
-        return sp.Mul(y.args[0], *sorted((y.args[1], x), key=_ORDER), evaluate=False)
+    if getattr(y, "is_Symbol", False) and _symbols_product(x, y):   # a * b * c, -s * x: at most a number
+        return _times_symbol(x, y)                                    # and distinct symbols
+    if getattr(x, "is_Symbol", False) and _symbols_product(y, x):
+        return _times_symbol(y, x)
     if x is _ONE and isinstance(y, Basic):
         return y
     if y is _ONE and isinstance(x, Basic):
@@ -36,13 +37,23 @@ def product(x, y):
     return x * y
 
 
-def _scaled_symbol(e, other) -> bool:
-    """``e`` is a number (not 0 or 1) times a symbol other than ``other``: ``e * other`` is
-    that number times the two symbols in sympy's order."""
-    if not getattr(e, "is_Mul", False) or len(e.args) != 2:
+def _symbols_product(e, other) -> bool:
+    """``e`` is a product of symbols other than ``other``, with at most a leading number (not
+    0 or 1): ``e * other`` is then the same product with ``other`` among its symbols."""
+    if not getattr(e, "is_Mul", False):
         return False
-    number, symbol = e.args
-    return number.is_Number and number.is_finite is True and symbol.is_Symbol and symbol != other
+    args = e.args
+    start = 1 if args[0].is_Number else 0
+    if start and args[0].is_finite is not True:
+        return False
+    return all(a.is_Symbol and a != other for a in args[start:])
+
+
+def _times_symbol(e, symbol):
+    """``e * symbol`` for ``_symbols_product(e, symbol)``: sympy's order, the number first."""
+    args = e.args
+    start = 1 if args[0].is_Number else 0
+    return sp.Mul(*args[:start], *sorted((*args[start:], symbol), key=_ORDER), evaluate=False)
 
 
 def _finite(e) -> bool:

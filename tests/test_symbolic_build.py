@@ -24,7 +24,9 @@ def _same(a, b) -> bool:
                                   (sp.oo, sp.Integer(0)), (sp.Integer(0), sp.zoo), (sp.Integer(0), sp.Float("inf")),
                                   # a number times a symbol, times another symbol: built directly
                                   (-t2, t1), (t1, -t2), (-t1, t10), (sp.Float(0.5) * u3, q0), (q0, 3 * t1),
-                                  (-t1, t1), (sp.Rational(1, 3) * t2, t1), (2 * t1 * t2, u3)])
+                                  (-t1, t1), (sp.Rational(1, 3) * t2, t1), (2 * t1 * t2, u3),
+                                  (t1 * t2, u3), (u3, t10 * q0), (t1 * t2, t1), (-t1 * t2 * q0, t10),
+                                  (sp.Float(1.5) * t2 * q0, t1), (t1 * t2, sp.Float(2.0))])
 def test_product_is_sympys_product(x, y):
     assert _same(product(x, y), x * y)
 
