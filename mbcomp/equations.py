@@ -356,7 +356,8 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
             V = prog.lets([total([a, product(b, prog.qd[k])]) for a, b in zip(V, S)])
         R = _rotate_frame(prog, R, getattr(joint, "child_rotation", None), transpose=True)
         kin.R[body.name] = R
-        kin.origin[body.name] = prog.lets([total([x, -r]) for x, r in zip(pos, matvec(R, kin.param(joint, "child_point")))])
+        child_point = matvec(R, kin.param(joint, "child_point"))
+        kin.origin[body.name] = prog.lets([total([x, -r]) for x, r in zip(pos, child_point)])
         kin.V[body.name], kin.A[body.name] = V, A
 
         mass = kin.param(body, "mass")

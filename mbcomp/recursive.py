@@ -159,7 +159,8 @@ def aba_outputs(prog, kin, topology, inertia: dict, wrench: dict, generalized: l
             continue  # welded to the ground: carried by no speed
         I = _inertia_matrix(inertia[body.name])
         IA[node] = I if IA[node] is None else _add(IA[node], I)
-        pA[node] = list(wrench[body.name]) if pA[node] is None else [total([a, b]) for a, b in zip(pA[node], wrench[body.name])]
+        own = wrench[body.name]
+        pA[node] = list(own) if pA[node] is None else [total([a, b]) for a, b in zip(pA[node], own)]
     U, W, D, u = [None] * nv, [None] * nv, [None] * nv, [None] * nv
     for k in reversed(range(nv)):
         if IA[k] is None:  # a massless end of the tree (every pivot of it is zero: reported)
