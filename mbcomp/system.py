@@ -603,7 +603,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     """Model -> System (see ``Model.compile``)."""
     from .compiler import CompiledModel
     from .formulations import FORMULATIONS, get_formulation
-    from .formulations.base import analyse
+    from .formulations.analysis_cache import cached_analyse
     formulation_class = get_formulation(formulation)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     # The library carries every registered formulation's C code: one library serves them all.
@@ -621,7 +621,8 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     if derivation is not None:
         parameters.update(derivation.values())  # sub-model parameters, by path
     formulation = formulation_class(compiled, **options)
-    info = analyse(formulation, Kernel(compiled, parameters))
+    info = cached_analyse(formulation, Kernel(compiled, parameters), getattr(compiled, "key", None) if cache else None,
+                          parameters, options)
     return System(compiled, formulation.with_info(info), parameters)
 
 
