@@ -75,18 +75,20 @@ def _plain_term(e) -> bool:
 
 def total(terms: list):
     """``sympy.Add(*terms)``, built directly when every term is plain (``_plain_term``) and no
-    two share their symbols: then sympy's sum is those terms in its canonical order."""
+    two share their symbols: then sympy's sum is those terms in its canonical order.  A term
+    that is itself a sum counts as its terms (sympy's sum flattens nested sums the same way)."""
     terms = [sp.sympify(t) for t in terms]
     terms = [t for t in terms if t is not _ZERO]
     if len(terms) < 2:
         return terms[0] if terms else _ZERO
+    given, terms = terms, [a for t in terms for a in (t.args if t.is_Add else (t,))]
     seen = set()
     for t in terms:
         if not _plain_term(t):
-            return sp.Add(*terms)
+            return sp.Add(*given)
         key = t.as_coeff_Mul()[1]
         if key in seen:
-            return sp.Add(*terms)
+            return sp.Add(*given)
         seen.add(key)
     terms.sort(key=_ORDER)
     return sp.Add(*terms, evaluate=False)

@@ -32,6 +32,11 @@ def test_product_is_sympys_product(x, y):
 
 
 @pytest.mark.parametrize("terms", [
+    [t1 * t2 + u3, q0 * t10],                  # a sum among the terms: flattened, built directly
+    [t1 + t2, u3 - q0, t10],
+    [t1 + t2, -t2 + u3],                       # the sums share t2: sympy collects
+    [t1 + 1, t2],                              # a number inside the sum: sympy's
+    [2 * (t1 + t2), t1],                       # a multiple of a sum is not a sum
     [t1 * t2, t10 * q0, -u3 * t1],             # distinct plain terms: built directly
     [t2, t1, t10],
     [t1 * t2, t2 * t1],                        # the same symbols: sympy collects 2*t1*t2
