@@ -31,7 +31,7 @@ def cached_analyse(formulation, kernel, model_key: str | None, parameters: Mappi
     """``analyse(formulation, kernel)``, from the code cache when the same analysis was kept
     (``model_key``: the compiled model's cache key; None: no cache)."""
     key = None if model_key is None or formulation.constraints is None else \
-        _key(formulation, model_key, parameters, options)
+        _key(formulation, kernel, model_key, parameters, options)
     if key is not None:
         info = _read(key)
         if info is not None:
@@ -42,12 +42,15 @@ def cached_analyse(formulation, kernel, model_key: str | None, parameters: Mappi
     return info
 
 
-def _key(formulation, model_key: str, parameters: Mapping[str, Any], options: Mapping[str, Any]) -> str | None:
+def _key(formulation, kernel, model_key: str, parameters: Mapping[str, Any],
+         options: Mapping[str, Any]) -> str | None:
     """The entry's key, or None when an input has no stable text (a Python callable, say: the
-    analysis then runs every time)."""
+    analysis then runs every time).  The code it hashes: the analysis, the constraint set, the
+    formulation, the kernel that evaluates the compiled functions and the state map."""
     try:
         values = {name: np.asarray(value, dtype=float).tolist() for name, value in sorted(parameters.items())}
-        modules = (inspect.getmodule(FormulationInfo), constraint_set, inspect.getmodule(type(formulation)))
+        modules = (inspect.getmodule(FormulationInfo), constraint_set, inspect.getmodule(type(formulation)),
+                   inspect.getmodule(type(kernel)), inspect.getmodule(type(kernel.topology.state_map)))
         sources = [Path(inspect.getfile(module)).read_bytes() for module in modules]
     except (TypeError, ValueError, OSError):
         return None
