@@ -38,15 +38,12 @@ def product(x, y):
 
 
 def _symbols_product(e, other) -> bool:
-    """``e`` is a product of symbols other than ``other``, with at most a leading number (not
-    0 or 1): ``e * other`` is then the same product with ``other`` among its symbols."""
-    if not getattr(e, "is_Mul", False):
+    """``e`` is a plain product (``_plain_term``: symbols, at most a leading finite number)
+    without ``other``: ``e * other`` is then the same product with ``other`` among its symbols."""
+    if not (getattr(e, "is_Mul", False) and _plain_term(e)) or other in e.args:
         return False
-    args = e.args
-    start = 1 if args[0].is_Number else 0
-    if start and args[0].is_finite is not True:
-        return False
-    return all(a.is_Symbol and a != other for a in args[start:])
+    first = e.args[0]
+    return not first.is_Number or first.is_finite is True
 
 
 def _times_symbol(e, symbol):
