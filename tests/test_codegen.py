@@ -92,6 +92,30 @@ class TestPrinter:
                 arr = (ctypes.c_double * 4)(*values)
                 assert fn(arr) == pytest.approx(reference(*values), rel=1e-13, abs=1e-15), name
 
+    def test_generated_units_declare_what_they_call_and_compile_as_with_math_h(self, tmp_path):
+        """Generated units declare the libm functions the printer emits (``C_MATH``) instead of
+        including <math.h>: every function the printer can print is declared (an undeclared
+        call is an error here), and the object code is the same as with the header."""
+        compiler = c_compiler()
+        if compiler is None:
+            pytest.skip("no C compiler")
+        printer = codegen.Printer(NAMES, "c")
+        every = [EXPRESSIONS["nested"], EXPRESSIONS["three-halves"], sp.tanh(x) * y, sp.Min(x, y) + sp.Max(z, w),
+                 x ** sp.Rational(-1, 2), x ** sp.Float(1.5)]
+        body = "".join(f"double f{i}(const double *v) {{ return {printer(e)}; }}\n" for i, e in enumerate(every))
+        objects = []
+        for header in (codegen.C_MATH, "#include <math.h>\n"):
+            folder = tmp_path / str(len(objects))
+            folder.mkdir()
+            (folder / "unit.c").write_text(header + body)
+            for flags in (["-O0"], ["-O1"]):
+                subprocess.run([compiler, *flags, "-fPIC", "-fno-math-errno", "-Werror=implicit-function-declaration",
+                                "-c", "unit.c", "-o", f"unit{flags[0]}.o"], check=True, capture_output=True, cwd=folder)
+            objects.append([(folder / f"unit{o}.o").read_bytes() for o in ("-O0", "-O1")])
+        assert objects[0] == objects[1]
+        for name in ("sqrt", "pow", "sin", "cos", "tanh", "fmin", "fmax"):
+            assert f" {name}(" in codegen.C_MATH, name
+
     def test_numbers_are_printed_as_floats(self):
         printer = codegen.Printer(NAMES, "c")
         assert printer(sp.Integer(3)) == "3.0"
