@@ -199,10 +199,12 @@ class CFunctions:
 #: Flags of the hot code (the generated right-hand side, the solves and the integrators);
 #: chosen by measurement (bench/compile_startup.py): -O1 runs the right-hand side 2.5-4.5x
 #: faster than -O0 for twice the compile time, -O2 is no faster than -O1 and compiles 1.3-1.8x
-#: longer.  Part of the cache key, with ``COLD_FLAGS`` and the unit plan.
-C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno")
+#: longer.  Part of the cache key, with ``COLD_FLAGS`` and the unit plan.  The C declares the
+#: C library functions it calls itself (``codegen.C_MATH``, ``codegen.C_TEMPLATE_LIBC``): a call
+#: it does not declare is an error, never an implicit ``int`` function.
+C_FLAGS = ("-O1", "-fPIC", "-fno-math-errno", "-Werror=implicit-function-declaration")
 #: Flags of the cold units (functions called per output sample, not per step).
-COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno")
+COLD_FLAGS = ("-O0", "-fPIC", "-fno-math-errno", "-Werror=implicit-function-declaration")
 #: Output functions of at most this many statements start compiling in the background as soon
 #: as they are printed, beside the model's own compilers (an unoptimised compiler of a unit
 #: this size holds little memory); longer ones once the model's library is built: at N = 50

@@ -144,7 +144,6 @@ def run_program(program: np.ndarray, t: float, index: int = 0) -> float:
 C_PROGRAM = f"""
 #ifndef MB_PROGRAM_DEFINED
 #define MB_PROGRAM_DEFINED 1
-#include <math.h>
 static double mb_program(const double **prog, double t) {{
     const double *pc = *prog;
     const long n = (long)pc[0];

@@ -72,8 +72,6 @@ def c_integrators() -> str:
     in compiled code), also ``dop853_reduced_run``: the same loop on the reduced state of
     ``formulations/lagrange_c.py``."""
     lines = [
-        "#include <stdlib.h>",
-        "#include <string.h>",
         "#include <float.h>",
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",

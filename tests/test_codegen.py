@@ -116,6 +116,41 @@ class TestPrinter:
         for name in ("sqrt", "pow", "sin", "cos", "tanh", "fmin", "fmax"):
             assert f" {name}(" in codegen.C_MATH, name
 
+    def test_the_templates_declarations_compile_as_the_c_library_headers(self, tmp_path):
+        """``C_TEMPLATE_LIBC`` stands for <stdlib.h>, <string.h> and <math.h> in the
+        hand-written C: code that uses every name it declares compiles to the same object as
+        with the headers, and a call it does not declare is an error under ``C_FLAGS``."""
+        from mbcomp.backend import C_FLAGS
+        compiler = c_compiler()
+        if compiler is None:
+            pytest.skip("no C compiler")
+        body = """
+double use(const double *v, double *w, long n) {
+    double *a = malloc(sizeof(double) * n), *b = calloc(n, sizeof(double));
+    if (!a || !b) return NAN;
+    memcpy(a, v, sizeof(double) * n); memmove(b, a, sizeof(double) * n); memset(w, 0, sizeof(double) * n);
+    double s = sqrt(a[0]) + pow(a[1], 1.5) + sin(a[2]) * cos(a[3]) + tanh(a[4]) + fmin(a[0], a[1])
+        + fmax(a[2], a[3]) + fabs(b[0]) + exp(b[1]) + log(b[2]) + nextafter(b[3], INFINITY);
+    if (!isfinite(s) || isnan(s) || signbit(s)) s = -DBL_EPSILON * (double)clock() / CLOCKS_PER_SEC;
+    free(a); free(b);
+    return s;
+}
+"""
+        headers = "#include <stdlib.h>\n#include <string.h>\n#include <math.h>\n#include <float.h>\n#include <time.h>\n"
+        objects = []
+        for k, header in enumerate((codegen.C_TEMPLATE_LIBC, headers)):
+            folder = tmp_path / str(k)
+            folder.mkdir()
+            (folder / "unit.c").write_text(header + body)
+            subprocess.run([compiler, *C_FLAGS, "-c", "unit.c", "-o", "unit.o"], check=True, capture_output=True,
+                           cwd=folder)
+            objects.append((folder / "unit.o").read_bytes())
+        assert objects[0] == objects[1]
+        (tmp_path / "bad.c").write_text(codegen.C_TEMPLATE_LIBC + "double f(double x) { return erf(x); }\n")
+        failed = subprocess.run([compiler, *C_FLAGS, "-c", "bad.c", "-o", "bad.o"], capture_output=True, text=True,
+                                cwd=tmp_path)
+        assert failed.returncode != 0 and "erf" in failed.stderr
+
     def test_numbers_are_printed_as_floats(self):
         printer = codegen.Printer(NAMES, "c")
         assert printer(sp.Integer(3)) == "3.0"

@@ -34,7 +34,6 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     from ..expressions_c import C_PROGRAM
     return f"""
 #ifdef DAE_LOOP
-#include <stdlib.h>
 #define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
 /* most KKT rows: geometric, one motor per speed, every contact */
 #define DAE_NR (NG + NQ + DAE_NK)
@@ -46,6 +45,9 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
 #define NDAEWORK (DAE_SOLVE_OFF + NQ * DAE_NR + DAE_NR * DAE_NR + 3 * DAE_NR + NQ)
 {C_PROGRAM}
 {C_BRENTQ}
+/* defined below, or after this code by the recursive program (recursive.c_dae) */
+int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
+                      const double *tau, double *qdd, double *work);
 static __thread int dae_nr = -1;
 /* dae_rows (DAE_NR: legacy configuration, geometric rows), dae_legacy ({SPEC_LONGS} DAE_NR) and
    dae_lam (DAE_NR + 1: multipliers of the last solve, per configured row) are per-thread

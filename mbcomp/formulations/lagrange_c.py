@@ -48,8 +48,6 @@ def c_lagrange(nv: int, ng: int) -> str:
 
 _C = r"""
 #ifdef REDUCED_LOOP
-#include <stdlib.h>
-#include <string.h>
 #define LAG_TRIAL @TRIAL@
 #define LAG_PAUSED @PAUSED@
 #define LAG_EVENT @EVENT@
