@@ -73,3 +73,17 @@ def test_a_preprocessor_test_of_a_size_is_refused():
     with pytest.raises(AssertionError, match="as a number"):
         sizes.check_generic("#define NV 3\n")
     assert sizes.check_generic("#if MB_HAS_QUAT\n#endif\n") == "#if MB_HAS_QUAT\n#endif\n"
+
+
+def test_a_compile_whose_templates_test_a_size_fails_and_keeps_nothing(tmp_path, monkeypatch):
+    """The check runs while the templates compile: the build is cancelled, nothing cached."""
+    from mbcomp import compiler
+    if compiler.c_compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
+    original = compiler.CompiledModel._c_templates
+    monkeypatch.setattr(compiler.CompiledModel, "_c_templates",
+                        lambda self, sizes: original(self, sizes) + "#if NQ > 2\n#endif\n")
+    with pytest.raises(AssertionError, match="NQ"):
+        pendulum_chain(3).compile(backend="c")
+    assert not list(tmp_path.glob("*.so")) and not list(tmp_path.glob("*.o"))
