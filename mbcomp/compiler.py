@@ -231,7 +231,7 @@ class CompiledModel:
             # Linked after the generated code, as in one unit: the layout of the integrators'
             # loops changes their speed by up to 15 % (N = 5 chain).
             build.add("templates", codegen.c_prototypes(functions) + templates, C_FLAGS, last=True,
-                      shared=tools if use_cache else None)
+                      shared=tools if use_cache else None, beside=True)
             # A size in an #if would read as 0: checked while the templates compile (16 ms of
             # regular expressions), before anything is linked; the build is cancelled if it fails.
             sizes.check_generic(templates)

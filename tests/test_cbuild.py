@@ -295,6 +295,23 @@ class TestStreamedUnits:
         finally:
             build.cancel()
 
+    def test_a_unit_beside_the_build_takes_no_job_slot(self):
+        """One job slot: a unit added ``beside`` (the templates) and a generated unit compile at
+        once; a second generated unit waits for the slot; all are linked."""
+        build = CBuild(c_compiler(), jobs=1)
+        try:
+            build.add("templates", "double t(double x) { return 2.0 * x; }\n", C_FLAGS, 10, last=True, beside=True)
+            build.add("u0", "double f0(double x) { return x; }\n", C_FLAGS, 5)
+            build.add("u1", "double f1(double x) { return x; }\n", C_FLAGS, 5)
+            with build._lock:  # checked at once: a compiler run takes tens of milliseconds
+                running = {name for _, name in build._running}
+                waiting = [name for _, name, _ in build._waiting]
+            assert running == {"templates", "u0"} and waiting == ["u1"]
+            library = build.finish()
+            assert library
+        finally:
+            build.cancel()
+
 
 @needs_cc
 def test_a_hot_function_is_compiled_in_two_halves_with_the_same_numbers(chain):
