@@ -4,6 +4,7 @@ defined elsewhere.  A new module gets its layer here."""
 from __future__ import annotations
 
 import ast
+from functools import lru_cache
 from pathlib import Path
 
 import pytest
@@ -84,13 +85,19 @@ def layer(name: str) -> int:
     raise AssertionError(f"module mbcomp.{name} has no layer: add it to LAYERS in tests/test_layers.py")
 
 
+@lru_cache(maxsize=None)
+def syntax_tree(path: Path) -> ast.Module:
+    """The parsed module (each file is parsed once per run: both checks walk it)."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
 def imports(name: str, path: Path, known) -> list[tuple[str, list[str], int]]:
     """``(module, imported names, line)`` for every import of an mbcomp module."""
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     if name == "__init__":
         package = []
     found = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(syntax_tree(path)):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package[: len(package) - node.level + 1]
@@ -137,7 +144,7 @@ def violations() -> list[tuple[str, int, str]]:
     problems = []
     for name, path in sorted(known.items()):
         where = f"mbcomp/{path.relative_to(ROOT)}"
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = syntax_tree(path)
         for target, names, line in imports(name, path, known):
             mine, theirs = layer(name), layer(target)
             same_package = target.rpartition(".")[0] == name.rpartition(".")[0] != "" or target.startswith(name + ".")
