@@ -270,7 +270,7 @@ class CBuild:
         ``beside``: its compiler starts at once and takes none of the ``jobs`` slots (the
         hand-written templates, added before the program exists: a generated unit printed
         while they compile starts too instead of waiting for them, which at N = 5 put the
-        second half of the dynamics 0.13 s later on the build's critical path).
+        second half of the dynamics 0.1-0.15 s later on the build's critical path).
 
         ``shared``: the toolchain inputs of the code cache (``cache.toolchain``) for a unit
         many models have in common (the hand-written templates of one model structure): its

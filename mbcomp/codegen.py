@@ -226,8 +226,8 @@ class UnitStream:
     handed out at the end of the ``add`` that filled it instead of waiting for more (None:
     never, which gives exactly the units of ``c_units``)."""
 
-    def __init__(self, prog, cold: tuple = (), chunk: int = CHUNK_STATEMENTS, unit: int = 1500, eager: int | None = None,
-                 halve: int | None = None):
+    def __init__(self, prog, cold: tuple = (), chunk: int = CHUNK_STATEMENTS, unit: int = 1500,
+                 eager: int | None = None, halve: int | None = None):
         self.prog, self.cold, self.chunk, self.unit, self.eager = prog, tuple(cold), chunk, unit, eager
         #: A hot function of more than ``halve`` statements (and at most ``unit``) gets two units
         #: of its own, one chunk each, that compile side by side (None: never).
