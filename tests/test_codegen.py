@@ -103,15 +103,16 @@ class TestPrinter:
         every = [EXPRESSIONS["nested"], EXPRESSIONS["three-halves"], sp.tanh(x) * y, sp.Min(x, y) + sp.Max(z, w),
                  x ** sp.Rational(-1, 2), x ** sp.Float(1.5)]
         body = "".join(f"double f{i}(const double *v) {{ return {printer(e)}; }}\n" for i, e in enumerate(every))
+        from mbcomp.backend import C_FLAGS, COLD_FLAGS
         objects = []
         for header in (codegen.C_MATH, "#include <math.h>\n"):
             folder = tmp_path / str(len(objects))
             folder.mkdir()
             (folder / "unit.c").write_text(header + body)
-            for flags in (["-O0"], ["-O1"]):
-                subprocess.run([compiler, *flags, "-fPIC", "-fno-math-errno", "-Werror=implicit-function-declaration",
-                                "-c", "unit.c", "-o", f"unit{flags[0]}.o"], check=True, capture_output=True, cwd=folder)
-            objects.append([(folder / f"unit{o}.o").read_bytes() for o in ("-O0", "-O1")])
+            for k, flags in enumerate((COLD_FLAGS, C_FLAGS)):  # the flags of cold and hot units
+                subprocess.run([compiler, *flags, "-c", "unit.c", "-o", f"unit{k}.o"], check=True,
+                               capture_output=True, cwd=folder)
+            objects.append([(folder / f"unit{k}.o").read_bytes() for k in range(2)])
         assert objects[0] == objects[1]
         for name in ("sqrt", "pow", "sin", "cos", "tanh", "fmin", "fmax"):
             assert f" {name}(" in codegen.C_MATH, name
