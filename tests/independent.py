@@ -37,6 +37,8 @@ coordinate vector is the concatenation of the joints' coordinates in that order.
 """
 from __future__ import annotations
 
+import cmath
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -98,6 +100,22 @@ class _Parameters:
         return out
 
 
+def _mm(*factors: sp.Matrix) -> sp.Matrix:
+    """The matrix product of ``factors``, left to right, skipping structural zeros: sympy's
+    own product multiplies every stored zero too (to keep ``0 * oo = nan``), and each such
+    product asks a large expression whether it is finite, which took 40 % of a derivation."""
+    out = factors[0]
+    for right in factors[1:]:
+        if out.cols != right.rows:
+            raise ValueError(f"cannot multiply {out.shape} by {right.shape}")
+        left_rows = [[(k, a) for k, a in enumerate(out.row(i)) if a != 0] for i in range(out.rows)]
+        right_cols = [right.col(j) for j in range(right.cols)]
+        out = sp.Matrix(out.rows, right.cols, lambda i, j: sp.Add(*[a * right_cols[j][k]
+                                                                    for k, a in left_rows[i]
+                                                                    if right_cols[j][k] != 0]))
+    return out
+
+
 def _skew(v: sp.Matrix) -> sp.Matrix:
     """Cross-product matrix: ``_skew(v) * u == v x u``."""
     return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
@@ -106,12 +124,12 @@ def _skew(v: sp.Matrix) -> sp.Matrix:
 def rotation_about(axis: sp.Matrix, angle: sp.Expr) -> sp.Matrix:
     """Right-handed rotation by ``angle`` about the unit ``axis`` (Rodrigues' formula)."""
     c, s = sp.cos(angle), sp.sin(angle)
-    return c * sp.eye(3) + s * _skew(axis) + (1 - c) * axis * axis.T
+    return c * sp.eye(3) + s * _skew(axis) + (1 - c) * _mm(axis, axis.T)
 
 
 def _cross_matrix_columns(a: sp.Matrix, J: sp.Matrix) -> sp.Matrix:
     """``a x`` applied to every column of ``J``."""
-    return _skew(a) * J
+    return _mm(_skew(a), J)
 
 
 @dataclass
@@ -145,13 +163,13 @@ def _joint_motion(joint: dict, params: _Parameters, q: list, qd: list) -> _Joint
     elif kind == "Spherical":
         for i, (letter, angle) in enumerate(zip(joint["sequence"], q)):
             axis = sp.Matrix(UNIT[letter])
-            J_rot[:, i] = rotation * axis          # the i-th rotation axis, in the parent frame
-            rotation = rotation * rotation_about(axis, angle)
+            J_rot[:, i] = _mm(rotation, axis)         # the i-th rotation axis, in the parent frame
+            rotation = _mm(rotation, rotation_about(axis, angle))
     elif kind != "Fixed":
         raise ValueError(f"joint {joint.get('name')!r}: unknown type {kind!r}")
     rates = sp.Matrix(qd)
-    bias_rot = (J_rot * rates).jacobian(q) * rates if nj else sp.zeros(3, 1)
-    bias_trans = (J_trans * rates).jacobian(q) * rates if nj else sp.zeros(3, 1)
+    bias_rot = _mm(_mm(J_rot, rates).jacobian(q), rates) if nj else sp.zeros(3, 1)
+    bias_trans = _mm(_mm(J_trans, rates).jacobian(q), rates) if nj else sp.zeros(3, 1)
     return _JointMotion(rotation, translation, J_rot, J_trans, bias_rot, bias_trans)
 
 
@@ -173,8 +191,8 @@ class _Frame:
 
     def point(self, local: sp.Matrix, rates: sp.Matrix):
         """Position, velocity Jacobian and acceleration bias of a body-fixed point."""
-        arm = self.R * local
-        omega = self.J_w * rates
+        arm = _mm(self.R, local)
+        omega = _mm(self.J_w, rates)
         J = self.J_v - _cross_matrix_columns(arm, self.J_w)
         bias = self.bias_a + self.bias_alpha.cross(arm) + omega.cross(omega.cross(arm))
         return self.origin + arm, J, bias
@@ -197,20 +215,20 @@ def _child_frame(parent: _Frame, motion: _JointMotion, pp: sp.Matrix, cp: sp.Mat
     """
     n = rates.shape[0]
     Rp = parent.R
-    omega_p = parent.J_w * rates
-    J_rel = _embed(Rp * motion.J_rot, start, n)
+    omega_p = _mm(parent.J_w, rates)
+    J_rel = _embed(_mm(Rp, motion.J_rot), start, n)
     J_w = parent.J_w + J_rel
-    omega_c = J_w * rates
-    bias_alpha = parent.bias_alpha + Rp * motion.bias_rot + omega_p.cross(J_rel * rates)
+    omega_c = _mm(J_w, rates)
+    bias_alpha = parent.bias_alpha + _mm(Rp, motion.bias_rot) + omega_p.cross(_mm(J_rel, rates))
 
-    R = Rp * motion.rotation
-    d = Rp * (pp + motion.translation)
-    e = R * cp
-    J_t = _embed(Rp * motion.J_trans, start, n)
-    t_rate = J_t * rates
+    R = _mm(Rp, motion.rotation)
+    d = _mm(Rp, pp + motion.translation)
+    e = _mm(R, cp)
+    J_t = _embed(_mm(Rp, motion.J_trans), start, n)
+    t_rate = _mm(J_t, rates)
     J_v = parent.J_v - _cross_matrix_columns(d, parent.J_w) + J_t + _cross_matrix_columns(e, J_w)
     bias_a = (parent.bias_a + parent.bias_alpha.cross(d) + omega_p.cross(omega_p.cross(d))
-              + 2 * omega_p.cross(t_rate) + Rp * motion.bias_trans
+              + 2 * omega_p.cross(t_rate) + _mm(Rp, motion.bias_trans)
               - bias_alpha.cross(e) - omega_c.cross(omega_c.cross(e)))
     return _Frame(R, parent.origin + d - e, J_v, J_w, bias_a, bias_alpha)
 
@@ -256,6 +274,77 @@ def _frames(description: dict, params: _Parameters, q: list, qd: list) -> dict[s
     if missing:
         raise ValueError(f"bodies not connected to the ground: {sorted(missing)}")
     return frames
+
+
+
+# ----------------------------------------------------------------------------------
+# Numeric evaluation
+# ----------------------------------------------------------------------------------
+def straight_line(arguments: list[list[sp.Symbol]], outputs: list) -> Callable:
+    """A Python function of one array per list of ``arguments`` that evaluates ``outputs``
+    (expressions, or matrices returned as flat arrays): one assignment per distinct
+    subexpression, so expressions sharing subtrees cost their distinct nodes once.  Real
+    inputs use ``math``, complex ones (complex steps) ``cmath``.  This replaces lambdify with
+    a common-subexpression pass, whose term sorting and optimisation search took most of a
+    derivation's time; it knows the operations the derivation produces (+, *, powers, sin,
+    cos) and refuses others."""
+    names: dict = {}
+    lines = []
+    for k, group in enumerate(arguments):
+        for i, symbol in enumerate(group):
+            names[symbol] = f"x{k}_{i}"
+            lines.append(f"    x{k}_{i} = a{k}[{i}]")
+    functions = {sp.sin: "sin", sp.cos: "cos"}
+
+    def name_of(root: sp.Expr) -> str:
+        stack = [(root, False)]
+        while stack:
+            node, ready = stack.pop()
+            if node in names:
+                continue
+            if node.is_Number:
+                names[node] = repr(float(node))
+                continue
+            if not ready:
+                stack.append((node, True))
+                stack.extend((arg, False) for arg in node.args if arg not in names)
+                continue
+            args = [names[arg] for arg in node.args]
+            if node.is_Add:
+                text = " + ".join(args)
+            elif node.is_Mul:
+                text = " * ".join(args)
+            elif node.is_Pow and node.exp == sp.S.Half:
+                text = f"sqrt({args[0]})"
+            elif node.is_Pow and node.exp.is_Number:
+                text = f"{args[0]} ** {args[1]}"
+            elif node.func in functions:
+                text = f"{functions[node.func]}({args[0]})"
+            else:
+                raise TypeError(f"straight_line cannot evaluate {node.func.__name__}")
+            names[node] = f"t{len(names)}"
+            lines.append(f"    {names[node]} = {text}")
+        return names[root]
+
+    returned = []
+    for out in outputs:
+        if isinstance(out, sp.MatrixBase):
+            returned.append("array([" + ", ".join(name_of(entry) for entry in out) + "])")
+        else:
+            returned.append(name_of(sp.sympify(out)))
+    source = (f"def evaluate({', '.join(f'a{k}' for k in range(len(arguments)))}):\n" + "\n".join(lines)
+              + "\n    return [" + ", ".join(returned) + "]\n")
+    code = compile(source, "<oracle>", "exec")
+    variants = {}
+    for module in (math, cmath):
+        namespace = {"sin": module.sin, "cos": module.cos, "sqrt": module.sqrt, "array": np.array}
+        exec(code, namespace)  # noqa: S102 - code printed above from the oracle's own expressions
+        variants[module] = namespace["evaluate"]
+
+    def evaluate(*arrays):
+        complex_ = any(np.iscomplexobj(a) for a in arrays)
+        return variants[cmath if complex_ else math](*arrays)
+    return evaluate
 
 
 # ----------------------------------------------------------------------------------
@@ -346,14 +435,15 @@ def derive(description: dict, method: str = "virtual_power") -> Equations:
         mass = params.scalar(spec["mass"])
         inertia = params.inertia(spec.get("inertia"))
         com, J_com, bias_com = frame.point(params.vector(spec.get("com", (0, 0, 0))), rates)
-        J_wb = frame.R.T * frame.J_w                      # angular velocity Jacobian, body frame
-        omega_b = J_wb * rates
-        bias_alpha_b = frame.R.T * frame.bias_alpha
-        mass_matrix += mass * J_com.T * J_com + J_wb.T * inertia * J_wb
-        forcing += J_com.T * (mass * (gravity - bias_com)) \
-            - J_wb.T * (inertia * bias_alpha_b + omega_b.cross(inertia * omega_b))
-        kinetic += (mass * (J_com * rates).dot(J_com * rates) + omega_b.dot(inertia * omega_b)) / 2
-        potential += -mass * gravity.dot(com)
+        J_wb = _mm(frame.R.T, frame.J_w)                     # angular velocity Jacobian, body frame
+        omega_b = _mm(J_wb, rates)
+        bias_alpha_b = _mm(frame.R.T, frame.bias_alpha)
+        mass_matrix += mass * _mm(J_com.T, J_com) + _mm(J_wb.T, inertia, J_wb)
+        forcing += _mm(J_com.T, mass * (gravity - bias_com)) \
+            - _mm(J_wb.T, _mm(inertia, bias_alpha_b) + omega_b.cross(_mm(inertia, omega_b)))
+        velocity = _mm(J_com, rates)
+        kinetic += (mass * _mm(velocity.T, velocity)[0] + _mm(omega_b.T, inertia, omega_b)[0]) / 2
+        potential += -mass * _mm(gravity.T, com)[0]
         kinematics.append([com, frame.R, J_com, frame.J_w, bias_com, frame.bias_alpha])
         rigid.append((mass, inertia, com, frame.R))
 
@@ -376,14 +466,13 @@ def lagrange_of(projected: Equations) -> Equations:
 
 
 def _numeric(coords, bodies, params, variables, mass_matrix, forcing, kinetic, potential, kinematics) -> Equations:
-    """Compile the symbolic results into one numpy function with the parameter values
-    bound (a single common-subexpression pass shares the kinematics with the dynamics)."""
+    """Compile the symbolic results into one function with the parameter values bound
+    (``straight_line``: the kinematics and the dynamics share their subexpressions)."""
     q, qd = variables
     n = len(coords)
     values = np.asarray(params.values, dtype=float)
     outputs = [mass_matrix, forcing, kinetic, potential] + [item for body in kinematics for item in body]
-    function = sp.lambdify([q, qd, params.symbols], outputs, modules="numpy", use_imps=False,
-                          cse=lambda exprs: sp.cse(exprs, order="none"))
+    function = straight_line([q, qd, params.symbols], outputs)
     shapes = [(3,), (3, 3), (3, n), (3, n), (3,), (3,)]
 
     def evaluate(qv, qdv):
@@ -406,12 +495,12 @@ def _springs(description: dict, frames: dict, params: _Parameters, rates: sp.Mat
         pa, Ja, _ = frames[body_a].point(params.vector(point_a), rates)
         pb, Jb, _ = frames[body_b].point(params.vector(point_b), rates)
         delta = pb - pa
-        length = sp.sqrt(delta.dot(delta))
+        length = sp.sqrt(_mm(delta.T, delta)[0])
         stretch = length - params.scalar(spring.get("rest_length", 0.0))
         stiffness = params.scalar(spring["stiffness"])
         energy += stiffness * stretch ** 2 / 2
         pull_on_b = -stiffness * stretch * delta / length
-        force += Jb.T * pull_on_b - Ja.T * pull_on_b
+        force += _mm(Jb.T, pull_on_b) - _mm(Ja.T, pull_on_b)
     return energy, force
 
 
@@ -430,12 +519,11 @@ def _lagrange(projected: Equations, rigid: list, potential: sp.Expr, q: list, pa
         J_r = com.jacobian(q)
         J_w = sp.zeros(3, n)
         for k, qk in enumerate(q):
-            W = R.T * R.diff(qk)                                # skew-symmetric: [column k]x
+            W = _mm(R.T, R.diff(qk))                               # skew-symmetric: [column k]x
             J_w[:, k] = sp.Matrix([W[2, 1], W[0, 2], W[1, 0]])
         parts += [mass, inertia, J_r, J_w]
     gradient = sp.Matrix([potential]).jacobian(q).T
-    function = sp.lambdify([q, params.symbols], [gradient, potential] + parts, modules="numpy",
-                           use_imps=False, cse=lambda exprs: sp.cse(exprs, order="none"))
+    function = straight_line([q, params.symbols], [gradient, potential] + parts)
     values = np.asarray(params.values, dtype=float)
     step = 1e-30
 

@@ -220,3 +220,23 @@ def test_random_tree_is_valid(seed):
             assert np.array_equal(inertia, inertia.T)
             a, b, c = np.linalg.eigvalsh(inertia)
             assert a > 0 and c <= a + b
+
+
+def test_the_oracles_evaluator_matches_sympy_on_real_and_complex_inputs():
+    """``straight_line`` (the oracle's numeric evaluation) gives sympy's own values, for real
+    inputs and for the complex steps of the Lagrange self-check, and refuses what it cannot
+    evaluate."""
+    import sympy as sp
+    x, y, p = sp.symbols("x y p", real=True)
+    shared = sp.sin(x) * sp.cos(y) + p ** 2
+    outputs = [sp.Matrix([[shared, 0], [sp.sqrt(shared + 3) / (1 + x ** 2), shared ** -3]]), x * y - p / 7]
+    evaluate = ind.straight_line([[x, y], [p]], outputs)
+    for point in ([0.3, -1.2], [0.3 + 0.2j, -1.2]):   # complex: a step of 0.2j, visible at 1e-14
+        values = {x: point[0], y: point[1], p: 0.8}
+        got = evaluate(np.array(point), np.array([0.8]))
+        expected = [np.array([complex(e.evalf(30, subs=values)) for e in outputs[0]]),
+                    complex(outputs[1].evalf(30, subs=values))]
+        np.testing.assert_allclose(got[0], expected[0], rtol=1e-14)
+        np.testing.assert_allclose(got[1], expected[1], rtol=1e-14)
+    with pytest.raises(TypeError, match="tan"):
+        ind.straight_line([[x]], [sp.tan(x)])
