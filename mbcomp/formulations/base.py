@@ -431,6 +431,32 @@ def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray
                                f"already fixed by {' and '.join(names)} (at {-implied:.6g}); remove one of them")
 
 
+def _newton_onto(formulation, kernel, q: np.ndarray, steps: int = 20) -> np.ndarray | None:
+    """A configuration on ``g = 0`` reached from ``q`` by plain Newton steps of minimum norm,
+    or None when they do not get there (a non-finite value, a residual that stalls or grows
+    a hundredfold, or ``steps`` used up).  For the analysis, which needs some consistent
+    configuration, not the one nearest the guess: about 1 ms where the trust-region search
+    of ``assemble`` takes 10-30 ms (four-bar: 5-11 steps against 47-67 evaluations)."""
+    zero = np.zeros(kernel.nv)
+    state_map = kernel.topology.state_map
+    first = None
+    for _ in range(steps):
+        cv = formulation.constraint_values(kernel, 0.0, q, zero)
+        if not (np.all(np.isfinite(cv.g)) and np.all(np.isfinite(cv.J))):
+            return None
+        residual = float(np.max(np.abs(cv.g), initial=0.0))
+        if residual < ASSEMBLY_TOLERANCE:
+            return q
+        first = residual if first is None else first
+        if residual > 100.0 * first:
+            return None
+        step, *_ = np.linalg.lstsq(cv.J, -cv.g, rcond=1e-10)
+        if not np.any(step):  # the residual is outside the Jacobian's range (a singular guess)
+            return None
+        q = state_map.integrate(q, step)
+    return None
+
+
 def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationInfo:
     """Find a consistent configuration and from it the rank of the constraints: the
     degrees of freedom, the independent rows and the redundant equations (by label).
@@ -451,7 +477,9 @@ def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationIn
     consistent = 0
     for guess in guesses:
         try:
-            q, _ = formulation.assemble(kernel, guess, np.zeros(nv))
+            q = _newton_onto(formulation, kernel, guess)
+            if q is None:  # Newton did not settle: the robust (and slower) trust-region assembly
+                q, _ = formulation.assemble(kernel, guess, np.zeros(nv))
         except SimulationError as exc:
             residual = getattr(exc, "residual", np.inf)
             if residual < closest:
