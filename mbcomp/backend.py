@@ -423,6 +423,18 @@ class CBuild:
 BACKGROUND_NICE = 10
 
 
+def spare_core() -> bool:
+    """Whether the machine has a core to spare for work done ahead of need: the 1-minute
+    load average is below the number of cores less a half (as ``make -l`` limits its jobs).
+    Where every core is busy (parallel test runs, process pools, other users) such work
+    only takes time from the work asked for; where the load cannot be read, assume a core."""
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average (Windows)
+        return True
+    return load < (os.cpu_count() or 1) - 0.5
+
+
 def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, idle: bool = False) -> bytes | None:
     """The shared library built from one C ``source`` with ``flags`` (its bytes), or None when
     the compiler fails (with a warning).  One compiler run compiles and links (the driver,

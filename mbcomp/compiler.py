@@ -15,7 +15,7 @@ from .c_sizes import CSizes
 from .backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, EARLY_OUTPUT_STATEMENTS, FUNCTIONS,
                       HALVE_STATEMENTS,
                       OUTPUT_FUNCTIONS, UNIT_STATEMENTS, BackgroundBuild, CBuild, CFunctions,
-                      PythonFunctions, c_compiler, c_library, compile_c, load_library_bytes)
+                      PythonFunctions, c_compiler, c_library, compile_c, load_library_bytes, spare_core)
 from .components._values import name_of
 from .param_layout import input_layout, parameter_layout, parameter_values
 from .drive_equations import drive_layout
@@ -299,7 +299,11 @@ class CompiledModel:
         (``BACKGROUND_NICE``), beside the model's own compilers or after them
         (``EARLY_OUTPUT_STATEMENTS``): the compile returns without waiting for it, the first
         ``energy``/``body_state`` waits for what is left, and it is stored in this compile's
-        cache directory."""
+        cache directory.  Not while every core is busy (``spare_core``): the library may never
+        be asked for (in the test suite, two builds in three were not), and the first
+        ``energy``/``body_state`` builds it then."""
+        if not spare_core():
+            return
         key, tools = self._output_key(compiler)
         inputs = {**tools, "source_sha256": hashlib.sha256(self._output_source.encode()).hexdigest()}
         store = None

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mbcomp import backend, compiler
 from mbcomp.backend import OUTPUT_FUNCTIONS, c_compiler
 from conftest import pendulum_chain, run_in_new_process
 
@@ -23,6 +24,13 @@ pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("output-library")]
 
 N = 4
+
+
+@pytest.fixture(autouse=True)
+def spare_core(monkeypatch):
+    """These tests look at the background build: it starts whatever the machine's load
+    (``test_on_a_busy_machine_...`` turns it off)."""
+    monkeypatch.setattr(compiler, "spare_core", lambda: True)
 
 
 @pytest.fixture
@@ -170,3 +178,36 @@ def test_without_the_cached_source_they_are_generated_again(cache_dir):
         (cache_dir / name).unlink()
     energy = system.energy(q, qd)
     assert (energy.kinetic, energy.potential) == (expected.kinetic, expected.potential)
+
+
+def test_on_a_busy_machine_the_outputs_are_built_when_first_asked_for(cache_dir, monkeypatch):
+    """With no core to spare, the compile starts no background build; the first ``energy``
+    builds the library (once, cached) and gives the numbers of the generated Python."""
+    monkeypatch.setattr(compiler, "spare_core", lambda: False)
+    system = pendulum_chain(N).compile(backend="c")
+    assert system._compiled._outputs_build is None
+    assert len(libraries(cache_dir)) == 1                       # the model's own only
+    q, qd = state()
+    energy = system.energy(q, qd)
+    expected = pendulum_chain(N).compile(backend="python", cache=False).energy(q, qd)
+    np.testing.assert_allclose([energy.kinetic, energy.potential], [expected.kinetic, expected.potential],
+                               rtol=1e-13, atol=1e-13)
+    assert len(libraries(cache_dir)) == 2                       # and the outputs', cached
+    again = pendulum_chain(N).compile(backend="c")
+    assert again._compiled.cache_hit
+    assert again.energy(q, qd) == energy
+
+
+@pytest.mark.parametrize("load, cores, spare", [((0.3, 0.2, 0.1), 2, True), ((1.6, 1.0, 0.5), 2, False),
+                                                 ((3.2, 3.0, 2.0), 4, True), ((7.9, 8.0, 8.0), 8, False)])
+def test_a_core_is_spare_while_the_load_is_below_the_cores_less_a_half(monkeypatch, load, cores, spare):
+    monkeypatch.setattr(backend.os, "getloadavg", lambda: load)
+    monkeypatch.setattr(backend.os, "cpu_count", lambda: cores)
+    assert backend.spare_core() is spare
+
+
+def test_where_the_load_cannot_be_read_a_core_is_spare(monkeypatch):
+    def unreadable():
+        raise OSError("no load average")
+    monkeypatch.setattr(backend.os, "getloadavg", unreadable)
+    assert backend.spare_core() is True
