@@ -51,7 +51,8 @@ def test_page_draws_moves_and_stays_offline(browser, page):
         picture = canvas(run)
         drawn = np.any(np.abs(picture - BACKGROUND) > 30, axis=2)
         assert 0.005 < drawn.mean() < 0.6, f"canvas looks blank or flooded: {drawn.mean():.4f}"
-        assert len(np.unique(picture.reshape(-1, 3), axis=0)) > 50     # shaded, not a flat fill
+        rgb = picture.reshape(-1, 3).astype(np.uint32)
+        assert len(np.unique(rgb[:, 0] << 16 | rgb[:, 1] << 8 | rgb[:, 2])) > 50     # shaded, not a flat fill
         # The bodies' colours (blue bar1, orange bar2) are on screen.
         for colour in ((0x4e, 0x79, 0xa7), (0xf2, 0x8e, 0x2b)):
             near = np.all(np.abs(picture - np.array(colour)) < 60, axis=2)
