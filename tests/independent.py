@@ -116,6 +116,51 @@ def _mm(*factors: sp.Matrix) -> sp.Matrix:
     return out
 
 
+def _derivative(expr: sp.Expr, x: sp.Symbol, memo: dict) -> sp.Expr:
+    """``d expr / d x``, each distinct subexpression differentiated once (``memo``: per
+    ``x``).  sympy's ``diff`` asks every subtree for its free symbols again at every level,
+    which made a 4-body Lagrange self-check take 6 s.  Knows +, *, numeric powers, sin, cos."""
+    known = memo.get(expr)
+    if known is not None:
+        return known
+    if expr == x:
+        out = sp.S.One
+    elif expr.is_Atom:
+        out = sp.S.Zero
+    elif expr.is_Add:
+        out = sp.Add(*[d for d in (_derivative(a, x, memo) for a in expr.args) if d != 0])
+    elif expr.is_Mul:
+        args = expr.args
+        terms = []
+        for i, a in enumerate(args):
+            d = _derivative(a, x, memo)
+            if d != 0:
+                terms.append(sp.Mul(*args[:i], d, *args[i + 1:]))
+        out = sp.Add(*terms)
+    elif expr.is_Pow and expr.exp.is_Number:
+        d = _derivative(expr.base, x, memo)
+        out = sp.S.Zero if d == 0 else expr.exp * expr.base ** (expr.exp - 1) * d
+    elif isinstance(expr, (sp.sin, sp.cos)):
+        d = _derivative(expr.args[0], x, memo)
+        slope = sp.cos(expr.args[0]) if isinstance(expr, sp.sin) else -sp.sin(expr.args[0])
+        out = sp.S.Zero if d == 0 else slope * d
+    else:
+        raise TypeError(f"_derivative cannot differentiate {expr.func.__name__}")
+    memo[expr] = out
+    return out
+
+
+def _jacobian(exprs: sp.Matrix, variables: list) -> sp.Matrix:
+    """``d exprs / d variables`` (a column of m expressions -> m x n), by ``_derivative``."""
+    column = list(exprs)
+    out = sp.zeros(len(column), len(variables))
+    for k, x in enumerate(variables):
+        memo: dict = {}
+        for i, e in enumerate(column):
+            out[i, k] = _derivative(e, x, memo)
+    return out
+
+
 def _skew(v: sp.Matrix) -> sp.Matrix:
     """Cross-product matrix: ``_skew(v) * u == v x u``."""
     return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
@@ -168,8 +213,8 @@ def _joint_motion(joint: dict, params: _Parameters, q: list, qd: list) -> _Joint
     elif kind != "Fixed":
         raise ValueError(f"joint {joint.get('name')!r}: unknown type {kind!r}")
     rates = sp.Matrix(qd)
-    bias_rot = _mm(_mm(J_rot, rates).jacobian(q), rates) if nj else sp.zeros(3, 1)
-    bias_trans = _mm(_mm(J_trans, rates).jacobian(q), rates) if nj else sp.zeros(3, 1)
+    bias_rot = _mm(_jacobian(_mm(J_rot, rates), q), rates) if nj else sp.zeros(3, 1)
+    bias_trans = _mm(_jacobian(_mm(J_trans, rates), q), rates) if nj else sp.zeros(3, 1)
     return _JointMotion(rotation, translation, J_rot, J_trans, bias_rot, bias_trans)
 
 
@@ -516,13 +561,13 @@ def _lagrange(projected: Equations, rigid: list, potential: sp.Expr, q: list, pa
     n = len(q)
     parts = []  # per body: m, I (body frame), J_r, J_w; M = sum m J_r^T J_r + J_w^T I J_w in numpy
     for mass, inertia, com, R in rigid:
-        J_r = com.jacobian(q)
+        J_r = _jacobian(com, q)
         J_w = sp.zeros(3, n)
         for k, qk in enumerate(q):
-            W = _mm(R.T, R.diff(qk))                               # skew-symmetric: [column k]x
+            W = _mm(R.T, _jacobian(R.reshape(9, 1), [qk]).reshape(3, 3))                              # skew-symmetric: [column k]x
             J_w[:, k] = sp.Matrix([W[2, 1], W[0, 2], W[1, 0]])
         parts += [mass, inertia, J_r, J_w]
-    gradient = sp.Matrix([potential]).jacobian(q).T
+    gradient = _jacobian(sp.Matrix([potential]), q).T
     function = straight_line([q, params.symbols], [gradient, potential] + parts)
     values = np.asarray(params.values, dtype=float)
     step = 1e-30

@@ -240,3 +240,18 @@ def test_the_oracles_evaluator_matches_sympy_on_real_and_complex_inputs():
         np.testing.assert_allclose(got[1], expected[1], rtol=1e-14)
     with pytest.raises(TypeError, match="tan"):
         ind.straight_line([[x]], [sp.tan(x)])
+
+
+def test_the_oracles_derivative_is_sympys():
+    """``_derivative``/``_jacobian`` (the oracle's memoised differentiation) equal sympy's
+    ``diff`` on the operations the derivation uses, and refuse others."""
+    import sympy as sp
+    x, y, p = sp.symbols("x y p", real=True)
+    shared = sp.sin(x) * sp.cos(x * y) + p * x ** 3
+    exprs = sp.Matrix([shared * sp.sqrt(shared ** 2 + 1), sp.cos(shared) / (1 + y ** 2), p, x * y * shared])
+    J = ind._jacobian(exprs, [x, y])
+    for i in range(4):
+        for k, v in enumerate((x, y)):
+            assert sp.simplify(J[i, k] - exprs[i].diff(v)) == 0, (i, k)
+    with pytest.raises(TypeError, match="exp"):
+        ind._jacobian(sp.Matrix([sp.exp(x)]), [x])
