@@ -18,6 +18,7 @@ if find_chromium() is None:
     pytest.skip("no Chromium here (apt-get install chromium)", allow_module_level=True)
 
 BACKGROUND = np.array([0xf4, 0xf5, 0xf7])
+pytestmark = pytest.mark.xdist_group("browser")   # one worker, one browser for the module
 
 
 @pytest.fixture(scope="module")
