@@ -785,9 +785,10 @@ def _blitter(fig, drawing: "_Drawing", points: np.ndarray, times: np.ndarray, dp
 def _encode_gif(frame, count: int, path: Path, fps: float) -> None:
     """Write ``count`` frames (``frame(k)``: RGB pixels) as a looping GIF.  One 256-colour
     palette, fitted to the first and the last frame (median cut, as Pillow's own GIF writer
-    fits one to every frame), serves every frame, each pixel taking its nearest colour: 1-2 ms
-    a frame where fitting a palette takes about 40 ms (640 x 480), and the still parts keep
-    their colours from frame to frame."""
+    fits one to every frame), serves every frame, each pixel taking its nearest colour (by
+    Pillow's lookup, of reduced precision: within a few levels): 1-2 ms a frame where fitting
+    a palette takes about 40 ms (640 x 480), and the still parts keep their colours from
+    frame to frame."""
     from PIL import Image
 
     ends = np.concatenate([frame(0), frame(count - 1)])
