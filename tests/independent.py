@@ -14,7 +14,9 @@ with ``Jv_b`` the Jacobian of body b's centre of mass and ``Jw_b`` the Jacobian 
 angular velocity in its own frame, both propagated joint by joint (no differentiation of
 large expressions).  ``derive(..., method="lagrange")`` obtains the same quantities from
 Lagrange's equations with M built from differentiated positions and rotation matrices,
-so the oracle can check itself.
+so the oracle can check itself.  The oracle evaluates (``straight_line``) and differentiates
+(``_derivative``) its sympy expressions with small routines of its own, each distinct
+subexpression once, and multiplies matrices skipping structural zeros (``_mm``).
 
 Description format (all vectors are 3-sequences; ``inertia`` is a 3x3 matrix about the
 centre of mass in the body frame, or ``None`` for a point mass)::
