@@ -24,6 +24,15 @@ def chain():
     return compiled, compiled.layout.pack(compiled.default_parameters)
 
 
+@pytest.fixture(scope="module")
+def single_unit(chain):
+    """The chain's functions compiled from one unit (the reference of the split builds)."""
+    compiled, _ = chain
+    return c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
+                       + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
+                       compiled.sizes)
+
+
 def _states(compiled, seed):
     rng = np.random.default_rng(seed)
     return rng.uniform(-2, 2, compiled.topology.nq), rng.uniform(-3, 3, compiled.topology.nv)
@@ -72,11 +81,9 @@ class TestUnits:
     @needs_cc
     @pytest.mark.parametrize("chunk, unit, jobs", [(300, 1500, None), (7, 30, None), (7, 30, 1)],
                              ids=["one-unit-each", "many-units", "many-units-one-job"])
-    def test_split_units_give_the_numbers_of_one_unit(self, chain, chunk, unit, jobs):
+    def test_split_units_give_the_numbers_of_one_unit(self, chain, single_unit, chunk, unit, jobs):
         compiled, p = chain
-        single = c_functions(codegen.c_source(compiled.program, FUNCTIONS, cold=COLD_FUNCTIONS)
-                             + compiled.output_layout.c_defines() + codegen.c_accelerations(compiled.topology.nv),
-                             compiled.sizes)
+        single = single_unit
         units, split = _split_library(compiled, chunk, unit, jobs)
         assert len(units) == 2 if unit == 1500 else len(units) > len(FUNCTIONS)
         u = np.zeros(0)

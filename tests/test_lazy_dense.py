@@ -14,7 +14,14 @@ from conftest import pendulum_chain, run_in_new_process
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("lazy-dense")]
 
-N = 12  # the recursive program is chosen from 12 speeds
+#: A short chain with the recursive program asked for: lazy building depends on the program,
+#: not the size (``auto`` choosing it from ``recursive.CROSSOVER_NV`` speeds is tested in
+#: test_recursive.py), and a 4-link chain compiles in half the time of a 12-link one.
+N = 4
+
+
+def chain():
+    return pendulum_chain(N)
 
 
 @pytest.fixture
@@ -33,7 +40,7 @@ def libraries(path: Path) -> set[str]:
 
 
 def test_compile_and_simulate_never_build_the_dense_dynamics_and_mass_matrix_does(cache_dir):
-    system = pendulum_chain(N).compile(backend="c")
+    system = chain().compile(backend="c", dynamics="recursive")
     compiled = system._compiled
     assert compiled.dynamics == "recursive" and compiled.lazy_dense
     q, qd = state()
@@ -42,7 +49,7 @@ def test_compile_and_simulate_never_build_the_dense_dynamics_and_mass_matrix_doe
     compiled.wait_for_background()                             # (the output functions' library)
     before = libraries(cache_dir)
     assert "dynamics" not in system._compiled.functions.loaded
-    dense = pendulum_chain(N).compile(backend="c", dynamics="dense", cache=False)
+    dense = chain().compile(backend="c", dynamics="dense", cache=False)
     M = system.mass_matrix(q)
     assert len(libraries(cache_dir) - before) == 1          # the dense dynamics' own entry
     np.testing.assert_array_equal(M, dense.mass_matrix(q))
@@ -54,8 +61,8 @@ def test_compile_and_simulate_never_build_the_dense_dynamics_and_mass_matrix_doe
 
 def test_a_new_process_loads_the_dense_dynamics_from_the_cache(cache_dir):
     q, _ = state()
-    expected = pendulum_chain(N).compile(backend="c").mass_matrix(q)  # builds and caches both
-    out = run_in_new_process(f"s = pendulum_chain({N}).compile(backend='c')\n"
+    expected = chain().compile(backend="c", dynamics="recursive").mass_matrix(q)  # builds and caches both
+    out = run_in_new_process(f"s = pendulum_chain({N}).compile(backend='c', dynamics='recursive')\n"
                              f"M = s.mass_matrix(np.linspace(0.1, 0.6, {N}))\n"
                              "print(json.dumps({'hit': s._compiled.cache_hit, 'sympy': 'sympy' in sys.modules,"
                              " 'M': M.tolist()}))\n")
@@ -65,12 +72,12 @@ def test_a_new_process_loads_the_dense_dynamics_from_the_cache(cache_dir):
 
 def test_a_damaged_dense_entry_is_rebuilt(cache_dir):
     q, _ = state()
-    first = pendulum_chain(N).compile(backend="c")
+    first = chain().compile(backend="c", dynamics="recursive")
     first._compiled.wait_for_background()                      # (the output functions' library)
     before = libraries(cache_dir)
     expected = first.mass_matrix(q)
     (dense_entry,) = libraries(cache_dir) - before
-    system = pendulum_chain(N).compile(backend="c")     # a cache hit: the model's library
+    system = chain().compile(backend="c", dynamics="recursive")     # a cache hit: the model's library
     damaged = cache_dir / dense_entry
     damaged.unlink()                      # (a new file: the loaded library keeps its own pages)
     damaged.write_bytes(b"not a library")
