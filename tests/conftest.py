@@ -4,6 +4,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -33,6 +34,33 @@ def _private_cache(tmp_path_factory):
         os.environ.pop("MBCOMP_CACHE_DIR", None)
     else:
         os.environ["MBCOMP_CACHE_DIR"] = old
+
+
+def templates_cache(directory: Path, model, **options) -> Path:
+    """A private cache ``directory`` holding only the compiled C templates object(s) of
+    ``model``'s kind (compiled into it here, with the ``compile`` ``options``) and the cache's secret: the tests of one file
+    that each need a cache of their own (what a compile writes, what a damaged entry does)
+    copy it with :func:`primed_cache` instead of compiling the hand-written templates again."""
+    old = os.environ.get("MBCOMP_CACHE_DIR")
+    os.environ["MBCOMP_CACHE_DIR"] = str(directory)
+    try:
+        model.compile(backend="c", **options)._compiled.wait_for_background()
+    finally:
+        if old is None:
+            del os.environ["MBCOMP_CACHE_DIR"]
+        else:
+            os.environ["MBCOMP_CACHE_DIR"] = old
+    for path in directory.iterdir():      # keep the shared objects and the secret
+        if path.name != "secret" and not path.name.endswith((".o", ".o.json")):
+            path.unlink()
+    return directory
+
+
+def primed_cache(source: Path, target: Path) -> Path:
+    """A copy of the :func:`templates_cache` ``source`` at ``target`` (modes kept: the cache
+    directory 0700, the secret 0600)."""
+    shutil.copytree(source, target)
+    return target
 
 
 #: Modules whose tests take long to start (a browser) run first: at the end of a parallel

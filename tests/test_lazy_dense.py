@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mbcomp.backend import c_compiler
-from conftest import pendulum_chain, run_in_new_process
+from conftest import pendulum_chain, primed_cache, run_in_new_process, templates_cache
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("lazy-dense")]
@@ -24,9 +24,15 @@ def chain():
     return pendulum_chain(N)
 
 
+@pytest.fixture(scope="module")
+def templates(tmp_path_factory):
+    """The chain's compiled templates object, shared by the tests' own caches."""
+    return templates_cache(tmp_path_factory.mktemp("templates") / "cache", chain(), dynamics="recursive")
+
+
 @pytest.fixture
-def cache_dir(tmp_path, monkeypatch):
-    path = tmp_path / "cache"
+def cache_dir(tmp_path, monkeypatch, templates):
+    path = primed_cache(templates, tmp_path / "cache")
     monkeypatch.setenv("MBCOMP_CACHE_DIR", str(path))
     return path
 

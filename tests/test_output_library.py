@@ -18,7 +18,7 @@ import pytest
 
 from mbcomp import backend, compiler
 from mbcomp.backend import OUTPUT_FUNCTIONS, c_compiler
-from conftest import pendulum_chain, run_in_new_process
+from conftest import pendulum_chain, primed_cache, run_in_new_process, templates_cache
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("output-library")]
@@ -33,9 +33,15 @@ def spare_core(monkeypatch):
     monkeypatch.setattr(compiler, "spare_core", lambda: True)
 
 
+@pytest.fixture(scope="module")
+def templates(tmp_path_factory):
+    """The chain's compiled templates object, shared by the tests' own caches."""
+    return templates_cache(tmp_path_factory.mktemp("templates") / "cache", pendulum_chain(N))
+
+
 @pytest.fixture
-def cache_dir(tmp_path, monkeypatch):
-    path = tmp_path / "cache"
+def cache_dir(tmp_path, monkeypatch, templates):
+    path = primed_cache(templates, tmp_path / "cache")
     monkeypatch.setenv("MBCOMP_CACHE_DIR", str(path))
     return path
 
