@@ -6,10 +6,9 @@ table through a name: ``NQ``, ``DYNAMICS_FORCES_OFF``, ``QUAT_Q``, ...  ``CSizes
 declares those names as hidden (library-local) constants defined elsewhere, and
 ``CSizes.unit`` is the small C unit that defines them, with the per-thread buffers whose
 length depends on them, for one model.  The templates' text then depends on a handful of
-compile-time constants only (``CSizes.flags``: drives, constraints, contacts, quaternions,
-and the length of the integrated state, kept constant for the integrators' speed), so the
-code cache compiles it once per kind of model and state length instead of once per output
-layout: about 0.22 s of C compiler at -O1 each time it is not compiled.
+compile-time constants only (``CSizes.flags``: drives and their number of states,
+constraints, contacts, quaternions), so the code cache compiles it once per kind of model
+instead of once per size: about 0.22 s of C compiler at -O1 each time it is not compiled.
 """
 from __future__ import annotations
 
@@ -31,8 +30,8 @@ class CSizes:
     ``values``: ``int`` constants (``NQ``, the output layout's ``*_OFF``/``*_SIZE``, ...);
     ``tables``: ``int`` arrays (quaternion and screw indices, the recursion's parents);
     ``buffers``: per-thread arrays ``{name: (C type, length)}``; ``flags``: the
-    compile-time constants, the switches the templates test with ``#if`` and the length of
-    the integrated state (the only model facts in their text).
+    compile-time constants, the switches the templates test with ``#if`` and the number of
+    drive states (the only model facts in their text).
     """
 
     values: Mapping[str, int]
@@ -67,21 +66,15 @@ class CSizes:
             "dae_legacy": ("long", DAE_SPEC_LONGS * dae_rows),
             "dae_lam": ("double", dae_rows + 1),
         }
-        # The length of the integrated state (NY = NMECH + NZ) stays a compile-time constant:
-        # read at run time, it made the compiled DOP853 runs of 3 to 10 links 12-16 % slower
-        # (measured side by side; from 12 links on no difference), for no clear reason in the
-        # generated code.  The templates are then shared by the models of a kind with the same
-        # state length.
-        # Models with constraints or contacts spend their step in the constraint solves, where
-        # a constant state length gains nothing measurable: there it is read at run time, so one
-        # compiled templates object (1-1.5 s of C compiler at -O1 for these kinds) serves every
-        # size of the kind.
+        # The length of the mechanical state (NMECH) is read at run time too, so one compiled
+        # templates object serves every size of a kind.  (It was a compile-time constant for
+        # trees, whose compiled runs of 3 to 10 links were 12-16 % slower with it read at run
+        # time: not the loops themselves but the C library's memcpy, which a copy of unknown
+        # length called, in its AVX-512 version, slowing the SSE2 arithmetic after it; the
+        # templates copy with their own ``mb_copy`` now, bench/state_copy.py.)
         flags = {"HAS_DRIVES": int(bool(drives)), "MB_HAS_NG": int(ng > 0), "MB_HAS_CONTACTS": int(nk > 0),
                  "MB_HAS_QUAT": int(state_map.quat_q.size > 0), "NZ": nz}
-        if ng or nk:
-            values["NMECH"] = ncoord + nv
-        else:
-            flags["NMECH"] = ncoord + nv
+        values["NMECH"] = ncoord + nv
         return cls(values, tables, buffers, flags)
 
     def header(self) -> str:

@@ -110,7 +110,7 @@ static double @INIT@(double t0, const double *y0, const double *f0, double t_end
     h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
     if (h0 > t_end - t0) h0 = t_end - t0;
     for (int i = 0; i < LOOP_NY; ++i) y1[i] = y0[i] + h0 * f0[i];
-    if (LOOP_RHS(t0 + h0, y1, f1)) memcpy(f1, f0, sizeof(double) * LOOP_NY);  /* (a failed trial: no curvature estimate) */
+    if (LOOP_RHS(t0 + h0, y1, f1)) mb_copy(f1, f0, sizeof(double) * LOOP_NY);  /* (a failed trial: no curvature estimate) */
     ++*nfev;
     for (int i = 0; i < LOOP_NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
     d2 = rms(scaled, LOOP_NY) / h0;
@@ -165,7 +165,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
             if (t_new > t_end) t_new = t_end;
             h = t_new - t;
             h_abs = fabs(h);
-            memcpy(K, f, sizeof(double) * LOOP_NY);
+            mb_copy(K, f, sizeof(double) * LOOP_NY);
             for (int s = 1; s < 12; ++s) {
                 for (int i = 0; i < LOOP_NY; ++i) {
                     double acc = 0.0;
@@ -244,9 +244,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                 double *ev_ = dae_ev;
 #endif
                 ev_[0] = t_new;
-                memcpy(ev_ + 1, y_new, sizeof(double) * LOOP_NY);
-                memcpy(ev_ + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
-                memcpy(ev_ + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
+                mb_copy(ev_ + 1, y_new, sizeof(double) * LOOP_NY);
+                mb_copy(ev_ + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+                mb_copy(ev_ + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
                 status = LOOP_EVENT;
                 goto done;
             }
@@ -274,15 +274,15 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                 for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[2 * lag_ni + i];  /* the drive states */
 #else
                 normalize_state(out);
-                if (t_out[*i_out] == t_new) memcpy(out, y_new, sizeof(double) * LOOP_NY);
+                if (t_out[*i_out] == t_new) mb_copy(out, y_new, sizeof(double) * LOOP_NY);
 #endif
                 ++*i_out;
             }
         }
         t = t_new;
 #if LOOP_REDUCED
-        memcpy(y, y_new, sizeof(double) * LOOP_NY);
-        memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
+        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
         {  /* the full state becomes the accepted one (the next Newton starts there) */
             const int as_ = lagrange_accept(t, y, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
             if (as_ < 0) { status = as_; goto done; }
@@ -291,8 +291,8 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         }
 #else
         normalize_state(y_new);
-        memcpy(y, y_new, sizeof(double) * LOOP_NY);
-        memcpy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
+        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
 #if defined(DAE_LOOP) && !MB_HAS_QUAT && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
         if (dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
@@ -302,7 +302,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
 #endif
         if (n_out == 0 && !LOOP_REDUCED) {
             t_steps[*n_steps] = t;
-            memcpy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
+            mb_copy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
             ++*n_steps;
         }
         if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
@@ -429,7 +429,7 @@ int rhs_jacobian(const double *p, const double *tau, double t, const double *y, 
     int status = 0;
     if (!f0 || !f1 || !yp || !work) { status = -4; goto done; }
     RHS_OR_FAIL(rhs(t, y, f0, p, tau, work));
-    memcpy(yp, y, sizeof(double) * NY);
+    mb_copy(yp, y, sizeof(double) * NY);
     for (int j = 0; j < NY; ++j) {
         const double h = sqrt(DBL_EPSILON) * (fabs(y[j]) > 1.0 ? fabs(y[j]) : 1.0);
         yp[j] = y[j] + h;
@@ -474,10 +474,10 @@ int rk4_run(const double *p, const double *tau, double t0, double *y, double dt,
     for (long s = 0; s < n; ++s) {
         const double t = t0 + s * dt, t_new = t0 + (s + 1) * dt;
         if (hook_says_stop(t)) { status = -6; goto done; }
-        if (have_f) memcpy(k, f_next, sizeof(double) * NY);
+        if (have_f) mb_copy(k, f_next, sizeof(double) * NY);
         else RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
         have_f = 0;
-        if (!t_out) memcpy(y_out + s * NY, y, sizeof(double) * NY);
+        if (!t_out) mb_copy(y_out + s * NY, y, sizeof(double) * NY);
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
         RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
         for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
@@ -498,10 +498,10 @@ int rk4_run(const double *p, const double *tau, double t0, double *y, double dt,
             hermite_rows(t, t_new, next, k, y, f_next, t_out, n_out, &j, last, y_out);
         }
     }
-    if (!t_out) memcpy(y_out + n * NY, y, sizeof(double) * NY);
+    if (!t_out) mb_copy(y_out + n * NY, y, sizeof(double) * NY);
 done:
     if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
-        memcpy(y_start, y, sizeof(double) * NY);
+        mb_copy(y_start, y, sizeof(double) * NY);
         next = y;
     }
     free(k); free(stage); free(next); free(f_next); free(work);

@@ -17,15 +17,16 @@ def _templates(model, **options):
     return compiled._c_templates(compiled._c_sizes()), compiled._c_sizes()
 
 
-def test_models_with_one_state_length_share_the_templates_text_and_differ_in_their_unit():
+def test_trees_of_every_size_share_the_templates_text_and_differ_in_their_unit():
     chain, chain_sizes = _templates(pendulum_chain(4))
     pairs, pair_sizes = _templates(xy_pairs())
     assert chain == pairs  # 4 bodies against 2: other layouts, one state length
     assert chain_sizes.values["KINEMATICS_SIZE"] != pair_sizes.values["KINEMATICS_SIZE"]
-    assert chain_sizes.values["NQ"] == pair_sizes.values["NQ"] == 4 and chain_sizes.flags["NMECH"] == 8
+    assert chain_sizes.values["NQ"] == pair_sizes.values["NQ"] == 4 and chain_sizes.values["NMECH"] == 8
     assert f"mb_KINEMATICS_SIZE = {chain_sizes.values['KINEMATICS_SIZE']};" in chain_sizes.unit()
-    longer, sizes7 = _templates(pendulum_chain(7))
-    assert longer != chain and sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.flags["NMECH"] == 14
+    longer, sizes7 = _templates(pendulum_chain(7))  # another state length: read at run time too
+    assert longer == chain and sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.values["NMECH"] == 14
+    assert "mb_NMECH = 14;" in sizes7.unit() and "NMECH" not in sizes7.flags
 
 
 def test_a_loop_and_a_tree_are_different_kinds():
@@ -37,8 +38,8 @@ def test_a_loop_and_a_tree_are_different_kinds():
 
 
 def test_loops_of_every_size_share_the_templates_text():
-    """With constraints the state length is read at run time: a four-bar (3 coordinates) and
-    a five-bar (4 coordinates, another output layout) compile one templates object."""
+    """A four-bar (3 coordinates) and a five-bar (4 coordinates, another output layout)
+    compile one templates object."""
     four, four_sizes = _templates(fourbar())
     five_bar = mb.Model("fivebar", gravity=(0, -9.81, 0))
     a, b, c, d = (five_bar.add(bar(n, L)) for n, L in (("a", 0.3), ("b", 0.8), ("c", 0.7), ("d", 0.4)))
@@ -61,7 +62,7 @@ def test_buffers_and_tables_get_their_lengths_in_the_unit():
     assert "dae_rows[9];" in unit and "dae_legacy[45];" in unit and "dae_lam[10];" in unit
     assert "lag_dv[6];" in unit and "lag_kc[13];" in unit  # contacts: 2 gaps, 2 x 4 Jacobian, 2 biases
     assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0, "NZ": 1}
-    assert sizes.values["NMECH"] == 8 and "mb_NMECH = 8;" in unit  # constraints: the state length at run time
+    assert sizes.values["NMECH"] == 8 and "mb_NMECH = 8;" in unit  # the state length, read at run time
 
 
 def test_a_preprocessor_test_of_a_size_is_refused():

@@ -179,18 +179,21 @@ class TestSharedUnits:
         np.testing.assert_allclose(second.accelerations(q, qd), moon.accelerations(q, qd), rtol=1e-12)
 
     def test_models_of_other_sizes_link_the_same_templates_object(self, tmp_path, monkeypatch):
-        """The templates read the layout's sizes from the model's own unit (c_sizes): a chain
-        of 4 links and 2 links on xy Euler-angle joints (the same state length, other
-        layouts) link one object, and each simulates as its scipy-stepped Python twin."""
+        """The templates read the model's sizes from its own unit (c_sizes): a chain of 4
+        links, 2 links on xy Euler-angle joints (the same state length, other layouts) and a
+        chain of 3 links (another state length) link one object, and each simulates as its
+        scipy-stepped Python twin."""
         monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
         calls = self._count_compiles(monkeypatch)
         chain = pendulum_chain(4).compile(backend="c")
         calls.clear()
         pairs = xy_pairs().compile(backend="c")
+        shorter = pendulum_chain(3).compile(backend="c")
         assert calls and not any("templates.c" in " ".join(c) for c in calls)
         assert len(list(tmp_path.glob("*.o"))) == 1
         q0 = np.array([0.4, -0.3, 0.2, 0.1])
-        for system, model in ((chain, pendulum_chain(4)), (pairs, xy_pairs())):
+        for system, model in ((chain, pendulum_chain(4)), (pairs, xy_pairs()), (shorter, pendulum_chain(3))):
+            q0 = q0[:len(system.coords)]
             compiled = system.simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             stepped = model.compile(backend="python", cache=False).simulate(1.0, q0, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
@@ -372,3 +375,22 @@ class TestBackgroundBuild:
         with pytest.warns(RuntimeWarning, match="compiler failed"):
             build = backend.BackgroundBuild("this is not C\n", c_compiler(), COLD_FLAGS)
             assert build.result() == (None, None)
+
+
+@needs_cc
+def test_the_templates_state_copy_copies_every_byte_and_nothing_more():
+    """``mb_copy`` (codegen.C_TEMPLATE_LIBC), the compiled loops' memcpy: whole words when
+    the length and both addresses allow, bytes otherwise; the bytes around stay as they were."""
+    import ctypes
+    source = (codegen.C_TEMPLATE_LIBC
+              + "void copy(unsigned char *to, const unsigned char *from, long n) { mb_copy(to, from, (mb_size_t)n); }\n")
+    library = backend.load_library_bytes(backend.compile_c(source, c_compiler()))
+    rng = np.random.default_rng(3)
+    source_bytes = rng.integers(0, 256, 200, dtype=np.uint8)
+    for start, offset, n in [(0, 0, 160), (8, 16, 64), (1, 0, 40), (0, 3, 17), (5, 7, 0), (0, 0, 8)]:
+        target = np.full(200, 0xAB, dtype=np.uint8)
+        library.copy(ctypes.c_void_p(target.ctypes.data + offset), ctypes.c_void_p(source_bytes.ctypes.data + start),
+                     ctypes.c_long(n))
+        expected = np.full(200, 0xAB, dtype=np.uint8)
+        expected[offset:offset + n] = source_bytes[start:start + n]
+        assert np.array_equal(target, expected), (start, offset, n)

@@ -411,12 +411,12 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     lag_acc[0] = t;
-    memcpy(lag_acc + 1, q, sizeof(double) * NQ);
-    memcpy(lag_acc + 1 + NQ, qd, sizeof(double) * NQ);
+    mb_copy(lag_acc + 1, q, sizeof(double) * NQ);
+    mb_copy(lag_acc + 1 + NQ, qd, sizeof(double) * NQ);
     for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + 2 * NQ + k] = y[2 * lag_ni + k];
     if (out) {
-        memcpy(out, q, sizeof(double) * NQ);
-        memcpy(out + NQ, qd, sizeof(double) * NQ);
+        mb_copy(out, q, sizeof(double) * NQ);
+        mb_copy(out + NQ, qd, sizeof(double) * NQ);
         for (int k = 0; k < LAG_NZ; ++k) out[2 * NQ + k] = y[2 * lag_ni + k];
     }
     if (!lag_nr) return 0;
@@ -551,7 +551,7 @@ int lagrange_prescribed(const double *p, long n, const double *t_out, double *ou
         int status = lagrange_full(t_out[k], lag_u, row, row + NQ, p);
         if (status) return status;
         lag_acc[0] = t_out[k];
-        memcpy(lag_acc + 1, row, sizeof(double) * 2 * NQ);
+        mb_copy(lag_acc + 1, row, sizeof(double) * 2 * NQ);
         *done = k + 1;
     }
     return 0;
