@@ -82,14 +82,16 @@ def run_example(script: Path, cwd: Path, scripts: ScriptServer):
 
 
 @pytest.fixture(scope="module")
-def example_runs(tmp_path_factory, scripts):
+def example_runs(tmp_path_factory, request):
     """The example scripts, run one after another on a background thread while the docs
     blocks execute in this process: ``{script: (future, working directory)}``.  Empty under
-    pytest-xdist, whose parallel workers share the tests out (each example test then runs
-    its own script; a background thread per worker would run every script twice)."""
+    pytest-xdist, whose parallel workers share the tests out (the example tests, kept on one
+    worker with its one script server, each run their own script; a background thread per
+    worker would run every script twice, and a docs page would start a server of its own)."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
         yield {}
         return
+    scripts = request.getfixturevalue("scripts")
     pool = ThreadPoolExecutor(max_workers=1)
     runs = {}
     for script in EXAMPLES:
@@ -137,6 +139,7 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
             sys.modules["matplotlib.pyplot"].close("all")
 
 
+@pytest.mark.xdist_group("example-scripts")  # one worker, one preloaded script server
 @pytest.mark.parametrize("script", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_runs(script, example_runs, tmp_path_factory, scripts):
     if script in example_runs:
@@ -165,6 +168,7 @@ def test_index_links_every_page():
     assert not missing, f"docs/index.md does not link {missing}"
 
 
+@pytest.mark.xdist_group("example-scripts")
 def test_scripts_run_like_python_script(tmp_path, scripts):
     """The example runner gives what ``python script.py`` gives: ``__main__``, argv, the
     script's directory on sys.path, its working directory, exit status, both streams."""
