@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import os
 import shutil
@@ -61,6 +62,22 @@ def primed_cache(source: Path, target: Path) -> Path:
     directory 0700, the secret 0600)."""
     shutil.copytree(source, target)
     return target
+
+
+#: The cyclic garbage collector's first threshold during the tests (Python's default: 700
+#: allocations).  The suite builds millions of short-lived symbolic and array objects; with
+#: collections every 50,000 allocations, and the objects that exist once the tests are
+#: collected (modules, classes, test items: never garbage) frozen out of later collections,
+#: the whole run took about 3 % less processor time (198 -> 192 s of user time, 2 workers).
+GC_THRESHOLD = (50_000, 20, 20)
+
+
+def pytest_configure(config):
+    gc.set_threshold(*GC_THRESHOLD)
+
+
+def pytest_collection_finish(session):
+    gc.freeze()
 
 
 #: Modules whose tests take long to start (a browser) run first: at the end of a parallel
