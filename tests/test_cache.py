@@ -21,6 +21,9 @@ from mbcomp.backend import c_compiler, compile_c
 from conftest import arm_model, assert_close
 
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
+#: One worker: the module fixtures (the arm compiled in another process, its reference
+#: accelerations) are built once per run.
+pytestmark = pytest.mark.xdist_group("cache-entries")
 
 # The arm at a fixed state, with accelerations computed without any cache.
 Q, QD = [0.3, -0.2, 0.9], [0.1, 0.4, -0.3]

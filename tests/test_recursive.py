@@ -88,6 +88,7 @@ def unit_quaternions(q, *slices):
     return q
 
 
+@pytest.mark.xdist_group("joint-zoo")  # (the module fixture is built once)
 def test_every_joint_kind_accelerations_agree(zoo_pair):
     """Free, Ball, Euler spherical, Universal, Cylindrical, Planar, Prismatic, Fixed and a
     branch, with springs, a callable torque, a point force and a drive's reflected inertia on
@@ -103,6 +104,7 @@ def test_every_joint_kind_accelerations_agree(zoo_pair):
                                   dense.mass_matrix(q, t))
 
 
+@pytest.mark.xdist_group("joint-zoo")  # (the module fixture is built once)
 def test_every_joint_kind_trajectories_agree(zoo_pair):
     """Stepped in Python (scipy's DOP853), both programs give the same trajectory."""
     dense, rec = zoo_pair
@@ -138,6 +140,7 @@ def ball_pair():
     return model.compile(), model.compile(dynamics="dense")
 
 
+@pytest.mark.xdist_group("ball-chain")  # (the module fixture is built once)
 def test_ball_chain_compiled_accelerations_agree(ball_pair):
     """Compiled C, a Free and two Ball joints (13 speeds: auto chooses the recursive program);
     the dynamics choice is part of the cache key."""
@@ -153,6 +156,7 @@ def test_ball_chain_compiled_accelerations_agree(ball_pair):
                                   dense.mass_matrix(q))
 
 
+@pytest.mark.xdist_group("ball-chain")  # (the module fixture is built once)
 def test_ball_chain_compiled_trajectories_agree(ball_pair):
     """The compiled integrators give the same trajectories with either program: fixed-step
     RK4 at every step; adaptive DOP853 at the end (its step sizes follow error estimates that
