@@ -1,18 +1,20 @@
 """Compiled runs with the templates' own state copies (``mb_copy``) against the C library's
 memcpy, side by side in one run.
 
-Usage: python bench/state_copy.py [--rounds R] [--models NAME ...]
+Usage: python bench/state_copy.py [--rounds R] [--runs K] [--models NAME ...]
 
 The compiled loops (DOP853, RK4, the lagrange reduced loop) copy state vectors whose length
 the templates read at run time.  Called with such a length, the C library's memcpy runs its
 widest version (AVX-512 ``__memmove_evex_unaligned_erms`` on this kind of machine), after
 which the generated SSE2 arithmetic of the right-hand side ran 12-16 % slower; the inline
-word copy of ``codegen.C_TEMPLATE_LIBC`` avoids it.  Both variants are compiled into one
-temporary cache (the templates' text differs, so the cache keys do); each model runs both
-variants interleaved, each run in a fresh process (``R`` rounds, best wall time of each; the state of one
-variant's runs must not reach the other's); the trajectories must be
-bit-identical.  Prints one row per model and method: ms with ``mb_copy``, ms with memcpy,
-their ratio.
+word copy of ``codegen.C_TEMPLATE_LIBC`` avoids it.  Each model runs both variants
+interleaved, ``R`` rounds, each variant in a fresh process that compiles the model into an
+empty cache of its own and runs it ``K`` times, as a script does; the best wall time of
+each variant counts, and the trajectories must be bit-identical.  Prints one row per model
+and method: ms with ``mb_copy``, ms with memcpy, their ratio.  (The slowdown needs the
+compile in the same process: loaded from a cache another process filled, and with both
+variants in one process, memcpy ran as fast on this machine: what slows the arithmetic is
+probably the state the processor is left in by the library's AVX-512 code, not the copies.)
 """
 from __future__ import annotations
 
@@ -30,7 +32,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-os.environ["MBCOMP_CACHE_DIR"] = tempfile.mkdtemp(prefix="state-copy-")
+os.environ["MBCOMP_CACHE_DIR"] = tempfile.mkdtemp(prefix="state-copy-")  # each process its own
 
 import mbcomp as mb  # noqa: E402
 from mbcomp import codegen  # noqa: E402

@@ -6,9 +6,9 @@ table through a name: ``NQ``, ``DYNAMICS_FORCES_OFF``, ``QUAT_Q``, ...  ``CSizes
 declares those names as hidden (library-local) constants defined elsewhere, and
 ``CSizes.unit`` is the small C unit that defines them, with the per-thread buffers whose
 length depends on them, for one model.  The templates' text then depends on a handful of
-compile-time constants only (``CSizes.flags``: drives, constraints, contacts,
-quaternions), so the code cache compiles it once per kind of model
-instead of once per size: about 0.22 s of C compiler at -O1 each time it is not compiled.
+compile-time constants only (``CSizes.flags``: drives, constraints, contacts, quaternions),
+so the code cache compiles it once per kind of model instead of once per size: about 0.22 s
+of C compiler at -O1 each time it is not compiled.
 """
 from __future__ import annotations
 
@@ -67,11 +67,12 @@ class CSizes:
             "dae_lam": ("double", dae_rows + 1),
         }
         # The length of the mechanical state (NMECH) and the number of drive states (NZ) are
-        # read at run time too, so one compiled templates object serves every size of a kind.  (It was a compile-time constant for
-        # trees, whose compiled runs of 3 to 10 links were 12-16 % slower with it read at run
-        # time: not the loops themselves but the C library's memcpy, which a copy of unknown
-        # length called, in its AVX-512 version, slowing the SSE2 arithmetic after it; the
-        # templates copy with their own ``mb_copy`` now, bench/state_copy.py.)
+        # read at run time too, so one compiled templates object serves every size of a kind.
+        # (The state length was a compile-time constant for trees, whose compiled runs of 3 to
+        # 10 links were 12-16 % slower with it read at run time: not the loops themselves but
+        # the C library's memcpy, which a copy of unknown length called, in its AVX-512
+        # version, slowing the SSE2 arithmetic after it; the templates copy with their own
+        # ``mb_copy`` now, bench/state_copy.py.)
         flags = {"HAS_DRIVES": int(bool(drives)), "MB_HAS_NG": int(ng > 0), "MB_HAS_CONTACTS": int(nk > 0),
                  "MB_HAS_QUAT": int(state_map.quat_q.size > 0)}
         values["NMECH"], values["NZ"] = ncoord + nv, nz

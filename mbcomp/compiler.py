@@ -181,8 +181,9 @@ class CompiledModel:
     def _c_templates(self, sizes: CSizes) -> str:
         """The hand-written C linked into every model: the tree accelerations, the
         formulations' code and the integrators.  Its text depends on the kind of model
-        (``sizes.flags``; the formulations; dense or recursive), not on its sizes, which ``sizes.header`` declares and the model's own unit
-        (``sizes.unit``) defines: models of one kind share one compiled object."""
+        (``sizes.flags``; the formulations; dense or recursive), not on its sizes, which
+        ``sizes.header`` declares and the model's own unit (``sizes.unit``) defines: models
+        of one kind share one compiled object."""
         from .integrators import c_integrators
         nv, ng = self.topology.nv, len(self.geometric_rows)
         tree = codegen.c_accelerations()
