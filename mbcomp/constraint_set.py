@@ -28,13 +28,6 @@ class ConstraintValues:
     bias: np.ndarray
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of 3-vectors (or rows of (k, 3) arrays); np.cross costs ~20 us a call."""
-    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
-    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
-
-
 def _derivatives(f, t: float, h: float = 1e-3, exact=None):
     """Value, first and second derivative of a function of time: exact when the function
     provides ``diff()`` (file expressions), else 5-point stencils (error O(h^4))."""

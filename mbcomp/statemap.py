@@ -7,12 +7,13 @@ call handles a single state or every sample of a result.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import ModelError
-from .rotations import quat_log
+from .rotations import cross, quat_log
 
 
 @dataclass(frozen=True)
@@ -50,10 +51,15 @@ class StateMap:
         """True when every speed is its coordinate's rate (no quaternions)."""
         return self.quat_q.size == 0
 
-    def _quat_index(self) -> np.ndarray:
+    @functools.cached_property
+    def _quat_rows(self) -> np.ndarray:
+        """``(k, 4)`` indices of each quaternion's coordinates (built once: the per-step
+        updates index with them)."""
         return self.quat_q[:, None] + np.arange(4)
 
-    def _omega_index(self) -> np.ndarray:
+    @functools.cached_property
+    def _omega_rows(self) -> np.ndarray:
+        """``(k, 3)`` indices of each quaternion's angular speeds."""
         return self.quat_v[:, None] + np.arange(3)
 
     def qdot(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -63,12 +69,12 @@ class StateMap:
         q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
         out = np.empty(q.shape[:-1] + (self.nq,))
         out[..., self.screw_q] = v[..., self.screw_v]
-        quat, w = q[..., self._quat_index()], v[..., self._omega_index()]
+        quat, w = q[..., self._quat_rows], v[..., self._omega_rows]
         a, b = quat[..., 0], quat[..., 1:]
         rate = np.empty_like(quat)
         rate[..., 0] = -0.5 * np.sum(b * w, axis=-1)
-        rate[..., 1:] = 0.5 * (a[..., None] * w + np.cross(b, w))
-        out[..., self._quat_index()] = rate
+        rate[..., 1:] = 0.5 * (a[..., None] * w + cross(b, w))
+        out[..., self._quat_rows] = rate
         return out
 
     def normalize(self, q: np.ndarray) -> np.ndarray:
@@ -76,7 +82,7 @@ class StateMap:
         if self.identity:
             return q
         q = np.array(q, dtype=float)
-        idx = self._quat_index()
+        idx = self._quat_rows
         quat = q[..., idx]
         norm = np.linalg.norm(quat, axis=-1, keepdims=True)
         bad = ~((norm[..., 0] > 1e-300) & np.isfinite(norm[..., 0]))
@@ -96,14 +102,14 @@ class StateMap:
         q, dv = np.asarray(q, dtype=float), np.asarray(dv, dtype=float)
         out = np.array(q, dtype=float)
         out[..., self.screw_q] = q[..., self.screw_q] + dv[..., self.screw_v]
-        phi = dv[..., self._omega_index()]
+        phi = dv[..., self._omega_rows]
         angle = np.linalg.norm(phi, axis=-1, keepdims=True)
         small = angle < 1e-4
         k = np.where(small, 0.5 - angle ** 2 / 48, np.sin(angle / 2) / np.where(small, 1.0, angle))
         step = np.concatenate((np.cos(angle / 2), k * phi), axis=-1)
-        quat = q[..., self._quat_index()]
+        quat = q[..., self._quat_rows]
         product = _multiply(quat, step)
-        out[..., self._quat_index()] = product / np.linalg.norm(product, axis=-1, keepdims=True)
+        out[..., self._quat_rows] = product / np.linalg.norm(product, axis=-1, keepdims=True)
         return out
 
     def difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
@@ -114,13 +120,13 @@ class StateMap:
             return q1 - q0
         out = np.zeros(q0.shape[:-1] + (self.nv,))
         out[..., self.screw_v] = q1[..., self.screw_q] - q0[..., self.screw_q]
-        a, b = self.normalize(q0)[..., self._quat_index()], self.normalize(q1)[..., self._quat_index()]
+        a, b = self.normalize(q0)[..., self._quat_rows], self.normalize(q1)[..., self._quat_rows]
         relative = _multiply(a * np.array([1.0, -1.0, -1.0, -1.0]), b)
         relative = np.where(relative[..., :1] < 0, -relative, relative)
         n = np.linalg.norm(relative[..., 1:], axis=-1, keepdims=True)
         angle = 2 * np.arctan2(n, relative[..., :1])
         scale = np.where(n < 1e-12, 2.0 / np.maximum(relative[..., :1], 1e-300), angle / np.where(n < 1e-12, 1.0, n))
-        out[..., self._omega_index()] = scale * relative[..., 1:]
+        out[..., self._omega_rows] = scale * relative[..., 1:]
         return out
 
     def neutral(self) -> np.ndarray:
@@ -135,7 +141,7 @@ def _multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     aw, av = a[..., :1], a[..., 1:]
     bw, bv = b[..., :1], b[..., 1:]
     w = aw * bw - np.sum(av * bv, axis=-1, keepdims=True)
-    v = aw * bv + bw * av + np.cross(av, bv)
+    v = aw * bv + bw * av + cross(av, bv)
     return np.concatenate((w, v), axis=-1)
 
 
@@ -156,7 +162,7 @@ class Chart:
         if m.identity:
             return np.array(x, dtype=float)
         dv = np.zeros(m.nv)
-        dv[m._omega_index()] = x[m._omega_index()]
+        dv[m._omega_rows] = x[m._omega_rows]
         q = m.integrate(self.base, dv)
         q[m.screw_q] = x[m.screw_v]
         return q
@@ -177,7 +183,7 @@ class Chart:
         """The largest |phi| (rad) of the chart's rotations (0 without quaternions)."""
         if self.map.identity:
             return 0.0
-        return float(np.max(np.linalg.norm(x[self.map._omega_index()], axis=-1)))
+        return float(np.max(np.linalg.norm(x[self.map._omega_rows], axis=-1)))
 
     def tangent(self, x: np.ndarray) -> np.ndarray | None:
         """``D = dv/dx`` (nv x nv): identity on screws, ``J_r(phi)`` on rotations (None when

@@ -8,7 +8,7 @@ import numpy as np
 
 from .components._values import name_of
 from . import checks
-from .constraint_set import cross
+from .rotations import cross
 from .errors import ModelError
 from .fastcall import DECLINE
 from .kernel import Kernel
