@@ -383,16 +383,14 @@ def main(argv=None):
     if kept_parts:
         head.append(f"- this run measured: {', '.join(p for p in PARTS if p in sections)}; the sections "
                     f"{', '.join(kept_parts)} are kept from the previous summary ({kept_date.lstrip('- ') or 'undated'})")
-    text = ["# Side-by-side benchmark summary", "",
-            f"Written by `python bench/run_all.py{' --quick' if quick else ''}` "
-            f"({'smoke run: one round, fewer settings' if quick else f'{rounds} interleaved rounds, medians'}; "
-            f"{total / 60:.1f} min). Ratios are mbcomp / fastest peer from this one run; a ratio below 1 means "
-            "mbcomp is faster. Wall time is the primary figure on a machine with a free core; the machine may be "
-            "shared, so CPU-time ratios are given too, and the chain's verdicts are judged by CPU time when it was "
-            "oversubscribed (see its section)."
-            if "chain" in sections else
-            "mbcomp is faster. Wall time is the primary figure; the machine may be shared, so CPU-time ratios "
-            "are given too.", ""] + head + ["", *overview, ""]
+    intro = (f"Written by `python bench/run_all.py{' --quick' if quick else ''}` "
+             f"({'smoke run: one round, fewer settings' if quick else f'{rounds} interleaved rounds, medians'}; "
+             f"{total / 60:.1f} min). Ratios are mbcomp / fastest peer from this one run; a ratio below 1 means "
+             "mbcomp is faster. Wall time is the primary figure on a machine with a free core; the machine may be "
+             "shared, so CPU-time ratios are given too")
+    intro += (", and the chain's verdicts are judged by CPU time when it was oversubscribed (see its section)."
+              if "chain" in sections else ".")
+    text = ["# Side-by-side benchmark summary", "", intro, ""] + head + ["", *overview, ""]
     for part in PARTS:
         if part in sections:
             text += sections[part] + [""]
