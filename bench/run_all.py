@@ -275,6 +275,18 @@ def merge_chain_rows(lines: list[str], oks: list[bool], previous: list[str], siz
     return lines[:start + 1] + table + ["", note], oks
 
 
+def summary_intro(quick: bool, rounds: int, minutes: float, chain: bool) -> str:
+    """The summary's first paragraph: how it was written and how to read the ratios (the
+    chain's clock rule only when this run measured the chain)."""
+    intro = (f"Written by `python bench/run_all.py{' --quick' if quick else ''}` "
+             f"({'smoke run: one round, fewer settings' if quick else f'{rounds} interleaved rounds, medians'}; "
+             f"{minutes:.1f} min). Ratios are mbcomp / fastest peer from this one run; a ratio below 1 means "
+             "mbcomp is faster. Wall time is the primary figure on a machine with a free core; the machine may be "
+             "shared, so CPU-time ratios are given too")
+    return intro + (", and the chain's verdicts are judged by CPU time when it was oversubscribed (see its section)."
+                    if chain else ".")
+
+
 def previous_summary(path: Path) -> tuple[str, dict, dict]:
     """``(date line, {part: section lines}, {overview name: overview row})`` of an existing
     summary.md (``--update`` keeps the parts not run again); empty when there is none."""
@@ -383,14 +395,8 @@ def main(argv=None):
     if kept_parts:
         head.append(f"- this run measured: {', '.join(p for p in PARTS if p in sections)}; the sections "
                     f"{', '.join(kept_parts)} are kept from the previous summary ({kept_date.lstrip('- ') or 'undated'})")
-    intro = (f"Written by `python bench/run_all.py{' --quick' if quick else ''}` "
-             f"({'smoke run: one round, fewer settings' if quick else f'{rounds} interleaved rounds, medians'}; "
-             f"{total / 60:.1f} min). Ratios are mbcomp / fastest peer from this one run; a ratio below 1 means "
-             "mbcomp is faster. Wall time is the primary figure on a machine with a free core; the machine may be "
-             "shared, so CPU-time ratios are given too")
-    intro += (", and the chain's verdicts are judged by CPU time when it was oversubscribed (see its section)."
-              if "chain" in sections else ".")
-    text = ["# Side-by-side benchmark summary", "", intro, ""] + head + ["", *overview, ""]
+    text = ["# Side-by-side benchmark summary", "", summary_intro(quick, rounds, total / 60, "chain" in sections),
+            ""] + head + ["", *overview, ""]
     for part in PARTS:
         if part in sections:
             text += sections[part] + [""]

@@ -92,3 +92,13 @@ def test_chain_verdicts_follow_the_chosen_clock():
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[2] == "1.5" and cells[4] == "5" and cells[6:] == ["0.8", "0.3", "PASS"]
     assert "oversubscribed" in " ".join(cpu_lines) and "oversubscribed" not in " ".join(wall_lines)
+
+
+def test_the_intro_is_whole_with_or_without_the_chain():
+    """A partial run without the chain once wrote only the intro's last sentence."""
+    for chain in (True, False):
+        intro = run_all.summary_intro(False, 3, 0.6, chain)
+        assert intro.startswith("Written by `python bench/run_all.py` (3 interleaved rounds, medians; 0.6 min).")
+        assert "a ratio below 1 means mbcomp is faster" in intro
+        assert ("oversubscribed" in intro) == chain and intro.endswith(".")
+    assert "smoke run" in run_all.summary_intro(True, 1, 2.0, True)
