@@ -68,7 +68,8 @@ def primed_cache(source: Path, target: Path) -> Path:
 #: allocations).  The suite builds millions of short-lived symbolic and array objects; with
 #: collections every 50,000 allocations, and the objects that exist once the tests are
 #: collected (modules, classes, test items: never garbage) frozen out of later collections,
-#: the whole run took about 3 % less processor time (198 -> 192 s of user time, 2 workers).
+#: the whole run took about 3 % less processor time (one pair of runs: 198 -> 192 s of user
+#: time, 2 workers).
 GC_THRESHOLD = (50_000, 20, 20)
 
 
