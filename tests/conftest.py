@@ -39,9 +39,10 @@ def _private_cache(tmp_path_factory):
 
 def templates_cache(directory: Path, model, **options) -> Path:
     """A private cache ``directory`` holding only the compiled C templates object(s) of
-    ``model``'s kind (compiled into it here, with the ``compile`` ``options``) and the cache's secret: the tests of one file
-    that each need a cache of their own (what a compile writes, what a damaged entry does)
-    copy it with :func:`primed_cache` instead of compiling the hand-written templates again."""
+    ``model``'s kind (compiled into it here, with the ``compile`` ``options``) and the
+    cache's secret: the tests of one file that each need a cache of their own (what a
+    compile writes, what a damaged entry does) copy it with :func:`primed_cache` instead of
+    compiling the hand-written templates again."""
     old = os.environ.get("MBCOMP_CACHE_DIR")
     os.environ["MBCOMP_CACHE_DIR"] = str(directory)
     try:
