@@ -37,21 +37,12 @@ os.environ["MBCOMP_CACHE_DIR"] = tempfile.mkdtemp(prefix="state-copy-")  # each 
 import mbcomp as mb  # noqa: E402
 from mbcomp import codegen  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import pendulum_chain as chain  # noqa: E402
+
 OWN = codegen.C_TEMPLATE_LIBC
 #: The same prelude with the copies left to the C library.
 LIBC = OWN.split("/* The compiled loops copy")[0] + "#define mb_copy memcpy\n"
-
-
-def chain(n: int) -> mb.Model:
-    """The benchmark chain of bench/README.md."""
-    m = mb.Model(f"chain{n}", gravity=(0, 0, -9.81))
-    parent = m.ground
-    for i in range(n):
-        body = m.add(mb.Body(f"link{i}", mass=1.0, com=(0, 0, -0.25), inertia=(0.25 / 12, 0.25 / 12, 1e-4)))
-        m.add(mb.Revolute(f"joint{i}", parent, body, axis="x" if i % 2 == 0 else "y",
-                          parent_point=(0, 0, -0.5) if i else (0, 0, 0)))
-        parent = body
-    return m
 
 
 def cases(names):
