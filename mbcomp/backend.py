@@ -256,11 +256,12 @@ class CBuild:
         self._shared: list = []    # (object path, cache key, toolchain inputs) to store once compiled
         self._held = contextlib.ExitStack()  # build locks of the shared units this build compiles
         self._deferred: list = []  # shared units another process is compiling: (add's arguments, key)
-        # Reaps finished compilers and starts waiting units while the caller is busy (building
-        # the rest of the program in Python): a free core never waits for the next ``add``.
+        # Each compiler has a thread that waits for it (no polling) and then reaps it and starts
+        # the next waiting unit, also while the caller is busy building the rest of the program
+        # in Python: a free core never waits for the next ``add``, nor for a timer.
         self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)  # notified when a compiler ends
         self._stop = threading.Event()
-        self._watcher: threading.Thread | None = None
 
     def add(self, name: str, text: str, flags: tuple[str, ...], statements: int = 0, last: bool = False,
             shared: dict | None = None, beside: bool = False) -> None:
@@ -311,29 +312,28 @@ class CBuild:
             self._waiting.append((statements, name, tuple(flags)))
             self._waiting.sort(key=lambda item: item[0])
         self._pump()
-        if self._watcher is None:
-            self._watcher = threading.Thread(target=self._watch, name="mbcomp-cbuild", daemon=True)
-            self._watcher.start()
 
-    def _watch(self) -> None:
-        """The watcher thread: pump every few milliseconds until ``finish`` or ``cancel``."""
-        while not self._stop.wait(0.004):
-            self._pump()
+    def _reap(self, process: subprocess.Popen) -> None:
+        """A compiler's own thread: wait for it to end, then reap it and start what waits."""
+        process.wait()
+        with self._changed:
+            if not self._stop.is_set():
+                self._pump_once()
+            self._changed.notify_all()
 
     def _pump(self, block: bool = False) -> None:
         """Reap finished compilers and start waiting units while slots are free; with
         ``block``, until every unit is compiled (or one failed, or ``TIMEOUT`` s passed)."""
         deadline = time.monotonic() + self.TIMEOUT
-        while True:
-            with self._lock:
+        with self._changed:
+            self._pump_once()
+            while block and self._running:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    self._failure = f"a compiler ran for more than {self.TIMEOUT} s"
+                    return
+                self._changed.wait(remaining)
                 self._pump_once()
-                running = bool(self._running)
-            if not block or not running:
-                return
-            if time.monotonic() > deadline:
-                self._failure = f"a compiler ran for more than {self.TIMEOUT} s"
-                return
-            time.sleep(0.002)
 
     def _pump_once(self) -> None:
         """Reap finished compilers and start waiting units while slots are free (under the lock)."""
@@ -363,6 +363,7 @@ class CBuild:
                 self._failure = str(exc)
                 break
             self._running.append((process, name))
+            threading.Thread(target=self._reap, args=(process,), name=f"mbcomp-cc-{name}", daemon=True).start()
 
     def finish(self) -> bytes | None:
         """Wait for every unit, link them, remove the directory; the library's bytes or None."""
@@ -406,8 +407,6 @@ class CBuild:
         """Stop every compiler still running and remove the build directory."""
         self._held.close()
         self._stop.set()
-        if self._watcher is not None and self._watcher is not threading.current_thread():
-            self._watcher.join()
         with self._lock:
             for process, _ in self._running:
                 process.kill()
