@@ -82,6 +82,15 @@ def pytest_collection_finish(session):
     gc.freeze()
 
 
+def pytest_sessionfinish(session):
+    """Collect once (finalizers that raise are still reported), then freeze what is left:
+    pytest's clean-up then collects five times more over the frozen heap at no cost, where
+    each full collection of a worker's heap took 0.16-0.36 s (about 1 s at the end of the
+    run).  What this collection's finalizers leave as garbage is not collected again."""
+    gc.collect()
+    gc.freeze()
+
+
 #: Modules whose tests take long to start (a browser) run first: at the end of a parallel
 #: run they kept one worker busy for 3-4 s while the other had nothing left to do.
 RUN_FIRST = ("test_viewer_browser.py",)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..constraint_set import ConstraintValues
 from ..errors import format_state, ModelError, SimulationError
+from .small_qr import orthonormal_basis, pivoted_qr
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
 #: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of
@@ -33,19 +34,17 @@ def independent_rows(J: np.ndarray, tol: float = RANK_TOLERANCE, scale: float = 
     """
     if J.shape[0] == 0 or J.shape[1] == 0:
         return np.arange(0)
-    import scipy.linalg  # on first use: scipy is not imported with mbcomp
     if prefer is not None and 0 < np.count_nonzero(prefer) < J.shape[0]:
         first, second = np.flatnonzero(prefer), np.flatnonzero(~np.asarray(prefer, dtype=bool))
         reference = max(float(np.max(np.linalg.norm(J, axis=1))), scale)
         chosen = first[independent_rows(J[first], tol, reference)]
         rest = J[second]
         if chosen.size:
-            basis = scipy.linalg.qr(J[chosen].T, mode="economic")[0]
+            basis = orthonormal_basis(J[chosen].T)
             rest = rest - (rest @ basis) @ basis.T
         extra = second[independent_rows(rest, tol, reference)] if rest.size and np.any(rest) else np.arange(0)
         return np.sort(np.concatenate((chosen, extra)).astype(int))
-    _, R, piv = scipy.linalg.qr(J.T, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(R))
+    diag, piv = pivoted_qr(J.T)
     if diag.size == 0 or diag[0] == 0.0:
         return np.arange(0)
     rank = int(np.sum(diag > tol * max(diag[0], scale)))
@@ -493,8 +492,7 @@ def analyse(formulation, kernel, tries: int = 6, seed: int = 0) -> FormulationIn
         # The generic rank is the largest found: a configuration may be singular (a
         # parallelogram built collinear), never more regular than the mechanism.
         if best is None or rows.size > best[0].size:
-            import scipy.linalg  # on first use: scipy is not imported with mbcomp
-            pivots = np.abs(np.diag(scipy.linalg.qr(J.T, mode="economic", pivoting=True)[1]))
+            pivots = pivoted_qr(J.T)[0]
             best = (rows, J.shape[0], float(pivots[0]) if pivots.size else 0.0, q)
         if consistent >= 3:
             break

@@ -7,6 +7,7 @@ from ..errors import SimulationError, TrialStateError, format_state
 from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 from .lagrange_c import c_lagrange
+from .small_qr import pivoted_qr
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
 CHART_LIMIT = 1.0
@@ -22,8 +23,7 @@ def partition(J: np.ndarray):
     nq = J.shape[1]
     if J.shape[0] == 0:
         return np.arange(0), np.arange(nq)
-    import scipy.linalg  # on first use: scipy is not imported with mbcomp
-    _, _, piv = scipy.linalg.qr(J, mode="economic", pivoting=True)
+    _, piv = pivoted_qr(J)
     dep = np.sort(piv[: J.shape[0]])
     ind = np.setdiff1d(np.arange(nq), dep)
     return dep, ind

@@ -1,0 +1,52 @@
+"""The direct LAPACK QR of small Jacobians gives scipy.linalg.qr's numbers to the bit."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from mbcomp.formulations.small_qr import orthonormal_basis, pivoted_qr
+
+
+def matrices():
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        m, n = (int(k) for k in rng.integers(1, 9, 2))
+        a = rng.standard_normal((m, n))
+        if trial % 3 == 0 and m > 1:
+            a[-1] = 2.0 * a[0]                       # a dependent row: rank-deficient
+        if trial % 5 == 0:
+            a = np.asfortranarray(a)
+        yield a
+
+
+def test_pivoted_qr_gives_scipys_pivots_and_diagonal():
+    for a in matrices():
+        _, r, piv = scipy.linalg.qr(a, mode="economic", pivoting=True)
+        diag, order = pivoted_qr(a)
+        np.testing.assert_array_equal(diag, np.abs(np.diag(r)))
+        np.testing.assert_array_equal(order, piv)
+        assert np.all(np.diff(diag) <= 0)                  # non-increasing: rank revealing
+
+
+def test_orthonormal_basis_is_scipys_q():
+    for a in matrices():
+        q = orthonormal_basis(a)
+        np.testing.assert_array_equal(q, scipy.linalg.qr(a, mode="economic")[0])
+        np.testing.assert_allclose(q.T @ q, np.eye(q.shape[1]), atol=1e-14)
+
+
+def test_a_rank_one_matrix_has_one_pivot_above_rounding():
+    a = np.outer([1.0, 2.0, -1.0], [0.5, 0.0, 3.0, 1.0])
+    diag, _ = pivoted_qr(a)
+    assert diag[0] > 1.0 and np.all(diag[1:] < 1e-14 * diag[0])
+
+
+def test_empty_and_non_finite_input():
+    diag, order = pivoted_qr(np.zeros((0, 3)))
+    assert diag.size == 0 and order.tolist() == [0, 1, 2]
+    assert orthonormal_basis(np.zeros((3, 0))).shape == (3, 0)
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        pivoted_qr(np.array([[1.0, np.nan]]))
+    with pytest.raises(ValueError, match="2-D"):
+        orthonormal_basis(np.ones(3))
