@@ -183,9 +183,9 @@ class Formulation:
         rows = self.nominal_rows if not contacts and self.nominal_rows is not None else None
         for attempt in range(2):
             if rows is None:
-                if qd is not None:
-                    self.check_dead_point(J, qd, t, q, contacts)
                 rows = self.rows_of(J)
+                if qd is not None:
+                    self.check_dead_point(J, qd, t, q, contacts, rows)
             if rows.size == 0:
                 return Minv_f, lam
             Js = J[rows]
@@ -205,10 +205,11 @@ class Formulation:
         lam[rows] = lam_s
         return Minv_f + Minv_JT @ lam_s, lam
 
-    def check_dead_point(self, J, qd, t, q, contacts=()):
+    def check_dead_point(self, J, qd, t, q, contacts=(), rows=None):
         """At rest on a configuration where the Jacobian lost rank the motion is not
-        determined (a bifurcation): raise naming the constraints involved."""
-        rows = self.rows_of(J)
+        determined (a bifurcation): raise naming the constraints involved.  ``rows``: the
+        independent rows of ``J`` when the caller has them (``rows_of``)."""
+        rows = self.rows_of(J) if rows is None else rows
         nominal = self.nominal_rank
         if nominal is not None and not contacts and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))

@@ -48,8 +48,8 @@ class LagrangeWorkspace(Workspace):
         self.chart = Chart(self.state_map, q)
         cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.kernel.nv), self.offsets,
                                                 self.contacts)
-        self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts)
         self.rows = self.formulation.rows_of(cv.J)
+        self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts, self.rows)
         self.dep, self.ind = partition(cv.J[self.rows])
 
     def dependent(self, t, xi):
@@ -106,7 +106,7 @@ class LagrangeWorkspace(Workspace):
         q, qd, x = self._full_state(t, y)
         tau = self.kernel.tau(self.tau, t, q, qd)
         qdd, _ = self.formulation.solve(self.kernel, t, q, qd, tau, self.offsets, self.contacts,
-                                        (self.rows, self.dep, self.ind))
+                                        (self.rows, self.dep, self.ind), multipliers=False)
         return np.concatenate((self.chart.rate(x, qd)[self.ind], qdd[self.ind]))
 
     def after_step(self, t, y):
@@ -214,14 +214,16 @@ class LagrangeFormulation(Formulation):
         from .lagrange_compiled import ReducedRun
         return ReducedRun(self, kernel, lib, q0, qd0, tau)
 
-    def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None):
+    def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None, multipliers=True):
+        """``(qdd, lam)``; without ``multipliers`` (the stepping's right-hand side, which
+        needs only qdd) lam is left zero instead of solved for."""
         if self.constraints is None and not contacts:
             return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
         M, f = kernel.checked_dynamics(t, q, qd, tau)
         cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         if partition_hint is None:
-            self.check_dead_point(cv.J, qd, t, q, contacts)
             rows = self.rows_of(cv.J)
+            self.check_dead_point(cv.J, qd, t, q, contacts, rows)
             dep, ind = partition(cv.J[rows])
         else:
             rows, dep, ind = partition_hint
@@ -246,5 +248,6 @@ class LagrangeFormulation(Formulation):
             qdd = B @ qdd_i + c
         else:
             qdd = c
-        lam[rows] = np.linalg.lstsq(J.T, M @ qdd - f, rcond=None)[0]
+        if multipliers:
+            lam[rows] = np.linalg.lstsq(J.T, M @ qdd - f, rcond=None)[0]
         return qdd, lam
