@@ -5,10 +5,12 @@ The templates (tree solve, formulations, integrators) read every size, offset an
 table through a name: ``NQ``, ``DYNAMICS_FORCES_OFF``, ``QUAT_Q``, ...  ``CSizes.header``
 declares those names as hidden (library-local) constants defined elsewhere, and
 ``CSizes.unit`` is the small C unit that defines them, with the per-thread buffers whose
-length depends on them, for one model.  The templates' text then depends on a handful of
-compile-time constants only (``CSizes.flags``: drives, constraints, contacts, quaternions),
-so the code cache compiles it once per kind of model instead of once per size: about 0.22 s
-of C compiler at -O1 each time it is not compiled.
+length depends on them, for one model; so are what a model has (``HAS_DRIVES``,
+``MB_HAS_NG``, ``MB_HAS_CONTACTS``, ``MB_HAS_QUAT``: tested with ``if``, not ``#if``).  The
+templates' text then depends only on the kind of model (the formulations' code it needs:
+trees, loops, contacts; dense or recursive dynamics), so the code cache compiles it once per
+kind instead of once per size and feature set: 0.3-1.5 s of C compiler at -O1 each time it
+is not compiled.
 """
 from __future__ import annotations
 
@@ -29,15 +31,13 @@ class CSizes:
 
     ``values``: ``int`` constants (``NQ``, the output layout's ``*_OFF``/``*_SIZE``, ...);
     ``tables``: ``int`` arrays (quaternion and screw indices, the recursion's parents);
-    ``buffers``: per-thread arrays ``{name: (C type, length)}``; ``flags``: the
-    compile-time constants, the switches the templates test with ``#if`` (the only model
-    facts in their text).
+    ``buffers``: per-thread arrays ``{name: (C type, length)}``.  No model fact is a
+    compile-time constant of the templates (``check_generic``).
     """
 
     values: Mapping[str, int]
     tables: Mapping[str, tuple[int, ...]] = field(default_factory=dict)
     buffers: Mapping[str, tuple[str, int]] = field(default_factory=dict)
-    flags: Mapping[str, int] = field(default_factory=dict)
 
     @classmethod
     def of(cls, layout, *, nq: int, ng: int, state_map, nz: int, drives: bool,
@@ -73,15 +73,19 @@ class CSizes:
         # the C library's memcpy, which a copy of unknown length called, in its AVX-512
         # version, slowing the SSE2 arithmetic after it; the templates copy with their own
         # ``mb_copy`` now, bench/state_copy.py.)
-        flags = {"HAS_DRIVES": int(bool(drives)), "MB_HAS_NG": int(ng > 0), "MB_HAS_CONTACTS": int(nk > 0),
-                 "MB_HAS_QUAT": int(state_map.quat_q.size > 0)}
         values["NMECH"], values["NZ"] = ncoord + nv, nz
-        return cls(values, tables, buffers, flags)
+        # What the model has (drive elements, constraint rows, contacts, quaternions) is read at
+        # run time too: the templates skip what a model lacks with an ``if`` on these, and
+        # every model of a kind shares one object (they were compile-time switches, which
+        # gave a suite run 19 template kinds instead of about 5).
+        values.update(HAS_DRIVES=int(bool(drives)), MB_HAS_NG=int(ng > 0), MB_HAS_CONTACTS=int(nk > 0),
+                      MB_HAS_QUAT=int(state_map.quat_q.size > 0))
+        return cls(values, tables, buffers)
 
     def header(self) -> str:
-        """C for the shared templates: the flags, and every size, table and buffer declared
-        by name (defined by ``unit``)."""
-        lines = [f"#define {name} {value}" for name, value in self.flags.items()]
+        """C for the shared templates: every size, table and buffer declared by name
+        (defined by ``unit``)."""
+        lines = []
         for name in self.values:
             lines.append(f"extern const int mb_{name} {HIDDEN};\n#define {name} mb_{name}")
         lines += [f"extern const int {name}[] {HIDDEN};" for name in self.tables]
@@ -114,7 +118,7 @@ class CSizes:
             if stripped.startswith(("#if ", "#elif ")):
                 used = set(re.findall(r"[A-Za-z_]\w*", stripped.split("/*")[0][3:])) & runtime
                 if used:
-                    raise AssertionError(f"the C templates test sizes {sorted(used)} in {stripped!r}: use a flag")
+                    raise AssertionError(f"the C templates test sizes {sorted(used)} in {stripped!r}: test them with an if")
             match = re.match(r"#define (\w+) -?\d+\s*$", stripped)
             if match and match.group(1) in self.values:
                 raise AssertionError(f"the C templates define the size {match.group(1)} as a number")

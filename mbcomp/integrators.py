@@ -294,8 +294,8 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         mb_copy(y, y_new, sizeof(double) * LOOP_NY);
         mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
-#if defined(DAE_LOOP) && !MB_HAS_QUAT && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
+#if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
         }
@@ -335,19 +335,19 @@ static double dummy_input[1];
 static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     (void)t;
     const double *v = y + NCOORD;
-#if MB_HAS_QUAT
-    for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
-    for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
-        const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
-        double *r = f + QUAT_Q[k];
-        r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
-        r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
-        r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
-        r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
+    if (MB_HAS_QUAT) {
+        for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
+        for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
+            const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
+            double *r = f + QUAT_Q[k];
+            r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
+            r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
+            r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
+            r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
+        }
+    } else {
+        for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
     }
-#else
-    for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
-#endif
 #ifdef DAE_LOOP
     if (dae_nr >= 0) {
         dae_time = t;
@@ -360,21 +360,16 @@ static int mech_rhs(double t, const double *y, double *f, const double *p, const
 
 /* Quaternions back to unit length (after each accepted step). */
 static void normalize_state(double *y) {
-#if MB_HAS_QUAT
     for (int k = 0; k < NQUAT; ++k) {
         double *a = y + QUAT_Q[k];
         const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
         if (n > 0) for (int i = 0; i < 4; ++i) a[i] /= n;
     }
-#else
-    (void)y;
-#endif
 }
 
-#if HAS_DRIVES
 /* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
    f[NMECH..] gets the states' rates. */
-static int rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+static int drive_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
     double u[1 + NZ], out[NV + NZ], tau_all[NV];
     u[0] = t;
     for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
@@ -383,9 +378,13 @@ static int rhs(double t, const double *y, double *f, const double *p, const doub
     for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
     return mech_rhs(t, y, f, p, tau_all, work);
 }
-#else
-#define rhs mech_rhs
-#endif
+
+/* The rate of the state: with the drive elements' states when the model has drive elements
+   (inlined at every call: one call per evaluation, as before HAS_DRIVES was read at run time). */
+static inline __attribute__((always_inline)) int rhs(double t, const double *y, double *f, const double *p,
+                                                     const double *tau, double *work) {
+    return HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
+}
 /* The step hook: called with the simulated time about every `hook_interval` s of processor
    time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
    around each run to react to Ctrl-C, to stop requests and to show progress. */

@@ -26,15 +26,35 @@ def test_trees_of_every_size_share_the_templates_text_and_differ_in_their_unit()
     assert f"mb_KINEMATICS_SIZE = {chain_sizes.values['KINEMATICS_SIZE']};" in chain_sizes.unit()
     longer, sizes7 = _templates(pendulum_chain(7))  # another state length: read at run time too
     assert longer == chain and sizes7.values["DYNAMICS_FORCES_OFF"] == 7 * 8 // 2 and sizes7.values["NMECH"] == 14
-    assert "mb_NMECH = 14;" in sizes7.unit() and "NMECH" not in sizes7.flags
+    assert "mb_NMECH = 14;" in sizes7.unit() and "#define NMECH mb_NMECH" in longer
 
 
 def test_a_loop_and_a_tree_are_different_kinds():
     tree, _ = _templates(pendulum_chain(4), formulation="dae")
     loop, sizes = _templates(fourbar(), formulation="dae")
     rows = len(fourbar().compile(backend="python", cache=False)._compiled.geometric_rows)
-    assert tree != loop and sizes.flags["MB_HAS_NG"] == 1 and sizes.values["NG"] == rows > 0
-    assert "#define MB_HAS_NG 1" in loop and "#define MB_HAS_NG 0" in tree
+    _, tree_sizes = _templates(pendulum_chain(4), formulation="dae")
+    assert tree != loop and sizes.values["MB_HAS_NG"] == 1 and sizes.values["NG"] == rows > 0
+    assert "mb_MB_HAS_NG = 1;" in sizes.unit() and "mb_MB_HAS_NG = 0;" in tree_sizes.unit()
+    assert loop.startswith("#define REDUCED_LOOP 1\n#define DAE_LOOP 1\n") and "#define DAE_LOOP" not in tree
+
+
+def test_what_a_model_has_is_read_at_run_time_so_the_library_compiles_two_kinds():
+    """Drive elements, constraint rows, contacts and quaternions are run-time values: the
+    38 compiles of the library's models (both formulations) need two templates objects, one
+    for trees (quaternions and drive elements among them) and one for loops and contacts."""
+    from pathlib import Path
+    kinds: dict[str, list] = {}
+    for path in sorted((Path(__file__).resolve().parents[1] / "library").glob("*.toml")):
+        for formulation in ("lagrange", "dae"):
+            text, sizes = _templates(mb.load(path), formulation=formulation)
+            kinds.setdefault(text, []).append(sizes.values)
+    assert len(kinds) == 2
+    has = {name: {tuple(sorted({v[name] for v in members})) for members in kinds.values()}
+           for name in ("HAS_DRIVES", "MB_HAS_NG", "MB_HAS_CONTACTS", "MB_HAS_QUAT")}
+    assert (0, 1) in has["HAS_DRIVES"] and (0, 1) in has["MB_HAS_QUAT"] and (0, 1) in has["MB_HAS_CONTACTS"]
+    for text in kinds:
+        assert "HAS_DRIVES 1" not in text and "MB_HAS_QUAT 1" not in text  # no compile-time switch
 
 
 def test_loops_of_every_size_share_the_templates_text():
@@ -50,7 +70,7 @@ def test_loops_of_every_size_share_the_templates_text():
     five_bar.add(mb.Revolute("C", b, c, axis="z", parent_point=(0.8, 0, 0), child_point=(0.7, 0, 0)))
     five, five_sizes = _templates(five_bar)
     assert four == five
-    assert four_sizes.values["NMECH"] != five_sizes.values["NMECH"] and "NMECH" not in four_sizes.flags
+    assert four_sizes.values["NMECH"] != five_sizes.values["NMECH"]
 
 
 def test_buffers_and_tables_get_their_lengths_in_the_unit():
@@ -61,7 +81,9 @@ def test_buffers_and_tables_get_their_lengths_in_the_unit():
     # DAE_NR = ng + nq + contacts = 9 rows; 5 longs per row of the spec; drives: 4 forces + 1 rate
     assert "dae_rows[9];" in unit and "dae_legacy[45];" in unit and "dae_lam[10];" in unit
     assert "lag_dv[6];" in unit and "lag_kc[13];" in unit  # contacts: 2 gaps, 2 x 4 Jacobian, 2 biases
-    assert sizes.flags == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0}
+    assert {name: sizes.values[name] for name in ("HAS_DRIVES", "MB_HAS_NG", "MB_HAS_CONTACTS", "MB_HAS_QUAT")} \
+        == {"HAS_DRIVES": 1, "MB_HAS_NG": 1, "MB_HAS_CONTACTS": 1, "MB_HAS_QUAT": 0}
+    assert "mb_MB_HAS_CONTACTS = 1;" in unit and "mb_MB_HAS_QUAT = 0;" in unit
     assert sizes.values["NMECH"] == 8 and "mb_NMECH = 8;" in unit  # the state lengths, read at run time
     assert sizes.values["NZ"] == 1 and "mb_NZ = 1;" in unit
 
@@ -74,7 +96,9 @@ def test_a_preprocessor_test_of_a_size_is_refused():
         sizes.check_generic("#define DAE_NR (NG + NQ)\n#if DAE_NR > 0\n#endif\n")
     with pytest.raises(AssertionError, match="as a number"):
         sizes.check_generic("#define NV 3\n")
-    assert sizes.check_generic("#if MB_HAS_QUAT\n#endif\n") == "#if MB_HAS_QUAT\n#endif\n"
+    with pytest.raises(AssertionError, match="MB_HAS_QUAT"):  # what a model has is a run-time value too
+        sizes.check_generic("#if MB_HAS_QUAT\n#endif\n")
+    assert sizes.check_generic("#ifdef DAE_LOOP\n#endif\n") == "#ifdef DAE_LOOP\n#endif\n"
 
 
 def test_a_compile_whose_templates_test_a_size_fails_and_keeps_nothing(tmp_path, monkeypatch):

@@ -100,12 +100,8 @@ void dae_configure(int nr, const long *rows, double alpha, double beta, double s
 static void dae_rows_eval(const double *q, const double *qd, const double *p, const double *u, double *work) {{
     double *c = work + DAE_C_OFF, *kc = work + DAE_K_OFF;
     double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
-#if MB_HAS_NG
-    if (dae_has_geo) constraints(q, qd, p, u, c);
-#endif
-#if MB_HAS_CONTACTS
-    if (dae_has_contacts) contacts(q, qd, p, u, kc);
-#endif
+    if (MB_HAS_NG && dae_has_geo) constraints(q, qd, p, u, c);
+    if (MB_HAS_CONTACTS && dae_has_contacts) contacts(q, qd, p, u, kc);
     (void)c; (void)kc;
     for (int k = 0; k < dae_nr; ++k) {{
         const long *s = dae_spec + {SPEC_LONGS} * k;
@@ -320,7 +316,7 @@ static int dae_event(double t, const double *y, const double *p) {{
     double kc[CONTACTS_SIZE + 1], u[1] = {{0.0}};
     (void)t;
     int event = 0;
-#if MB_HAS_CONTACTS
+    if (!MB_HAS_CONTACTS) return 0;
     contacts(y, y + NQ, p, u, kc);
     for (int k = 0; k < dae_nk; ++k) {{
         if (dae_held[k]) continue;
@@ -331,9 +327,6 @@ static int dae_event(double t, const double *y, const double *p) {{
         for (int k = 0; k < dae_nr; ++k)
             if (dae_spec[{SPEC_LONGS} * k] == {ROW_CONTACT} && dae_lam[k] < 0.0) event = 1;
     if (!event) for (int k = 0; k < dae_nk; ++k) dae_gaps[k] = kc[CONTACTS_GAP_OFF + k];
-#else
-    (void)y; (void)p; (void)kc; (void)u;
-#endif
     return event;
 }}
 
@@ -357,13 +350,9 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
                   const double *p) {{
     double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {{0.0}};
     dae_dense(s, t_old, h, y_old, F, ny, y);
-#if MB_HAS_CONTACTS
+    if (!MB_HAS_CONTACTS) return NAN;
     contacts(y, y + NQ, p, u, kc);
     return kc[CONTACTS_GAP_OFF + k];
-#else
-    (void)k; (void)p; (void)kc; (void)u;
-    return NAN;
-#endif
 }}
 
 double dae_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
