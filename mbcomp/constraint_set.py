@@ -7,6 +7,7 @@ For every equation ``g(q, t)``: ``gdot = J qd + g_t`` and ``gddot = J qdd + bias
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,12 +34,12 @@ def _derivatives(f, t: float, h: float = 1e-3, exact=None):
     provides ``diff()`` (file expressions), else 5-point stencils (error O(h^4))."""
     if exact is not None:
         values = [float(f(t)), float(exact[0](t)), float(exact[1](t))]
-        if not np.all(np.isfinite(values)):
+        if not all(map(math.isfinite, values)):
             raise ValueError("non-finite value")
         return tuple(values)
     values = [float(f(t + k * h)) for k in (-2, -1, 0, 1, 2)]
     fm2, fm1, f0, fp1, fp2 = values
-    if not np.all(np.isfinite(values)):
+    if not all(map(math.isfinite, values)):
         raise ValueError("non-finite value")
     d1 = (fm2 - 8 * fm1 + 8 * fp1 - fp2) / (12 * h)
     d2 = (-fm2 + 16 * fm1 - 30 * f0 + 16 * fp1 - fp2) / (12 * h * h)
@@ -76,6 +77,7 @@ class ConstraintSet:
                 first = position.diff()
                 self.exact_derivatives[r] = (first, first.diff())
         self.geometric_rows = [r for r in range(self.nc) if r not in set(self.coordinate_rows)]
+        self._geometric_index = np.array(self.geometric_rows, dtype=np.intp)  # (indexes faster than the list)
 
     # -- evaluation -------------------------------------------------------------------------------
     def evaluate(self, kernel, q: np.ndarray, qd: np.ndarray, t: float,
@@ -86,9 +88,12 @@ class ConstraintSet:
         motor rows are ``q_k - s(t)`` with s's derivatives by finite differences.
         """
         nv, nc = self.topology.nv, self.nc
+        if not self.coordinate_rows:  # every row geometric, in the generated function's order
+            g, J, bias = kernel.constraints(q, qd)   # (views of a new array: this call's own)
+            return ConstraintValues(g, J, np.zeros(nc), bias)
         g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nv)), np.zeros(nc), np.zeros(nc)
-        rows = self.geometric_rows
-        if rows:
+        rows = self._geometric_index
+        if rows.size:
             g[rows], J[rows], bias[rows] = kernel.constraints(q, qd)
         for r in self.coordinate_rows:
             eq = self.equations[r]

@@ -7,6 +7,7 @@ about formulations.  ``System`` is the public façade on top of it.
 """
 from __future__ import annotations
 
+import functools
 from types import MappingProxyType
 from typing import Any, Mapping
 
@@ -73,7 +74,7 @@ class Kernel:
             arr = np.asarray(tau, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}") from None
-        if arr.shape != (self.nv,) or not np.all(np.isfinite(arr)):
+        if arr.shape != (self.nv,) or not np.isfinite(arr).all():
             raise ModelError("tau", f"must be {self.nv} finite numbers (one per speed), got {tau!r}")
         return arr
 
@@ -172,15 +173,14 @@ class Kernel:
         matrix, this 1 us, and the scipy-stepped right-hand side factors twice per evaluation."""
         if M.size == 0:
             return M.copy()
-        from scipy.linalg import lapack  # imported by the scipy-stepped path anyway, not by mbcomp
-        L, info = lapack.dpotrf(M, lower=1, clean=1)
+        L, info = _lapack().dpotrf(M, lower=1, clean=1)
         return L if info == 0 else None
 
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Lower Cholesky factor of ``M``, or a ``SimulationError`` naming why M is singular."""
         L = self.cholesky(M)
-        scale = max(float(np.max(np.abs(np.diag(M)))), 1e-300) if M.size else 1.0
-        if L is None or (M.size and np.min(np.diag(L)) ** 2 < SINGULAR_PIVOT * scale):
+        scale = max(float(np.abs(M.diagonal()).max()), 1e-300) if M.size else 1.0
+        if L is None or (M.size and L.diagonal().min() ** 2 < SINGULAR_PIVOT * scale):
             raise SimulationError(f"mass matrix is singular at q = {format_state(q)}: {self.diagnose(q)}")
         return L
 
@@ -190,8 +190,7 @@ class Kernel:
         the triangular inverse by LAPACK's ``dtrtri`` (1 us against numpy's 8 us for 3 x 3)."""
         if L.size == 0:
             return L.copy()
-        from scipy.linalg import lapack
-        Linv, _ = lapack.dtrtri(L, lower=1)
+        Linv, _ = _lapack().dtrtri(L, lower=1)
         return Linv.T @ Linv
 
     def tree_solve(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -228,7 +227,7 @@ class Kernel:
 
     def check_finite(self, values: np.ndarray, what: str, q: np.ndarray) -> np.ndarray:
         """``values`` unchanged, or a ``SimulationError`` naming what made them non-finite."""
-        if not np.all(np.isfinite(values)):
+        if not np.isfinite(values).all():
             springs = []
             for comp in self.topology.forces:
                 if comp.refs.get("a") == "attachment":  # two-point elements (springs, dampers)
@@ -239,3 +238,12 @@ class Kernel:
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
             raise SimulationError(f"{what} is not finite at q = {format_state(q)}: {reason}")
         return values
+
+
+@functools.lru_cache(maxsize=None)
+def _lapack():
+    """scipy's LAPACK wrappers, imported on first use (by the scipy-stepped path, which has
+    imported scipy anyway; ``import mbcomp`` does not), then kept: an import statement
+    in the per-evaluation solves cost about 1 us a call."""
+    from scipy.linalg import lapack
+    return lapack

@@ -188,21 +188,25 @@ class Formulation:
                     self.check_dead_point(J, qd, t, q, contacts, rows)
             if rows.size == 0:
                 return Minv_f, lam
-            Js = J[rows]
+            every = rows.size == J.shape[0]  # (rows are sorted and distinct: then all of them, in order)
+            Js = J if every else J[rows]
             Minv_JT = Minv @ Js.T
             A = Js @ Minv_JT
             LA = kernel.cholesky(A)
             if LA is not None:
-                diag = np.diag(LA)
-                if np.min(diag) > RANK_TOLERANCE * max(np.max(diag), self.schur_scale):
+                diag = LA.diagonal()
+                if diag.min() > RANK_TOLERANCE * max(diag.max(), self.schur_scale):
                     break
             if attempt:
                 raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
                                       f"{self.row_names(rows, contacts)}")
             rows = None
         LAinv = kernel.inverse(LA)
-        lam_s = LAinv @ (rhs[rows] - Js @ Minv_f)
-        lam[rows] = lam_s
+        lam_s = LAinv @ ((rhs if every else rhs[rows]) - Js @ Minv_f)
+        if every:
+            lam = lam_s
+        else:
+            lam[rows] = lam_s
         return Minv_f + Minv_JT @ lam_s, lam
 
     def check_dead_point(self, J, qd, t, q, contacts=(), rows=None):
@@ -211,7 +215,7 @@ class Formulation:
         independent rows of ``J`` when the caller has them (``rows_of``)."""
         rows = self.rows_of(J) if rows is None else rows
         nominal = self.nominal_rank
-        if nominal is not None and not contacts and rows.size < nominal and float(np.max(np.abs(qd), initial=0.0)) < 1e-9:
+        if nominal is not None and not contacts and rows.size < nominal and float(np.abs(qd).max(initial=0.0)) < 1e-9:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
             raise SimulationError(
                 f"the constraint Jacobian loses rank at q = {format_state(q)} (t = {t:g}) with the "

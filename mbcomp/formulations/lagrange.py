@@ -63,7 +63,7 @@ class LagrangeWorkspace(Workspace):
         for _ in range(25):
             cv = self.formulation.constraint_values(self.kernel, t, q, zero, self.offsets, self.contacts)
             g = cv.g[self.rows]
-            if float(np.max(np.abs(g), initial=0.0)) < ASSEMBLY_TOLERANCE:
+            if float(np.abs(g).max(initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
             D = chart.tangent(x)
             Jx = cv.J[self.rows] if D is None else cv.J[self.rows] @ D
