@@ -14,6 +14,7 @@ import numpy as np
 
 from .errors import ModelError
 from .rotations import cross, quat_log
+from .small_linalg import solve
 
 
 @dataclass(frozen=True)
@@ -203,7 +204,7 @@ class Chart:
             return v
         out = np.array(v, dtype=float)
         for vi in m.quat_v:
-            out[vi:vi + 3] = np.linalg.solve(_right_jacobian(x[vi:vi + 3]), v[vi:vi + 3])
+            out[vi:vi + 3] = solve(_right_jacobian(x[vi:vi + 3]), v[vi:vi + 3])
         return out
 
 

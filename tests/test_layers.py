@@ -16,7 +16,7 @@ LAYERS = {
     "errors": 0, "services": 0,
     # 1 core: plain data and helpers without model knowledge
     "rotations": 1, "expressions": 1, "result": 1, "checks": 1, "library": 1, "params": 1, "shapes": 1, "progress": 1,
-    "statemap": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
+    "statemap": 1, "small_linalg": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
     "components.primitives": 1, "components.expr": 1, "components._values": 1,
     # 2 spec: components and the model builder
     "components": 2, "model": 2, "compose": 2, "servo": 2,
@@ -47,7 +47,7 @@ SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen
               ("compose", "components"), ("compose", "model"), ("model", "compose"), ("io", "topology"), ("io", "fileform"),
               ("equations", "drive_equations"), ("equations", "param_layout"), ("equations", "recursive"),
               ("simulate", "drive_runtime"),
-              ("servo", "components"), ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"),
+              ("servo", "components"), ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"), ("statemap", "small_linalg"),
               ("cli", "cli_analyse"),
               ("formulations.lagrange_c", "integrators"), ("formulations.lagrange_c", "expressions_c"),
               ("formulations.dae_c", "expressions_c")}

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..constraint_set import ConstraintValues
 from ..errors import format_state, ModelError, SimulationError
-from .small_qr import orthonormal_basis, pivoted_qr
+from ..small_linalg import orthonormal_basis, pivoted_qr
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
 #: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of

@@ -7,7 +7,7 @@ from ..errors import SimulationError, TrialStateError, format_state
 from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 from .lagrange_c import c_lagrange
-from .small_qr import pivoted_qr
+from ..small_linalg import pivoted_qr, solve
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
 CHART_LIMIT = 1.0
@@ -68,7 +68,7 @@ class LagrangeWorkspace(Workspace):
             D = chart.tangent(x)
             Jx = cv.J[self.rows] if D is None else cv.J[self.rows] @ D
             try:
-                x[self.dep] -= np.linalg.solve(Jx[:, self.dep], g)
+                x[self.dep] -= solve(Jx[:, self.dep], g)
             except np.linalg.LinAlgError:
                 raise TrialStateError(f"dependent coordinates are singular at t = {t:g}: constraints "
                                       f"{self.formulation.row_names(self.rows, self.contacts)}") from None
@@ -93,7 +93,7 @@ class LagrangeWorkspace(Workspace):
         qd[self.ind] = qdi
         if len(self.dep):
             J = cv.J[self.rows]
-            qd[self.dep] = np.linalg.solve(J[:, self.dep], -(J[:, self.ind] @ qdi + cv.g_t[self.rows]))
+            qd[self.dep] = solve(J[:, self.dep], -(J[:, self.ind] @ qdi + cv.g_t[self.rows]))
         return q, qd, x
 
     def full_state(self, t, y):
@@ -233,7 +233,7 @@ class LagrangeFormulation(Formulation):
         J = cv.J[rows]
         Jd = J[:, dep]
         try:
-            X = np.linalg.solve(Jd, np.column_stack((J[:, ind], cv.bias[rows])))
+            X = solve(Jd, np.column_stack((J[:, ind], cv.bias[rows])))
         except np.linalg.LinAlgError:
             raise SimulationError(f"constraint Jacobian is singular at t = {t:g}: constraints "
                                   f"{self.row_names(rows, contacts)}") from None

@@ -1,11 +1,14 @@
-"""QR factorisations of the small constraint Jacobians, by direct LAPACK calls.
+"""Linear algebra on the small matrices of a Python-stepped evaluation, by direct LAPACK calls.
 
-The formulations factor a Jacobian of a few rows at every evaluation of a Python-stepped
-constrained model (which rows are independent, which speeds are dependent).  For matrices
-this small, ``scipy.linalg.qr`` spends most of its time outside LAPACK (argument checks,
-routine lookup, a workspace query per call): 69 us against 4 us for a 5 x 3 matrix.  These
-functions call the same LAPACK routines (``geqp3``, ``geqrf``, ``orgqr``) with the same
-optimal workspace, looked up once per shape, and so return the same numbers to the bit.
+The formulations factor a constraint Jacobian of a few rows and solve a few small systems at
+every evaluation of a Python-stepped constrained model (which rows are independent, which
+speeds are dependent, the dependent coordinates' Newton steps).  For matrices this small the
+library wrappers spend most of their time outside LAPACK (argument checks, routine lookup,
+a workspace query per call): ``scipy.linalg.qr`` 69 us against 4 us for a 5 x 3 matrix,
+``numpy.linalg.solve`` 8-13 us against 2 us for a 2 x 2 system.  These functions call the
+same LAPACK routines (``geqp3``, ``geqrf``, ``orgqr``, ``gesv``) with the same optimal
+workspace, looked up once per shape, and return the same numbers to the bit
+(tests/test_small_linalg.py compares them).
 """
 from __future__ import annotations
 
@@ -71,3 +74,19 @@ def orthonormal_basis(a: np.ndarray) -> np.ndarray:
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal orgqr")
     return q
+
+
+def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``x`` with ``a x = b`` (a square; b a vector or columns) by LAPACK ``gesv``, as
+    ``numpy.linalg.solve`` computes it; ``numpy.linalg.LinAlgError`` when ``a`` is singular."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or b.shape[:1] != a.shape[:1]:
+        raise ValueError(f"expected a square matrix and a right-hand side of its rows, got {a.shape} and {b.shape}")
+    if a.shape[0] == 0:
+        return np.empty(b.shape)
+    _, _, x, info = _routine("gesv")(a, b)
+    if info > 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal gesv")
+    return x

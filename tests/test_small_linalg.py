@@ -1,11 +1,11 @@
-"""The direct LAPACK QR of small Jacobians gives scipy.linalg.qr's numbers to the bit."""
+"""The direct LAPACK calls on small matrices give scipy.linalg.qr's and numpy.linalg.solve's numbers to the bit."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import scipy.linalg
 
-from mbcomp.formulations.small_qr import orthonormal_basis, pivoted_qr
+from mbcomp.small_linalg import orthonormal_basis, pivoted_qr, solve
 
 
 def matrices():
@@ -50,3 +50,24 @@ def test_empty_and_non_finite_input():
         pivoted_qr(np.array([[1.0, np.nan]]))
     with pytest.raises(ValueError, match="2-D"):
         orthonormal_basis(np.ones(3))
+
+
+def test_solve_gives_numpys_solution_to_the_bit():
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        n = int(rng.integers(1, 6))
+        a = rng.standard_normal((n, n))
+        b = rng.standard_normal(n) if rng.random() < 0.5 else rng.standard_normal((n, int(rng.integers(1, 4))))
+        np.testing.assert_array_equal(solve(a, b), np.linalg.solve(a, b))
+    x = solve(np.array([[2.0, 0.0], [0.0, 4.0]]), np.array([1.0, 1.0]))
+    np.testing.assert_array_equal(x, [0.5, 0.25])
+
+
+def test_solve_refuses_a_singular_matrix_and_mismatched_shapes():
+    with pytest.raises(np.linalg.LinAlgError):
+        solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.array([1.0, 0.0]))
+    with pytest.raises(ValueError, match="square"):
+        solve(np.ones((2, 3)), np.ones(2))
+    with pytest.raises(ValueError, match="rows"):
+        solve(np.eye(2), np.ones(3))
+    assert solve(np.zeros((0, 0)), np.zeros(0)).shape == (0,)
