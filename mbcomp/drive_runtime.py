@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from .components.forces import checked_output
+
 
 class DriveTorque:
     """Callable ``(t, q, qd) -> tau``: user tau + drive forces at the states ``z`` last set."""
@@ -28,7 +30,6 @@ class DriveTorque:
         if self.tau is None:
             return forces
         if callable(self.tau):
-            from .components.forces import checked_output
             return forces + checked_output("tau", self.tau(t, q, qd), len(forces))
         return forces + self.tau
 

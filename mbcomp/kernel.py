@@ -14,6 +14,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .components import Spherical
+from .components.forces import checked_output
 from .constraint_set import ConstraintValues
 from .errors import ModelError, SimulationError, describe, format_state
 from .layout import body_fields
@@ -68,7 +69,6 @@ class Kernel:
         if tau is None:
             return None
         if callable(tau):
-            from .components.forces import checked_output
             return checked_output("tau", tau(t, q, qd), self.nv)
         try:
             arr = np.asarray(tau, dtype=float).reshape(-1)

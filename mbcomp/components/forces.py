@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelError, describe
+from ..errors import ModelError, SimulationError, describe
 from ..params import ParameterSpec, nonnegative
 from .base import ForceElement, one_dof_joint_problems
 from .signals import SignalOwner
@@ -340,14 +340,14 @@ class TorsionSpring(ForceElement):
 
 
 def checked_output(owner: Any, value: Any, size: int) -> np.ndarray:
-    """A user callable's result as a finite float array of ``size``, else ``SimulationError``."""
-    from ..errors import SimulationError
+    """A user callable's result as a finite float array of ``size``, else ``SimulationError``
+    (called at every evaluation of a callable force or tau: no per-call imports or wrappers)."""
     try:
         arr = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
         raise SimulationError(f"callable returned {value!r}, not numbers", owner) from None
     if arr.size != size:
         raise SimulationError(f"callable returned {arr.size} values, expected {size}", owner)
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise SimulationError(f"callable returned a non-finite value {arr.tolist()}", owner)
     return arr
