@@ -7,7 +7,6 @@ about formulations.  ``System`` is the public façade on top of it.
 """
 from __future__ import annotations
 
-import functools
 from types import MappingProxyType
 from typing import Any, Mapping
 
@@ -18,6 +17,7 @@ from .components.forces import checked_output
 from .constraint_set import ConstraintValues
 from .errors import ModelError, SimulationError, describe, format_state
 from .layout import body_fields
+from .small_linalg import lapack_routine
 
 #: A pivot of the mass matrix's Cholesky factor below this fraction of its largest diagonal
 #: entry counts as singular (the same threshold as the compiled ``accelerations``).
@@ -173,7 +173,7 @@ class Kernel:
         matrix, this 1 us, and the scipy-stepped right-hand side factors twice per evaluation."""
         if M.size == 0:
             return M.copy()
-        L, info = _lapack().dpotrf(M, lower=1, clean=1)
+        L, info = lapack_routine("potrf")(M, lower=1, clean=1)
         return L if info == 0 else None
 
     def factor(self, M: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -190,7 +190,7 @@ class Kernel:
         the triangular inverse by LAPACK's ``dtrtri`` (1 us against numpy's 8 us for 3 x 3)."""
         if L.size == 0:
             return L.copy()
-        Linv, _ = _lapack().dtrtri(L, lower=1)
+        Linv, _ = lapack_routine("trtri")(L, lower=1)
         return Linv.T @ Linv
 
     def tree_solve(self, M: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -238,12 +238,3 @@ class Kernel:
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"
             raise SimulationError(f"{what} is not finite at q = {format_state(q)}: {reason}")
         return values
-
-
-@functools.lru_cache(maxsize=None)
-def _lapack():
-    """scipy's LAPACK wrappers, imported on first use (by the scipy-stepped path, which has
-    imported scipy anyway; ``import mbcomp`` does not), then kept: an import statement
-    in the per-evaluation solves cost about 1 us a call."""
-    from scipy.linalg import lapack
-    return lapack

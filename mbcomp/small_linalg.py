@@ -18,8 +18,10 @@ import numpy as np
 
 
 @functools.lru_cache(maxsize=None)
-def _routine(name: str):
-    """The double-precision LAPACK routine ``name`` of scipy (imported on first use)."""
+def lapack_routine(name: str):
+    """The double-precision LAPACK routine ``name`` (``"potrf"`` for ``dpotrf``) of scipy,
+    looked up once: scipy is imported on first use (``import mbcomp`` does not import it),
+    and an import statement in a per-evaluation solve cost about 1 us a call."""
     from scipy.linalg import lapack
     return getattr(lapack, "d" + name)
 
@@ -28,7 +30,7 @@ def _routine(name: str):
 def _workspace(name: str, shape: tuple[int, int]) -> int:
     """The optimal workspace length LAPACK gives for ``name`` on a matrix of ``shape``
     (what ``scipy.linalg.qr`` asks for before every call)."""
-    routine = _routine(name)
+    routine = lapack_routine(name)
     probe = np.zeros(shape, order="F")
     if name == "orgqr":
         result = routine(probe, np.zeros(min(shape)), lwork=-1)
@@ -53,7 +55,7 @@ def pivoted_qr(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = _finite(a)
     if a.size == 0:
         return np.zeros(0), np.arange(a.shape[1], dtype=np.int32)
-    qr, jpvt, _, _, info = _routine("geqp3")(a, lwork=_workspace("geqp3", a.shape))
+    qr, jpvt, _, _, info = lapack_routine("geqp3")(a, lwork=_workspace("geqp3", a.shape))
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal geqp3")
     return np.abs(np.diag(qr)), jpvt - 1
@@ -66,11 +68,11 @@ def orthonormal_basis(a: np.ndarray) -> np.ndarray:
     m, n = a.shape
     if a.size == 0:
         return np.empty((m, min(m, n)))
-    qr, tau, _, info = _routine("geqrf")(a, lwork=_workspace("geqrf", a.shape))
+    qr, tau, _, info = lapack_routine("geqrf")(a, lwork=_workspace("geqrf", a.shape))
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal geqrf")
     head = qr[:, :m] if m < n else qr
-    q, _, info = _routine("orgqr")(head, tau, lwork=_workspace("orgqr", head.shape), overwrite_a=1)
+    q, _, info = lapack_routine("orgqr")(head, tau, lwork=_workspace("orgqr", head.shape), overwrite_a=1)
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal orgqr")
     return q
@@ -84,7 +86,7 @@ def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         raise ValueError(f"expected a square matrix and a right-hand side of its rows, got {a.shape} and {b.shape}")
     if a.shape[0] == 0:
         return np.empty(b.shape)
-    _, _, x, info = _routine("gesv")(a, b)
+    _, _, x, info = lapack_routine("gesv")(a, b)
     if info > 0:
         raise np.linalg.LinAlgError("Singular matrix")
     if info < 0:
