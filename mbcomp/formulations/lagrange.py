@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SimulationError, TrialStateError, format_state
+from ..small_linalg import pivoted_qr, solve
 from ..statemap import Chart
 from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 from .lagrange_c import c_lagrange
-from ..small_linalg import pivoted_qr, solve
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
 CHART_LIMIT = 1.0
