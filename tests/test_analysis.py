@@ -376,7 +376,7 @@ def test_inverse_dynamics_rejects_bad_shapes():
 # -- command line ----------------------------------------------------------------------------------
 def test_cli_analyse_prints_equilibrium_modes_and_stability(capsys, monkeypatch):
     from pathlib import Path
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
     assert main(["analyse", "library/double_pendulum.toml", "--at", "phi1=0.4,theta2=-0.2"]) == 0
     out = capsys.readouterr().out

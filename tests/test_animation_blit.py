@@ -9,7 +9,7 @@ pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402
 
 import mbcomp as mb  # noqa: E402
-from mbcomp import plotting  # noqa: E402
+from mbcomp.face import plotting  # noqa: E402
 
 
 def full_redraw(fig, drawing, points, times, dpi):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import checks
-from mbcomp.backend import c_compiler
+from mbcomp.core import checks
+from mbcomp.codegen.backend import c_compiler
 from conftest import pendulum_chain
 
 Q0 = [0.3, 0.2]

@@ -197,7 +197,7 @@ def test_save_writes_nested_models_that_load_reads_back(tmp_path):
 
 
 def test_info_prints_the_instance_tree(files, capsys):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     assert main(["info", str(files / "double_pendulum.toml"), "--no-equations"]) == 0
     out = capsys.readouterr().out
     assert "instances\n  upper (link)  length=0.3, mass=1\n" in out

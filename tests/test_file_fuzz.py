@@ -25,7 +25,7 @@ except ModuleNotFoundError:  # pragma: no cover
     import tomli as tomllib
 
 import mbcomp as mb  # noqa: E402
-from mbcomp.io import load  # noqa: E402
+from mbcomp.files.toml_model import load  # noqa: E402
 
 LIBRARY = Path(__file__).resolve().parent.parent / "library"
 FILES = sorted(LIBRARY.glob("*.toml"))
@@ -168,7 +168,7 @@ def test_known_malformed_files(tmp_path, text, expected):
 
 
 def test_cli_prints_one_line_and_exits_2(tmp_path, capsys):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     path = tmp_path / "bad.toml"
     path.write_text('[joints.j]\ntype = ["revolute"]\nparent = "ground"\nchild = "ground"\n', encoding="utf-8")
     assert main(["run", str(path)]) == 2

@@ -15,7 +15,7 @@ import pytest
 from scipy.integrate import trapezoid
 
 import mbcomp as mb
-from mbcomp.io import library_models, load
+from mbcomp.files.toml_model import library_models, load
 
 MODELS = library_models()
 ENERGY_RTOL = 1e-6
@@ -25,7 +25,7 @@ ENERGY_RTOL = 1e-6
 # Helpers
 # ----------------------------------------------------------------------------------------------
 def needs_constraints(model) -> bool:
-    from mbcomp.components import Constraint, Contact
+    from mbcomp.spec.components import Constraint, Contact
     return any(isinstance(c, (Constraint, Contact)) for c in model.components.values())
 
 
@@ -41,7 +41,7 @@ def compile_or_skip(model, **options):
             if "not yet supported" in text or "loop-closing joint must not carry coordinates" in text:
                 pytest.skip(f"{model.name}: {text}")
         raise
-    from mbcomp.components import Contact
+    from mbcomp.spec.components import Contact
     if any(isinstance(c, Contact) for c in model.components.values()) and not hasattr(system, "impact"):
         pytest.skip(f"{model.name}: contacts are not yet supported (System.impact missing)")
     return system

@@ -6,9 +6,9 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from ..errors import SimulationError, format_state
-from ..formulations.base import independent_rows
-from .space import Chart, difference, force_vector, integrate, model_forces, speed_names
+from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.formulations.base import independent_rows
+from mbcomp.analysis.space import Chart, difference, force_vector, integrate, model_forces, speed_names
 
 #: Accept an equilibrium when the reduced generalised force is below this fraction of the
 #: loads (the largest generalised force at the guess, or 1), and the constraints hold to

@@ -6,8 +6,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import SimulationError, format_state
-from .space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
+from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.analysis.space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
 
 #: Relative step of the central differences (fourth order: truncation ~ h^4, rounding ~ eps/h).
 STEP = 1e-3

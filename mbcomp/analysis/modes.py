@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from ..errors import SimulationError, format_state
-from .linear import Linearization, linearize
+from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.analysis.linear import Linearization, linearize
 
 #: An eigenvalue counts as growing when its real part exceeds this fraction of the largest
 #: eigenvalue magnitude (or of 1/s): the derivatives carry ~1e-10 relative error.
@@ -89,7 +89,7 @@ def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -
     damping = np.where(magnitude > 1e-12 * scale, -reps.real / np.where(magnitude > 0, magnitude, 1.0), 0.0)
     damping = np.where(np.abs(damping) < 1e-9, 0.0, damping)  # finite-difference noise on undamped modes
     stable = bool(np.all(values.real <= STABILITY_TOLERANCE * scale))
-    from .space import speed_names
+    from mbcomp.analysis.space import speed_names
     return Modes(frequencies=magnitude / (2 * np.pi), damping_ratios=damping, eigenvalues=reps,
                  shapes=shape_matrix, stable=stable, all_eigenvalues=values,
                  speeds=speed_names(system), linearization=lin)

@@ -17,9 +17,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import ModelError, SimulationError, format_state
-from ..formulations.base import independent_rows
-from ..formulations.lagrange import partition
+from mbcomp.core.errors import ModelError, SimulationError, format_state
+from mbcomp.formulations.base import independent_rows
+from mbcomp.formulations.lagrange import partition
 
 #: Newton tolerance for the dependent tangent coordinates (m or rad).
 CHART_TOLERANCE = 1e-13
