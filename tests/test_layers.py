@@ -16,7 +16,7 @@ LAYERS = {
     "errors": 0, "services": 0,
     # 1 core: plain data and helpers without model knowledge
     "rotations": 1, "expressions": 1, "result": 1, "checks": 1, "library": 1, "params": 1, "shapes": 1, "progress": 1,
-    "statemap": 1, "small_linalg": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
+    "statemap": 1, "small_linalg": 1, "limits": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
     "components.primitives": 1, "components.expr": 1, "components._values": 1,
     # 2 spec: components and the model builder
     "components": 2, "model": 2, "compose": 2, "servo": 2,
