@@ -75,7 +75,7 @@ def file_problem(path: str | os.PathLike) -> str | None:
     try:
         info = os.stat(path)
     except FileNotFoundError:
-        return "no such file"
+        return "cannot read the file (no such file)"
     except (OSError, ValueError) as exc:
         return f"cannot read the file ({getattr(exc, 'strerror', None) or exc})"
     return _stat_problem(info)
