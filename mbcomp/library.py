@@ -34,7 +34,8 @@ def library_models() -> dict[str, Path]:
     found: dict[str, Path] = {}
     for folder in library_dirs():
         for path in sorted(folder.glob("*.toml")):
-            found.setdefault(path.stem, path)
+            if _inside(path, folder):   # (a symlink out of the library is not a library model)
+                found.setdefault(path.stem, path)
     return dict(sorted(found.items()))
 
 
@@ -143,7 +144,8 @@ def library_parts() -> dict[str, Path]:
     found: dict[str, Path] = {}
     for folder in library_dirs():
         for path in sorted((folder / "parts").glob("*.toml")):
-            found.setdefault(path.stem, path)
+            if _inside(path, folder):
+                found.setdefault(path.stem, path)
     return dict(sorted(found.items()))
 
 
