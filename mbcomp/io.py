@@ -98,6 +98,10 @@ def load(path: str | os.PathLike) -> Model:
     below this file, or ``"library:NAME"``) with port bindings and parameter overrides.
     A file read as a model on its own binds its ``"external"`` ports to the ground.
 
+    Only regular files within ``MBCOMP_MAX_FILE_BYTES`` are read (a FIFO or a device is
+    refused unopened), and the sub-model instances the files would build, and how deeply
+    they nest, are counted before anything is built (``mbcomp.limits``, docs/errors.md).
+
     The returned model also carries the file's extras as attributes: ``description``
     (str), ``named_parameters`` ({name: float}), ``initial`` (``{"q": {coord: value},
     "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
