@@ -16,7 +16,7 @@ from mbcomp.errors import ModelError
 
 #: ``(environment variable, default)`` of each limit.
 FILE_BYTES = ("MBCOMP_MAX_FILE_BYTES", 10_000_000)
-INSTANCES = ("MBCOMP_MAX_INSTANCES", 10_000)
+INSTANCES = ("MBCOMP_MAX_INSTANCES", 5_000)
 NESTING = ("MBCOMP_MAX_NESTING", 50)
 STEPS = ("MBCOMP_MAX_STEPS", 1_000_000_000)
 
@@ -43,7 +43,7 @@ def max_file_bytes() -> int:
 
 
 def max_instances() -> int:
-    """Sub-model instances one model may hold (``$MBCOMP_MAX_INSTANCES``, default 10 000)."""
+    """Sub-model instances one model may hold (``$MBCOMP_MAX_INSTANCES``, default 5 000)."""
     return _limit(INSTANCES)
 
 

@@ -75,7 +75,7 @@ def test_thirty_doubling_files_are_refused_before_building(tmp_path):
     finally:
         tracemalloc.stop()
     assert f"would build {2 ** 30 - 1} sub-model instances" in message
-    assert "limit of 10000" in message and "MBCOMP_MAX_INSTANCES" in message and str(top) in message
+    assert "limit of 5000" in message and "MBCOMP_MAX_INSTANCES" in message and str(top) in message
     assert peak < 20e6, peak
 
 
