@@ -191,9 +191,10 @@ class TestDirectory:
         elif problem == "a-file":
             cache_dir.rmdir()
             cache_dir.write_text("not a directory")
-        else:
+        else:  # a symlink to a directory that is not private (one to a private directory is used)
             target = tmp_path / "elsewhere"
             target.mkdir(mode=0o700)
+            os.chmod(target, 0o770)
             cache_dir.rmdir()
             cache_dir.symlink_to(target)
         monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))

@@ -67,17 +67,31 @@ def _uid() -> int | None:
 def directory_problem(path: Path) -> str | None:
     """Why ``path`` is not a safe cache directory for this user (None when it is).
 
-    Safe: a real directory (not a symlink), owned by the user, not writable by group or
-    others, readable and writable by the user."""
+    Safe: a directory owned by the user, not writable by group or others, readable and
+    writable by the user; or a symlink owned by the user to such a directory."""
     try:
         info = os.lstat(path)
     except FileNotFoundError:
         return "does not exist"
     except OSError as exc:
         return f"cannot be inspected ({exc.strerror})"
-    if not stat.S_ISDIR(info.st_mode):
-        return "is not a directory"
     uid = _uid()
+    if stat.S_ISLNK(info.st_mode):
+        if uid is not None and info.st_uid != uid:
+            return f"is a symlink owned by another user (uid {info.st_uid})"
+        target = os.path.realpath(path)
+        try:
+            info = os.stat(path)
+        except FileNotFoundError:
+            return f"is a symlink to {str(target)!r}, which does not exist"
+        except OSError as exc:
+            return f"is a symlink whose target cannot be inspected ({exc.strerror})"
+        if not stat.S_ISDIR(info.st_mode):
+            return f"is a symlink to {str(target)!r}, which is not a directory"
+        problem = directory_problem(Path(target)) if target != os.fspath(path) else None
+        return f"is a symlink to {str(target)!r}, which {problem}" if problem else None
+    if not stat.S_ISDIR(info.st_mode):
+        return f"is not a directory (it is {_file_kind(info.st_mode)})"
     if uid is not None and info.st_uid != uid:
         return f"is owned by another user (uid {info.st_uid})"
     if uid is not None and info.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
@@ -87,10 +101,23 @@ def directory_problem(path: Path) -> str | None:
     return None
 
 
+def _file_kind(mode: int) -> str:
+    """What a file that is not a directory is, for messages."""
+    for test, name in ((stat.S_ISREG, "a regular file"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return name
+    return "a special file"
+
+
 def _prepare(path: Path) -> str | None:
     """Create ``path`` (mode 0700) if missing; return why it is unusable, or None."""
+    if os.path.islink(path):   # a symlink is checked, never created through (a dangling one says so)
+        return directory_problem(path)
     try:
         path.mkdir(mode=0o700, parents=True, exist_ok=True)
+    except FileExistsError:
+        return directory_problem(path) or "cannot be created (it exists)"
     except OSError as exc:
         return f"cannot be created ({exc.strerror or exc})"
     return directory_problem(path)
@@ -106,9 +133,16 @@ def cache_dir() -> Path:
     fallback = Path(tempfile.gettempdir()) / f"mbcomp-{_uid() if _uid() is not None else 'user'}"
     if fallback == configured or _prepare(fallback) is not None:
         fallback = Path(tempfile.mkdtemp(prefix="mbcomp-cache-"))
-    warnings.warn(f"mbcomp: cache directory {str(configured)!r} {problem}; using the private directory "
-                  f"{str(fallback)!r} instead (see docs/cache.md)", CacheWarning, stacklevel=3)
+    message = (f"mbcomp: cache directory {str(configured)!r} {problem}; using the private directory "
+               f"{str(fallback)!r} instead (see docs/cache.md)")
+    if (str(configured), problem) not in _WARNED:   # once: one compile asks for the directory several times
+        _WARNED.add((str(configured), problem))
+        warnings.warn(message, CacheWarning, stacklevel=3)
     return fallback
+
+
+#: ``(directory, problem)`` of the cache warnings given so far in this process (each is given once).
+_WARNED: set[tuple[str, str]] = set()
 
 
 # -- the per-user secret ----------------------------------------------------------------------

@@ -22,7 +22,8 @@ PAUSED, TRIAL_FAILED = 2, -8
 #: ... and with contacts watched: a step in which a contact closes or a held one would pull.
 EVENT = 3
 #: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
-#: pace of that window, the rest of the interval would need more than COLLAPSE_STEPS steps.
+#: pace of that window, the rest of the interval would need more than its step budget
+#: (``limits.max_steps()``, default COLLAPSE_STEPS; Python-stepped loops get a hundredth).
 COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
 
 
@@ -76,6 +77,8 @@ def c_integrators() -> str:
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
+        "static __thread double step_budget = COLLAPSE_STEPS;  /* set by Python before each run */",
+        "void set_step_budget(double steps) { step_budget = steps > 0 ? steps : COLLAPSE_STEPS; }",
         f"#define LOOP_EVENT {EVENT}",
         "#define NY (NMECH + NZ)",
         "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
@@ -306,7 +309,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
             ++*n_steps;
         }
         if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
-            if (t < t_end && (t_end - t) > COLLAPSE_STEPS * ((t - window_t0) / COLLAPSE_WINDOW)) {
+            if (t < t_end && (t_end - t) > step_budget * ((t - window_t0) / COLLAPSE_WINDOW)) {
                 status = -7;
                 goto done;
             }
@@ -627,6 +630,7 @@ class _Hook:
         self.outer = getattr(_hooks, "active", None)
         _hooks.active = self
         _hook_setter(lib)(_TRAMPOLINE, self.interval)
+        _set_step_budget(lib)
 
     def remove(self, lib) -> None:
         """Unset the hook (the outer run's again, for a nested run), restore the SIGINT
@@ -672,6 +676,15 @@ def _dispatch(t: float) -> int:
 
 _TRAMPOLINE = _HOOK_TYPE(_dispatch)
 _NO_HOOK = _HOOK_TYPE()
+
+
+def _set_step_budget(lib) -> None:
+    """The compiled loops' step budget for this thread: ``limits.max_steps()``."""
+    from mbcomp.core.limits import max_steps
+    setter = lib.set_step_budget
+    if setter.restype is not None:
+        setter.argtypes, setter.restype = [ctypes.c_double], None
+    setter(float(max_steps()))
 
 
 def _hook_setter(lib):
@@ -761,7 +774,8 @@ def _diagnose(kernel, t: float, y: np.ndarray, method: str) -> None:
         pass
 
 
-def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
+def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int | None = None,
+          t_end: float | None = None):
     n = kernel.nq
     if status == RANK_LOST:
         raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
@@ -773,7 +787,9 @@ def _fail(kernel, status: int, t: float, y: np.ndarray, method: str):
     if status == SINGULAR:
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == COLLAPSED:
-        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds))
+        from mbcomp.core.limits import max_steps
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds,
+                                               steps=steps, t_end=t_end, budget=max_steps()))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
@@ -783,15 +799,21 @@ class CollapseWatch:
     """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
     that window's pace the rest of the interval would need more than ``limit`` steps, or more
     than ``limit / 30`` while the pace has fallen a hundredfold below the run's best (a state
-    running away, not a model that needs small steps throughout)."""
+    running away, not a model that needs small steps throughout).  ``limit``: a hundredth of
+    ``limits.max_steps()`` (Python steps cost about a hundred compiled ones)."""
 
-    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float = 1e7):
+    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float | None = None):
+        if limit is None:
+            from mbcomp.core.limits import max_steps
+            limit = max_steps() / 100
         self.t_end, self.window, self.limit = t_end, window, limit
         self.t0, self.n, self.best = t0, 0, 0.0
+        self.start, self.steps = t0, 0   # the whole run's, for its average pace
         self.projected = 0.0  # steps the rest of the run would need at the last window's pace
 
     def collapsed(self, t: float) -> bool:
         self.n += 1
+        self.steps += 1
         if self.n < self.window:
             return False
         pace, self.t0, self.n = (t - self.t0) / self.window, t, 0
@@ -800,15 +822,35 @@ class CollapseWatch:
         self.projected = rest / pace if pace > 0 else float("inf")
         return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 30 * pace and pace < 1e-2 * self.best))
 
+    def message(self, who: str, t: float, speeds, names=()) -> str:
+        """Why the run gave up at ``t`` (see ``collapse_message``)."""
+        return collapse_message(who, t, speeds, names, self.window, self.projected, steps=self.steps,
+                                t_end=self.t_end, budget=self.limit, start=self.start)
+
 
 def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
-                     projected: float = COLLAPSE_STEPS) -> str:
-    """Why a run whose step size collapsed gave up, and the largest speed it reached."""
+                     projected: float = COLLAPSE_STEPS, *, steps: int | None = None, t_end: float | None = None,
+                     budget: float | None = None, start: float = 0.0) -> str:
+    """Why a run whose step size collapsed gave up, and the largest speed it reached.
+
+    With the run's ``steps`` so far, ``t_end`` and the step ``budget``: when even the run's
+    average pace could not reach ``t_end`` within the budget, the run is merely longer than
+    the budget allows (a bounded motion over a long time), and the message says so and how
+    to raise it; otherwise the pace collapsed (a state growing without bound)."""
     speeds = np.abs(np.asarray(speeds, dtype=float))
     largest = ""
     if speeds.size:
         i = int(speeds.argmax())
         largest = f"; largest speed {speeds[i]:.3g} ({names[i] if len(names) == speeds.size else f'speed {i}'})"
+    if steps and t_end is not None and budget and t > start:
+        average = (t - start) / steps
+        needed = steps + (t_end - t) / average
+        if needed > budget:
+            return (f"{who}: the step budget ran out at t = {t:.6g} s: {steps} steps reached it ({average:.2g} s a "
+                    f"step), so t_end = {t_end:.6g} s would take about {needed:.2g} steps, more than the budget of "
+                    f"{budget:.2g} steps (set MBCOMP_MAX_STEPS to raise it, simulate in shorter stretches, or loosen "
+                    f"rtol/atol for longer steps){largest} (if the motion should be slower, check the initial state "
+                    f"and the forces)")
     return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
             f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
             f"(check the initial state and the forces)")
@@ -956,5 +998,6 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
         if status == STOPPED:
             hook.stopped(state[0], method)
         full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
-        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method)
+        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method,
+              steps=int(counts[1]), t_end=t_end)
 

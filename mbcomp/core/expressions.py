@@ -16,6 +16,12 @@ def _short(value: Any, width: int = 40) -> str:
     return text if len(text) <= width else text[: width - 3] + "..."
 
 
+def _shown(text: str) -> str:
+    """An expression's text for messages: the file, table and key already say where it is,
+    so only its start is shown (a value is never echoed in full)."""
+    return _short(text, 24)
+
+
 FUNCTIONS: dict[str, Callable[[float], float]] = {"sin": math.sin, "cos": math.cos, "exp": math.exp,
                                                    "sqrt": math.sqrt}
 CONSTANTS = {"pi": math.pi}
@@ -45,27 +51,27 @@ def parse_expression(text: str, names: dict[str, float], *, allow_t: bool) -> tu
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
-        raise ExpressionError(f"{text!r} is not a number or an arithmetic expression ({exc.msg})") from None
+        raise ExpressionError(f"{_shown(text)} is not a number or an arithmetic expression ({exc.msg})") from None
     except (RecursionError, MemoryError, ValueError):
-        raise ExpressionError(f"{text!r} is too deeply nested") from None
+        raise ExpressionError(f"{_shown(text)} is too deeply nested") from None
     return _convert(tree.body, text, names, allow_t, 0)
 
 
 def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, depth: int) -> tuple:
     if depth > MAX_DEPTH:
-        raise ExpressionError(f"{text!r} is too deeply nested")
+        raise ExpressionError(f"{_shown(text)} is too deeply nested")
     if isinstance(node, ast.Constant):
         value = node.value
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ExpressionError(f"{text!r}: {value!r} is not a number")
+            raise ExpressionError(f"{_shown(text)}: {_short(value, 20)} is not a number")
         try:
             return ("num", float(value))
         except OverflowError:
-            raise ExpressionError(f"{text!r}: number {value} is too large") from None
+            raise ExpressionError(f"{_shown(text)}: number {_short(value, 24)} is too large") from None
     if isinstance(node, ast.Name):
         if node.id == "t":
             if not allow_t:
-                raise ExpressionError(f"{text!r}: the time t is only allowed in time-varying inputs "
+                raise ExpressionError(f"{_shown(text)}: the time t is only allowed in time-varying inputs "
                                       "(motor position, force, joint_torque value)")
             return ("t",)
         if node.id in CONSTANTS:
@@ -78,9 +84,9 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
             linked = not allow_t and not isinstance(value, (int, float))
             return ("obj", value) if linked else ("num", float(value))
         if node.id in FUNCTIONS:
-            raise ExpressionError(f"{text!r}: {node.id} is a function; call it as {node.id}(...)")
+            raise ExpressionError(f"{_shown(text)}: {node.id} is a function; call it as {node.id}(...)")
         known = ", ".join(sorted(names)) or "none defined"
-        raise ExpressionError(f"{text!r}: unknown name {node.id!r} (parameters: {known})")
+        raise ExpressionError(f"{_shown(text)}: unknown name {_short(node.id, 20)} (parameters: {known})")
     if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
         return (_BINARY[type(node.op)], _convert(node.left, text, names, allow_t, depth + 1),
                 _convert(node.right, text, names, allow_t, depth + 1))
@@ -91,12 +97,12 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
         func = node.func.id if isinstance(node.func, ast.Name) else None
         if func not in FUNCTIONS:
             shown = func if func is not None else _short(ast.unparse(node.func), 40)
-            raise ExpressionError(f"{text!r}: calling {shown} is not allowed (only sin, cos, exp, sqrt)")
+            raise ExpressionError(f"{_shown(text)}: calling {shown} is not allowed (only sin, cos, exp, sqrt)")
         if node.keywords or len(node.args) != 1 or isinstance(node.args[0], ast.Starred):
-            raise ExpressionError(f"{text!r}: {func}() takes exactly one argument")
+            raise ExpressionError(f"{_shown(text)}: {func}() takes exactly one argument")
         return ("call", func, _convert(node.args[0], text, names, allow_t, depth + 1))
     what = type(node).__name__
-    raise ExpressionError(f"{text!r}: {what} is not allowed (numbers, parameter names, t, + - * / **, "
+    raise ExpressionError(f"{_shown(text)}: {what} is not allowed (numbers, parameter names, t, + - * / **, "
                           "sin, cos, exp, sqrt only)")
 
 

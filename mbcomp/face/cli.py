@@ -90,14 +90,17 @@ def _version() -> str:
 # Shared steps
 # ----------------------------------------------------------------------------------------------
 def resolve_model_file(spec: str) -> Path:
-    """A path that exists, else a library model of that name; ``CommandError`` otherwise."""
+    """A path that exists, else a library model of that name; ``CommandError`` otherwise
+    (also for what ``mb.load`` refuses to read: a FIFO, a device, a file over the size limit)."""
     from mbcomp.files.toml_model import library_models
     from mbcomp.files.library import resolve_model_path
+    from mbcomp.core.limits import file_problem
     path = resolve_model_path(spec)
-    if path.is_file():
+    if path.exists() or path.is_symlink():
+        problem = file_problem(path)
+        if problem is not None:
+            raise CommandError(f"{spec}: {problem}", EXIT_BAD_INPUT)
         return path
-    if path.exists():
-        raise CommandError(f"{spec}: not a file", EXIT_BAD_INPUT)
     names = ", ".join(library_models()) or "none found"
     raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
                        EXIT_BAD_INPUT)

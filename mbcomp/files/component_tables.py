@@ -116,14 +116,14 @@ class Reader:
                 try:
                     check = evaluate(node, 0.0)
                 except (ArithmeticError, ValueError) as exc:
-                    return self.problem(table, key, f"{value!r} cannot be evaluated at t = 0 ({exc})")
+                    return self.problem(table, key, f"{short(value, 24)} cannot be evaluated at t = 0 ({exc})")
                 if not math.isfinite(check):
-                    return self.problem(table, key, f"{value!r} is not finite at t = 0")
+                    return self.problem(table, key, f"{short(value, 24)} is not finite at t = 0")
                 return expr
             try:
                 x = evaluate(node)
             except (ArithmeticError, ValueError) as exc:
-                return self.problem(table, key, f"{value!r} cannot be evaluated ({exc})")
+                return self.problem(table, key, f"{short(value, 24)} cannot be evaluated ({exc})")
         else:
             try:
                 x = float(value)
@@ -155,7 +155,7 @@ class Reader:
         if isinstance(value, str):
             if value.strip().lower().lstrip("+-") in ("x", "y", "z") and value.strip().count("-") <= 1:
                 return value.strip().lower()
-            return self.problem(table, key, f"{message}, got {value!r}")
+            return self.problem(table, key, f"{message}, got {short(value, 24)}")
         if not isinstance(value, list) or len(value) != 3:
             got = f"{len(value)} components" if isinstance(value, list) else f"{type_name(value)} ({short(value)})"
             return self.problem(table, key, f"{message}, got {got}")
@@ -168,7 +168,7 @@ class Reader:
         if not isinstance(value, str):
             return self.problem(table, key, f"must be a string, got {type_name(value)} ({short(value)})")
         if choices is not None and value not in choices:
-            return self.problem(table, key, f"must be one of {', '.join(repr(c) for c in choices)}, got {value!r}")
+            return self.problem(table, key, f"must be one of {', '.join(repr(c) for c in choices)}, got {short(value, 24)}")
         return value
 
     def reference(self, table: str, key: str, value: Any, known: dict, kind: str) -> Any:
@@ -179,7 +179,7 @@ class Reader:
             names = ", ".join(known) or "none declared"
             hint = close_match(value, tuple(known))
             plural = "bodies" if kind == "body" else kind + "s"
-            return self.problem(table, key, f"unknown {kind} {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+            return self.problem(table, key, f"unknown {kind} {short(value, 24)}" + (f" (did you mean {hint!r}?)" if hint else "")
                                 + f"; {plural}: {names}")
         if value in self.ports:   # a port: the Frame (or body) its user bound
             bound = known[value]

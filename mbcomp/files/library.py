@@ -34,7 +34,8 @@ def library_models() -> dict[str, Path]:
     found: dict[str, Path] = {}
     for folder in library_dirs():
         for path in sorted(folder.glob("*.toml")):
-            found.setdefault(path.stem, path)
+            if _inside(path, folder):   # (a symlink out of the library is not a library model)
+                found.setdefault(path.stem, path)
     return dict(sorted(found.items()))
 
 
@@ -60,12 +61,46 @@ def library_robots() -> dict[str, Path]:
     return {name: folder / rel for name, rel in ROBOTS.items() if (folder / rel).is_file()}
 
 
+def library_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a library model or part (None when it can): a library name is
+    a plain name or a sub-path inside the library (``"link"``, ``"parts/link"``), never an
+    absolute path nor one with ``..``, so that ``library:`` never leaves the library."""
+    if not isinstance(name, str) or not name.strip():
+        return "is empty: give a library model or part name (see 'mbcomp library')"
+    if "\x00" in name or "\\" in name:
+        return "is not a library name (a plain name or name/sub-path, see 'mbcomp library')"
+    if name.startswith("/") or os.path.isabs(name) or Path(name).drive or ":" in name:
+        return "is an absolute path: library: names a model or part inside the library (see 'mbcomp library')"
+    if any(part in ("..", ".") for part in name.split("/")):
+        return "contains '..' or '.': library: names a model or part inside the library (see 'mbcomp library')"
+    return None
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """True when ``path`` (symlinks resolved) lies inside ``folder``."""
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except (OSError, ValueError, RuntimeError):
+        return False
+
+
 def find_library_model(name: str) -> Path | None:
-    """The path of library model ``name`` (with or without ``.toml``), or of a library robot
-    (``"ur5"``, ``"panda"``: URDF files of the optional ``example-robot-data``), or None."""
+    """The path of library model ``name`` (with or without ``.toml``; a sub-path inside a
+    library folder also works), or of a library robot (``"ur5"``, ``"panda"``: URDF files of
+    the optional ``example-robot-data``), or None.  Never a file outside the library:
+    absolute paths and ``..`` are refused (``library_name_problem``)."""
+    if library_name_problem(name) is not None:
+        return None
     stem = name[:-5] if name.endswith(".toml") else name
     found = library_models().get(stem)
-    return found if found is not None else library_robots().get(name)
+    if found is not None:
+        return found
+    if "/" in stem:
+        for folder in library_dirs():
+            candidate = folder / f"{stem}.toml"
+            if candidate.is_file() and _inside(candidate, folder):
+                return candidate
+    return library_robots().get(name)
 
 
 LIBRARY_PREFIX = "library:"
@@ -76,12 +111,13 @@ def resolve_model_path(spec: str | os.PathLike) -> Path:
     (``"double_pendulum"``, ``"double_pendulum.toml"`` or ``"library:double_pendulum"``).
 
     A spec that names neither is returned unchanged as a ``Path``, so that the caller's own
-    "no such file" report (with the file's name) applies to it.
+    "no such file" report (with the file's name) applies to it.  A ``library:`` spec only ever
+    names a file inside the library (``library_name_problem``).
     """
     text = os.fspath(spec)
     if text.startswith(LIBRARY_PREFIX):
         found = find_library_model(text[len(LIBRARY_PREFIX):])
-        return found if found is not None else Path(text[len(LIBRARY_PREFIX):])
+        return found if found is not None else Path(text)
     path = Path(text)
     if path.exists() or "/" in text or os.sep in text:
         return path
@@ -91,11 +127,14 @@ def resolve_model_path(spec: str | os.PathLike) -> Path:
 
 def find_library_part(name: str) -> Path | None:
     """The path of library part ``name`` (``library/parts/NAME.toml``), else of the library
-    model ``name``, or None (what ``use = "library:NAME"`` in a model file refers to)."""
+    model ``name``, or None (what ``use = "library:NAME"`` in a model file refers to).  Only
+    files inside a library folder: see ``library_name_problem``."""
+    if library_name_problem(name) is not None:
+        return None
     stem = name[:-5] if name.endswith(".toml") else name
     for folder in library_dirs():
         path = folder / "parts" / f"{stem}.toml"
-        if path.is_file():
+        if path.is_file() and _inside(path, folder):
             return path
     return find_library_model(stem)
 
@@ -105,7 +144,8 @@ def library_parts() -> dict[str, Path]:
     found: dict[str, Path] = {}
     for folder in library_dirs():
         for path in sorted((folder / "parts").glob("*.toml")):
-            found.setdefault(path.stem, path)
+            if _inside(path, folder):
+                found.setdefault(path.stem, path)
     return dict(sorted(found.items()))
 
 

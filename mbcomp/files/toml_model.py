@@ -27,6 +27,8 @@ from mbcomp.files.component_tables import (BAD, ZERO3, Reader, close_match, comp
 from mbcomp.files.library import (find_library_model, find_library_part, library_dirs, library_models, library_parts,
                       read_description, resolve_model_path)
 from mbcomp.spec.model import Model
+from mbcomp.files.library import LIBRARY_PREFIX, library_name_problem
+from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting, read_file
 from mbcomp.spec.compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from mbcomp.spec.components.frame import Frame
 
@@ -48,10 +50,9 @@ MAX_SAMPLES = 10_000_000  # output samples a file may ask for (each holds q and 
 # Reading
 # ----------------------------------------------------------------------------------------------
 def _parse_toml(path: Path, label: str) -> dict:
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ModelError(problems=[f"{label}: cannot read the file ({exc.strerror or exc})"]) from None
+    """The TOML data of a model file: a regular file of at most ``max_file_bytes()`` (a FIFO
+    or a device is refused before it is read), UTF-8, valid TOML; else a ``ModelError``."""
+    raw = read_file(path, label)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -97,25 +98,39 @@ def load(path: str | os.PathLike) -> Model:
     below this file, or ``"library:NAME"``) with port bindings and parameter overrides.
     A file read as a model on its own binds its ``"external"`` ports to the ground.
 
+    Only regular files within ``MBCOMP_MAX_FILE_BYTES`` are read (a FIFO or a device is
+    refused unopened), and the sub-model instances the files would build, and how deeply
+    they nest, are counted before anything is built (``mbcomp.core.limits``, docs/errors.md).
+
     The returned model also carries the file's extras as attributes: ``description``
     (str), ``named_parameters`` ({name: float}), ``initial`` (``{"q": {coord: value},
     "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
     ``path`` (the file read).
     """
+    spec = os.fspath(path)
     path = resolve_model_path(path)
     label = str(path)
+    if isinstance(spec, str) and spec.startswith(LIBRARY_PREFIX) and not path.exists():
+        name = spec[len(LIBRARY_PREFIX):]
+        problem = library_name_problem(name) or "is not a library model"
+        raise ModelError(problems=[f"{short(spec)} {problem} "
+                                   f"(library: {', '.join(library_models()) or 'none found'})"])
     if not path.exists() and "/" not in label and os.sep not in label and not label.endswith(".toml"):
         names = ", ".join(library_models()) or "none found"
         raise ModelError(problems=[f"{label}: cannot read the file (no such file), and no library model "
                                    f"of that name (library: {names})"])
     data = _parse_toml(path, label)
     reader = Reader(label)
+    files = _Files(path, data)
     try:
-        model = _read_model(reader, data, path)
+        files.check_limits(label)   # before anything is built: milliseconds even for 2**29 instances
+        model = _read_model(reader, data, path, files)
     except ModelError:
         raise
     except RecursionError:
-        raise ModelError(problems=reader.problems + [f"{label}: values are nested too deeply to read"]) from None
+        raise ModelError(problems=reader.problems + [f"{label}: values or sub-models are nested too deeply to "
+                                                     f"read (sub-models nest at most {max_nesting()} deep; "
+                                                     f"{NESTING[0]} sets it)"]) from None
     except (ArithmeticError, LookupError, TypeError, ValueError, OSError, MemoryError) as exc:
         # A safety net: a file is data, and no file may end in a raw exception.
         raise ModelError(problems=reader.problems + [f"{label}: cannot be read ({type(exc).__name__}: {exc})"]) from None
@@ -124,7 +139,7 @@ def load(path: str | os.PathLike) -> Model:
     return model
 
 
-def _read_model(r: Reader, data: dict, path: Path) -> Model:
+def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
     r.keys("", data, TOP_KEYS)
 
     name = data.get("name", path.stem or "model")
@@ -149,7 +164,7 @@ def _read_model(r: Reader, data: dict, path: Path) -> Model:
     for port in external:   # read on its own, a part hangs from the ground
         bodies[port] = model.ground
         r.ports.add(port)
-    context = _FileContext(path, (path.resolve(),), {})
+    context = _FileContext(path, (path.resolve(),), {}, files)
     coords_seen = _read_parts(r, data, model, bodies, context, exposed)
 
     model.description = description
@@ -352,11 +367,11 @@ def _port_frame(r: Reader, port: str, spec: Any, bodies: dict) -> Any:
 
 
 class _FileContext:
-    """Where a file is read from: its path, the chain of files including it (for cycles)
-    and the sub-model classes made so far (one per file)."""
+    """Where a file is read from: its path, the chain of files including it (for cycles),
+    the sub-model classes made so far (one per file) and the files of this load."""
 
-    def __init__(self, path: Path, chain: tuple, classes: dict):
-        self.path, self.chain, self.classes = path, chain, classes
+    def __init__(self, path: Path, chain: tuple, classes: dict, files: "_Files"):
+        self.path, self.chain, self.classes, self.files = path, chain, classes, files
 
 
 def _port_body(spec: Any) -> str | None:
@@ -365,31 +380,129 @@ def _port_body(spec: Any) -> str | None:
     return body if isinstance(body, str) else None
 
 
-def _resolve_use(r: Reader, label: str, use: Any, context: _FileContext) -> Path | None:
+def _use_target(use: Any, path: Path, explain: bool = True) -> tuple[Path | None, str | None]:
+    """``(file, None)`` that ``use = ...`` in the file ``path`` names, or ``(None, why not)``:
+    a file beside or below ``path``, or ``library:NAME`` inside the library.  Nothing outside
+    is ever read (``explain=False``: skip composing the message)."""
     if not isinstance(use, str) or not use.strip():
-        r.problem(label, "use", f'must be a file name ("part.toml") or "library:NAME", got {short(use)}')
-        return None
-    if use.startswith("library:"):
-        found = find_library_part(use[len("library:"):])
-        if found is None:
-            r.problem(label, "use", f"no library part or model {use[len('library:'):]!r}; parts: "
-                      f"{', '.join(library_parts())}; models: {', '.join(library_models())}")
-        return found
-    base = context.path.resolve().parent
+        return None, f'must be a file name ("part.toml") or "library:NAME", got {short(use)}'
+    if use.startswith(LIBRARY_PREFIX):
+        name = use[len(LIBRARY_PREFIX):]
+        problem = library_name_problem(name)
+        if problem is not None:
+            return None, f"{short(use)} {problem}"
+        found = find_library_part(name)
+        if found is None and explain:
+            return None, (f"no library part or model {short(name)}; parts: {', '.join(library_parts())}; "
+                          f"models: {', '.join(library_models())}")
+        return found, None
+    base = path.resolve().parent
     try:
         target = (base / use).resolve()
-        found = target.is_file()
-    except (OSError, ValueError) as exc:
-        r.problem(label, "use", f"{short(use)} is not a usable file name ({type(exc).__name__}: {exc})")
-        return None
+        found = target.exists()
+    except (OSError, ValueError, RuntimeError) as exc:
+        return None, f"{short(use)} is not a usable file name ({type(exc).__name__})"
     if not target.is_relative_to(base):
-        r.problem(label, "use", f"{use!r} leaves the directory of {context.path.name}: a file may use files "
-                  "beside or below it, or library:NAME")
-        return None
+        return None, (f"{short(use)} leaves the directory of {path.name}: a file may use files beside or below "
+                      "it, or library:NAME")
     if not found:
-        r.problem(label, "use", f"file {use!r} not found beside {context.path.name}")
-        return None
+        return None, f"file {short(use)} not found beside {path.name}"
+    return target, None   # (a FIFO or a device is refused when it is read)
+
+
+def _resolve_use(r: Reader, label: str, use: Any, context: _FileContext) -> Path | None:
+    target, problem = _use_target(use, context.path)
+    if problem is not None:
+        r.problem(label, "use", problem)
     return target
+
+
+class _Files:
+    """The files one ``load`` reads, each read once (by resolved path), and the limits on the
+    sub-model instances their ``use`` graph builds, checked before anything is built."""
+
+    def __init__(self, path: Path, data: dict):
+        self.top = path
+        self.data: dict[Path, Any] = {path.resolve(): data}
+
+    def data_of(self, path: Path, label: str) -> dict:
+        """The parsed data of ``path`` (read once; a file that failed fails again)."""
+        key = path.resolve()
+        found = self.data.get(key)
+        if found is None:
+            try:
+                found = _parse_toml(path, label)
+            except ModelError as exc:
+                found = exc
+            self.data[key] = found
+        if isinstance(found, ModelError):
+            raise ModelError(problems=found.problems)
+        return found
+
+    def check_limits(self, label: str) -> None:
+        """``ModelError`` when the model would hold more than ``max_instances()`` sub-model
+        instances or nest them more than ``max_nesting()`` deep.  Counted on the ``use``
+        graph with multiplicities, each file once: milliseconds even for 2**29 instances.
+        Files that cannot be read or used count as nothing here (the reader reports them)."""
+        limit, deepest = max_instances(), max_nesting()
+        memo: dict[Path, tuple[int, int, tuple]] = {}
+
+        def too_deep(chain: tuple) -> ModelError:
+            names = [p.name if isinstance(p, Path) else p for p in chain]
+            if len(names) > 7:
+                names = names[:3] + [f"... ({len(names) - 5} more)"] + names[-2:]
+            return ModelError(problems=[f"{label}: sub-models nest more than {deepest} deep (set {NESTING[0]} to "
+                                        f"raise the limit): {' -> '.join(names)}"])
+
+        def table(data: Any, where: Path, level: int, chain: tuple) -> tuple[int, int, tuple]:
+            subs = data.get("submodels") if isinstance(data, dict) else None
+            count, depth, longest = 0, 0, ()
+            if not isinstance(subs, dict):
+                return count, depth, longest
+            for name, entry in subs.items():
+                if not isinstance(entry, dict):
+                    continue
+                below, step = (0, 0, ()), f"[submodels.{toml_key(str(name))}]"
+                if "use" in entry:
+                    target, _ = _use_target(entry["use"], where, explain=False)
+                    if target is not None and target.resolve() not in chain:
+                        below = use(target.resolve(), level + 1, chain + (target.resolve(),))
+                elif entry and all(key in PART_SECTIONS + ("submodels",) for key in entry):
+                    if level + 1 > deepest:
+                        raise too_deep(chain + (step,))
+                    below = table(entry, where, level + 1, chain + (step,))
+                count += 1 + below[0]
+                if 1 + below[1] > depth:
+                    depth, longest = 1 + below[1], below[2]
+            return count, depth, longest
+
+        def use(target: Path, level: int, chain: tuple) -> tuple[int, int, tuple]:
+            if level > deepest:
+                raise too_deep(chain)
+            if target not in memo:
+                try:
+                    data = self.data_of(target, str(target))
+                except ModelError:
+                    data = {}
+                memo[target] = table(data, target, level, chain)
+            count, depth, longest = memo[target]
+            if level + depth > deepest:
+                raise too_deep(chain + longest)
+            return count, depth, (target,) + longest
+
+        top = self.top.resolve()
+        counts = {}
+        data = self.data[top]
+        subs = data.get("submodels") if isinstance(data, dict) else None
+        if isinstance(subs, dict):
+            for name, entry in subs.items():
+                counts[name] = table({"submodels": {name: entry}}, self.top, 0, (top,))[0]
+        total = sum(counts.values())
+        if total > limit:
+            name, most = max(counts.items(), key=lambda item: item[1])
+            alone = f"; [submodels.{toml_key(str(name))}] alone builds {most}" if len(counts) > 1 else ""
+            raise ModelError(problems=[f"{label}: would build {total} sub-model instances, more than the limit of "
+                                       f"{limit} per model (set {INSTANCES[0]} to raise it){alone}"])
 
 
 def _read_submodel(r: Reader, name: str, label: str, table: dict, bodies: dict, context: _FileContext):
@@ -413,7 +526,7 @@ def _read_submodel(r: Reader, name: str, label: str, table: dict, bodies: dict, 
     cls = context.classes.get(resolved)
     if cls is None:
         try:
-            cls = _part_class(path, _FileContext(path, context.chain + (resolved,), context.classes))
+            cls = _part_class(path, _FileContext(path, context.chain + (resolved,), context.classes, context.files))
         except ModelError as exc:
             r.problems.extend(exc.problems)
             return None
@@ -458,7 +571,7 @@ def _part_class(path: Path, context: _FileContext) -> type:
     """A ``Submodel`` class for a part file: its [parameters] become Parameters (a number,
     or a table {value, unit, min, max, doc}), its external [ports] the ports of build."""
     label = str(path)
-    data = _parse_toml(path, label)
+    data = context.files.data_of(path, label)
     r = Reader(label)
     r.keys("", data, TOP_KEYS)
     params_table = data.get("parameters", {})

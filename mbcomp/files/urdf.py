@@ -35,6 +35,7 @@ from mbcomp.spec.components import Body, Free, Prismatic, Revolute
 from mbcomp.spec.components.frame import Frame
 from mbcomp.core.errors import ModelError
 from mbcomp.spec.model import Model
+from mbcomp.core.limits import file_problem
 from mbcomp.spec.shapes import Box, Cylinder, Mesh, Sphere
 
 __all__ = ["load_urdf"]
@@ -147,6 +148,37 @@ def _shapes(link: Any, T_body_link: np.ndarray, urdf_dir: Path, materials: dict,
     return out
 
 
+def _check_tree(joints: list, links: dict, path: Path) -> None:
+    """``ModelError`` naming the joints when the links do not form a tree: a joint to an
+    unknown link or from a link to itself, a link with two parent joints, joints in a cycle."""
+    import networkx as nx
+    problems, parents = [], {}
+    for joint in joints:
+        if joint.parent not in links or joint.child not in links:
+            problems.append(f"URDF joint {joint.name!r}: connects unknown links {joint.parent!r} -> {joint.child!r}")
+        elif joint.parent == joint.child:
+            problems.append(f"URDF joint {joint.name!r}: connects link {joint.parent!r} to itself")
+        else:
+            parents.setdefault(joint.child, []).append(joint)
+    for link, found in parents.items():
+        if len(found) > 1:
+            names = ", ".join(repr(j.name) for j in found)
+            problems.append(f"URDF link {link!r}: has {len(found)} parent joints ({names}); a link hangs from one "
+                            "joint (the links must form a tree: close a loop with a constraint after loading)")
+    graph = nx.DiGraph()
+    graph.add_edges_from((j.parent, j.child, {"joint": j.name}) for found in parents.values() for j in found)
+    try:
+        cycle = nx.find_cycle(graph)
+    except nx.NetworkXNoCycle:
+        cycle = []
+    if cycle:
+        names = ", ".join(repr(graph.edges[u, v]["joint"]) for u, v in cycle)
+        loop = " -> ".join([cycle[0][0]] + [v for _, v in cycle])
+        problems.append(f"URDF joints {names}: form a cycle ({loop}); the links must form a tree")
+    if problems:
+        raise ModelError(problems=[f"{path}: {problem}" for problem in problems])
+
+
 def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any = GRAVITY,
               limits: bool = False) -> Model:
     """Read a URDF file into a ``Model`` (see the module docstring for the mapping).
@@ -165,8 +197,9 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
         raise ModelError("load_urdf", "reading URDF needs the optional package yourdfpy: "
                                       "pip install 'mbcomp[urdf]'") from None
     path = Path(path)
-    if not path.is_file():
-        raise ModelError("load_urdf", f"{path}: no such file")
+    problem = file_problem(path)   # a FIFO, a device or an oversized file is never opened
+    if problem is not None:
+        raise ModelError("load_urdf", f"{path}: {'no such file' if not path.exists() else problem}")
     try:
         robot = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
                                    build_collision_scene_graph=False, load_collision_meshes=False).robot
@@ -174,11 +207,10 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
         raise ModelError("load_urdf", f"{path}: not a readable URDF file ({exc})") from None
 
     links = {link.name: link for link in robot.links}
+    _check_tree(robot.joints, links, path)
     children: dict[str, list] = {}
     parent_joint: dict[str, Any] = {}
     for joint in robot.joints:
-        if joint.parent not in links or joint.child not in links:
-            raise ModelError(f"URDF joint {joint.name!r}", f"connects unknown links {joint.parent!r} -> {joint.child!r}")
         children.setdefault(joint.parent, []).append(joint)
         parent_joint[joint.child] = joint
     roots = [name for name in links if name not in parent_joint]
@@ -205,21 +237,24 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
     ground_body = "__ground__"
 
     def visit(link_name: str, body: str, T: np.ndarray) -> None:
-        body_of[link_name], T_in_body[link_name] = body, T
-        link = links[link_name]
-        mass_of[body] = mass_of.get(body, _Mass()).plus(_link_mass(link).moved(T))
-        shapes_of.setdefault(body, []).extend(_shapes(link, T, path.parent, materials, skipped_meshes))
-        for joint in children.get(link_name, ()):
-            origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=float)
-            if joint.type == "fixed":
-                visit(joint.child, body, T @ origin)
-            else:
-                order.append(joint.child)
-                visit(joint.child, joint.child, np.eye(4))
+        """Depth first from ``link_name`` (a stack, not recursion: a chain may be long)."""
+        stack = [(link_name, body, T)]
+        while stack:
+            link_name, body, T = stack.pop()
+            body_of[link_name], T_in_body[link_name] = body, T
+            if body == link_name:   # a link that founds a body (one that moves)
+                order.append(link_name)
+            link = links[link_name]
+            mass_of[body] = mass_of.get(body, _Mass()).plus(_link_mass(link).moved(T))
+            shapes_of.setdefault(body, []).extend(_shapes(link, T, path.parent, materials, skipped_meshes))
+            for joint in reversed(children.get(link_name, ())):   # (popped in the file's order)
+                origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=float)
+                if joint.type == "fixed":
+                    stack.append((joint.child, body, T @ origin))
+                else:
+                    stack.append((joint.child, joint.child, np.eye(4)))
 
     base = root if floating else ground_body
-    if floating:
-        order.append(root)
     visit(root, base, np.eye(4))
 
     names: dict[str, str] = {}
@@ -250,6 +285,9 @@ def load_urdf(path: str | os.PathLike, floating: bool = False, *, gravity: Any =
         origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=float)
         T = T_in_body[joint.parent] @ origin
         axis = np.array([1.0, 0.0, 0.0]) if joint.axis is None else np.asarray(joint.axis, dtype=float)
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)):
+            raise ModelError(f"URDF joint {joint.name!r}", f"axis {' '.join(f'{v:g}' for v in axis.ravel())} is not "
+                                                          "three finite numbers")
         if not np.linalg.norm(axis) > 0:
             raise ModelError(f"URDF joint {joint.name!r}", "axis is the zero vector")
         axis = axis / np.linalg.norm(axis)

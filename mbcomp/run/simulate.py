@@ -258,8 +258,8 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
             poll_step_hooks(t)
             if collapse.collapsed(t):
                 q_now, qd_now = workspace.full_state(t, solver.y)
-                raise SimulationError(collapse_message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
-                                                       kernel.topology.speeds, collapse.window, collapse.projected))
+                raise SimulationError(collapse.message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
+                                                       kernel.topology.speeds))
             if restart is None and solver.status == "finished":
                 break
             if restart is None:

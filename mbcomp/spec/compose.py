@@ -123,6 +123,7 @@ class Registry:
     components: list = field(default_factory=list)        # (full name, component, scope path)
     parameters: dict = field(default_factory=dict)        # path -> ParameterEntry
     names: dict = field(default_factory=dict)             # id(component) -> full name
+    instances: int = 0                                    # sub-model instances so far (limits.max_instances)
 
 
 class Submodel:
@@ -217,9 +218,10 @@ class Submodel:
         if outer:
             self._modifiers.update(outer)   # outer modifiers win
         path = f"{prefix}{self.name}"
+        where = f"{type(self).__name__} {path!r}"
+        _check_limits(registry, path, where)
         object.__setattr__(self, "_path", path)
         object.__setattr__(self, "_registry", registry)
-        where = f"{type(self).__name__} {path!r}"
         self._classify(self._modifiers, where, final=False)
         for key, spec in self.declared_parameters().items():
             given = self._modifiers.get(key, spec.default)
@@ -311,6 +313,20 @@ class Submodel:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.path!r})"
+
+
+def _check_limits(registry: Registry, path: str, where: str) -> None:
+    """``ModelError`` when one more instance at ``path`` would pass the limits on sub-model
+    instances per model or on their nesting (``mbcomp.core.limits``; a recursive ``build`` ends here)."""
+    from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting
+    depth, deepest = path.count(".") + 1, max_nesting()
+    if depth > deepest:
+        raise ModelError(where, f"sub-models nest more than {deepest} deep (set {NESTING[0]} to raise the limit)")
+    registry.instances += 1
+    limit = max_instances()
+    if registry.instances > limit:
+        raise ModelError(where, f"the model would hold more than {limit} sub-model instances (set {INSTANCES[0]} "
+                                "to raise the limit)")
 
 
 class FileSubmodel(Submodel):
