@@ -71,11 +71,17 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
             rows = [["coordinate", "value", "holding force"]]
             rows += [[c, fmt(v), fmt(h)] for c, v, h in zip(system.coords, q, tau)]
         else:
-            q = system.equilibrium(q_guess)
+            q, states = system.equilibrium(q_guess, return_states=True)
             print("equilibrium:")
             rows = [["coordinate", "start", "equilibrium"]]
             rows += [[c, fmt(g), fmt(v)] for c, g, v in zip(system.coords, q_guess, q)]
         print(table(rows))
+        if system.extra_states:
+            if args.held:
+                from .analysis import rest_states
+                states = dict(zip(system.extra_states, rest_states(system, q, tau=tau)))
+            print("drive states at rest:")
+            print(table([["state", "value"]] + [[name, fmt(value)] for name, value in states.items()]))
         modes = system.modes(q, tau=tau)
     except (SimulationError, ModelError) as exc:
         raise CommandError(f"analysis failed: {exc}", EXIT_FAILED) from None
@@ -84,17 +90,38 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     rows = [["mode", "frequency (Hz)", "damping ratio", "eigenvalue (1/s)", "kind", "shape"]]
     for i, (f, z, lam) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.eigenvalues)):
         kind = _kind(lam, z, modes)
-        shape = modes.shapes[:, i]
-        text = ", ".join(f"{s}={fmt(float(np.real(v)))}" for s, v in zip(speeds, shape) if abs(v) > 1e-9)
+        text = shape_text(speeds, modes.shapes[:, i])
         scale = max(1.0, float(np.max(np.abs(modes.all_eigenvalues), initial=0.0)))
         re = 0.0 if abs(lam.real) < 1e-9 * scale else lam.real
         lam_text = fmt(re) if abs(lam.imag) < 1e-9 * scale else f"{re:.4g}{lam.imag:+.4g}j"
         rows.append([str(i + 1), fmt(f), fmt(z), lam_text, kind, text])
     if len(rows) > 1:
         print(table(rows))
+    if system.extra_states:  # the drive states' eigenvalues join the mechanical ones: list them all
+        values = sorted(modes.all_eigenvalues, key=lambda lam: (abs(lam), -lam.imag))
+        print("eigenvalues with the drive states (1/s): " + ", ".join(
+            fmt(lam.real) if abs(lam.imag) < 1e-9 * max(1.0, abs(lam)) else f"{lam.real:.4g}{lam.imag:+.4g}j"
+            for lam in values))
     verdict = "stable" if modes.stable else f"UNSTABLE ({modes.unstable} growing mode{'s' * (modes.unstable > 1)})"
     print(f"stability: {verdict}")
     return EXIT_OK
+
+
+#: The shape column shows at most this many components (the largest), each at least
+#: ``SHAPE_FLOOR`` of the largest; the rest are counted ("+3 smaller").
+SHAPE_COMPONENTS = 3
+SHAPE_FLOOR = 0.05
+
+
+def shape_text(speeds: tuple[str, ...], shape: np.ndarray) -> str:
+    """A mode shape as its dominant components, largest first (``a=1, b=-0.43 (+2 smaller)``),
+    so that the column stays narrow for models with many coordinates."""
+    values = np.real(np.asarray(shape))
+    order = [int(j) for j in np.argsort(-np.abs(values), kind="stable") if abs(values[j]) > 1e-9]
+    shown = [j for j in order[:SHAPE_COMPONENTS] if abs(values[j]) >= SHAPE_FLOOR * abs(values[order[0]])]
+    text = ", ".join(f"{speeds[j]}={values[j]:.3g}" for j in shown)
+    rest = len(order) - len(shown)
+    return text + (f" (+{rest} smaller)" if rest else "")
 
 
 def fmt(x: float) -> str:

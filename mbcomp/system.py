@@ -535,10 +535,12 @@ class System:
         cs = self._formulation.constraints
         return [] if cs is None else list(cs.owner)
 
-    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0) -> np.ndarray:
-        """``q`` at rest with every constraint met, near ``q_guess`` (see ``mbcomp.analysis``)."""
+    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0, return_states: bool = False) -> Any:
+        """``q`` at rest with every constraint met and the drive states (currents, PID integrals)
+        at rest, near ``q_guess``; ``return_states=True``: ``(q, {state: value})`` (see
+        ``mbcomp.analysis``)."""
         from .analysis import equilibrium
-        return equilibrium(self, q_guess, tau=tau, t=t)
+        return equilibrium(self, q_guess, tau=tau, t=t, return_states=return_states)
 
     def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
                   independent: Any = None, states: Any = None):
