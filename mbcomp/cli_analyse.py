@@ -21,6 +21,8 @@ def register(commands: Any, cli: Any) -> None:
                          help="starting value of a coordinate (rad or m); repeat or separate by commas")
     analyse.add_argument("--held", action="store_true",
                          help="analyse the starting pose held by its holding forces instead of an equilibrium")
+    analyse.add_argument("--time", type=float, default=0.0, metavar="T",
+                         help="time (s) at which inputs that change with time (steps, sines) are held (default 0)")
     analyse.add_argument("--formulation", choices=("lagrange", "dae"), help="default: the file's, else lagrange")
     analyse.set_defaults(handler=lambda args: cmd_analyse(args, cli))
 
@@ -63,15 +65,19 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     print(f"{model.name}: {len(system.coords)} coordinates, {system.ndof} degrees of freedom "
           f"({system.formulation})")
     tau = None
+    t = args.time
+    if not np.isfinite(t):
+        raise CommandError("--time must be a finite number of seconds", cli.EXIT_BAD_INPUT)
+    from .analysis import changing_inputs
     try:
         if args.held:
-            q = system.assemble(q_guess)[0] if system.constraint_names else q_guess
-            tau = system.holding_forces(q)
+            q = system.assemble(q_guess, None, t)[0] if system.constraint_names else q_guess
+            tau = system.holding_forces(q, t)
             print("pose held by its holding forces:")
             rows = [["coordinate", "value", "holding force"]]
             rows += [[c, fmt(v), fmt(h)] for c, v, h in zip(system.coords, q, tau)]
         else:
-            q, states = system.equilibrium(q_guess, return_states=True)
+            q, states = system.equilibrium(q_guess, t=t, return_states=True)
             print("equilibrium:")
             rows = [["coordinate", "start", "equilibrium"]]
             rows += [[c, fmt(g), fmt(v)] for c, g, v in zip(system.coords, q_guess, q)]
@@ -79,10 +85,14 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
         if system.extra_states:
             if args.held:
                 from .analysis import rest_states
-                states = dict(zip(system.extra_states, rest_states(system, q, tau=tau)))
+                states = dict(zip(system.extra_states, rest_states(system, q, t=t, tau=tau)))
             print("drive states at rest:")
             print(table([["state", "value"]] + [[name, fmt(value)] for name, value in states.items()]))
-        modes = system.modes(q, tau=tau)
+        changing = changing_inputs(system, q, t, states if system.extra_states else None)
+        if changing:
+            print(f"note: inputs change with time (they act on {', '.join(changing)}); analysed with them held "
+                  f"at their values at t = {fmt(t)} s (--time to choose another)")
+        modes = system.modes(q, t=t, tau=tau)
     except (SimulationError, ModelError) as exc:
         raise CommandError(f"analysis failed: {exc}", EXIT_FAILED) from None
     speeds = modes.speeds

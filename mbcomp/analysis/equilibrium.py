@@ -34,10 +34,11 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
     depends on (the integral of a PID with ``ki = 0``) is left at 0: it drifts without effect.
     ``tau``: constant generalised forces (array, one per speed) or a callable ``(t, q, qd)``.
     Which equilibrium is found (a pendulum has two) depends on the guess; stable or not
-    (see ``modes``).  ``return_states=True`` returns ``(q, {state: value})`` with the drive
-    states (``system.extra_states``) at rest.  ``SimulationError`` when none is found near the
-    guess, or when the model has no rest at all (a motor prescribing motion, loads that
-    change with time).
+    (see ``modes``).  Inputs that change with time (a ``Step`` setpoint, a ``Sine`` voltage)
+    are held at their values at ``t`` (``changing_inputs`` names them).  ``return_states=True``
+    returns ``(q, {state: value})`` with the drive states (``system.extra_states``) at rest.
+    ``SimulationError`` when none is found near the guess, or when a motor prescribes motion
+    (such a model is never at rest).
     """
     q0 = system.state_vector(q_guess, "q_guess")
     n = len(speed_names(system))
@@ -79,6 +80,7 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
               and still <= FORCE_TOLERANCE * drives.rate_scale)
         return ok, worst
 
+    drives.check_never_at_rest(q0)
     y0 = np.concatenate((zero, z_start[drives.active]))
     z = z_start
     try:
@@ -124,7 +126,6 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
         raise SimulationError(f"no equilibrium found near q = {format_state(q0)}: the closest point reached, "
                               f"q = {format_state(q)}, leaves an unbalanced generalised force of {worst:.3g} "
                               f"(loads up to {scale:.3g}); {hint}")
-    drives.check_time_invariant(q, z, scale)
     if return_states:
         return q, dict(zip(drives.names, (float(v) for v in z)))
     return q
@@ -223,39 +224,48 @@ class DriveRest:
         self.rate_scale = max(1.0, float(np.max(np.concatenate(terms), initial=0.0)))
         return z
 
-    def check_time_invariant(self, q: np.ndarray, z: np.ndarray, scale: float) -> None:
-        """``SimulationError`` unless the rest found at ``t`` is a rest at every time: no motor
-        moves a constrained coordinate at rest, no force or state rate changes with time (the
-        user's ``tau`` held at its value at ``t``)."""
+    def check_never_at_rest(self, q: np.ndarray) -> None:
+        """``SimulationError`` when a motor prescribes motion at ``q`` (the constraints' time
+        rate at rest is not zero): such a model has no rest at any pose."""
+        system = self.system
+        if not system.constraint_names:
+            return
+        cv = system.constraint_values(q, np.zeros(self.n), self.t)
+        moving = np.abs(np.asarray(cv.g_t, dtype=float)) > POSITION_TOLERANCE
+        if np.any(moving):
+            owners = sorted({system.constraint_rows[i] for i in np.flatnonzero(moving)})
+            what = f"{'constraint' if len(owners) == 1 else 'constraints'} {', '.join(map(repr, owners))}"
+            raise SimulationError(f"no equilibrium: {what} prescribe{'s' * (len(owners) == 1)} motion in time "
+                                  f"(a motor's position or speed), so the model is never at rest; analyse it "
+                                  f"with the motor held at a fixed position, or linearise about the motion")
+
+    def changing(self, q: np.ndarray, z: np.ndarray, scale: float = 1.0) -> list[str]:
+        """The speeds and drive states whose forces or rates at rest at ``(q, z)`` change with
+        time (a time-varying voltage, torque or setpoint; the user's ``tau`` held at ``t``)."""
         system, t = self.system, self.t
-        n = self.n
-        if system.constraint_names:
-            cv = system.constraint_values(q, np.zeros(n), t)
-            moving = np.abs(np.asarray(cv.g_t, dtype=float)) > POSITION_TOLERANCE
-            if np.any(moving):
-                owners = sorted({system.constraint_rows[i] for i in np.flatnonzero(moving)})
-                what = f"{'constraint' if len(owners) == 1 else 'constraints'} {', '.join(map(repr, owners))}"
-                raise SimulationError(f"no equilibrium: {what} prescribe{'s' * (len(owners) == 1)} motion in time "
-                                      f"(a motor's position or speed), so the model is never at rest; analyse it "
-                                      f"with the motor held at a fixed position, or linearise about the motion")
-        held = force_vector(system, self.tau, t, q, np.zeros(n))
+        held = force_vector(system, self.tau, t, q, np.zeros(self.n))
         frozen = DriveRest(system, t, held)
         frozen.active, frozen.rate_scale = self.active, self.rate_scale
         f_now, r_now = frozen.forces(q, z), frozen.rates(q, z)
+        changed: list[str] = []
         for dt in (0.7071067811865476, 3.141592653589793, 12.345678):
-            later = DriveRest.__new__(DriveRest)
-            later.__dict__.update(frozen.__dict__)
-            later.t = t + dt
-            changed = [speed_names(system)[i] for i in
-                       np.flatnonzero(np.abs(later.forces(q, z) - f_now) > 1e3 * FORCE_TOLERANCE * scale)]
+            frozen.t = t + dt
+            changed += [speed_names(system)[i] for i in
+                        np.flatnonzero(np.abs(frozen.forces(q, z) - f_now) > 1e3 * FORCE_TOLERANCE * scale)]
             changed += [self.names[self.active[i]] for i in
-                        np.flatnonzero(np.abs(later.rates(q, z) - r_now) > 1e3 * FORCE_TOLERANCE * self.rate_scale)]
-            if system.constraint_names and system.constraint_violation(q, t + dt) > 1e3 * POSITION_TOLERANCE:
-                changed.append("the constraints")
-            if changed:
-                raise SimulationError(f"no equilibrium: the loads change with time (on {', '.join(changed)}: a "
-                                      f"time-varying voltage, torque or setpoint), so the model rests at no pose; "
-                                      f"analyse it with constant inputs")
+                        np.flatnonzero(np.abs(frozen.rates(q, z) - r_now) > 1e3 * FORCE_TOLERANCE * self.rate_scale)]
+        return list(dict.fromkeys(changed))
+
+
+def changing_inputs(system, q: Any, t: float = 0.0, states: Any = None) -> list[str]:
+    """The speeds and drive states whose loads at rest at ``q`` change with time (signals,
+    voltages, setpoints that depend on ``t``): an equilibrium found at ``t`` holds them at
+    their values at ``t``; empty when the model's loads are constant."""
+    q = system.state_vector(q)
+    from mbcomp.analysis.space import drive_state_vector
+    drives = DriveRest(system, t, None, q)
+    z = drive_state_vector(system, states)
+    return drives.changing(q, z, max(1.0, float(np.max(np.abs(drives.forces(q, z)), initial=0.0))))
 
 
 #: "Near the guess": each tangent coordinate stays within this distance of the guess (rad or m).

@@ -69,7 +69,8 @@ def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -
     rates = lin.state_derivative[2 * k:]
     # a drive state nothing depends on (a PID integral with ki = 0: its column of A is zero)
     # drifts without effect; the others must rest too
-    acting = np.any(A[:, 2 * k:] != 0.0, axis=0) if rates.size else np.zeros(0, dtype=bool)
+    size = max(1.0, float(np.max(np.abs(A), initial=0.0)))
+    acting = np.any(np.abs(A[:, 2 * k:]) > 1e-12 * size, axis=0) if rates.size else np.zeros(0, dtype=bool)
     rate_scale = max(1.0, float(np.linalg.norm(A[2 * k:]))) if rates.size else 1.0
     if (np.max(np.abs(accel), initial=0.0) > EQUILIBRIUM_TOLERANCE * stiffness
             or np.max(np.abs(rates[acting]), initial=0.0) > EQUILIBRIUM_TOLERANCE * rate_scale):
