@@ -52,8 +52,11 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
     f0 = drives.forces(q0, z_start)
     scale = max(float(np.max(np.abs(f0), initial=0.0)), 1.0)
     rows = np.arange(0)
+    sigma0 = 1.0
     if system.constraint_names:
-        rows = independent_rows(system.constraint_values(q0, None, t).J)
+        J0 = system.constraint_values(q0, None, t).J
+        rows = independent_rows(J0)
+        sigma0 = float(np.linalg.norm(J0[rows], 2)) if len(rows) else 1.0
     r = len(rows)
 
     def split(y):
@@ -69,6 +72,8 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
             return np.concatenate((f / scale, rates))
         cv = system.constraint_values(q, None, t)
         J = cv.J[rows]
+        if np.linalg.svd(J, compute_uv=False)[-1] < SINGULAR * sigma0:
+            raise _Singular(y)  # at a dead point: the search would creep towards it for ever
         projected = f - J.T @ np.linalg.solve(J @ J.T, J @ f)
         return np.concatenate((projected / scale, cv.g[rows], rates))
 
@@ -92,7 +97,13 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
         if not ok:
             # 2. It stopped where the force is smallest but not zero (a fold of the force field):
             # pseudo-transient continuation follows the overdamped motion towards a stable rest.
-            q, z = _continuation(system, q0, z_start, drives, t, tau, solved)
+            def dead(q):
+                return bool(r) and np.linalg.svd(system.constraint_values(q, None, t).J[rows],
+                                                 compute_uv=False)[-1] < SINGULAR * sigma0
+
+            q, z = _continuation(system, q0, z_start, drives, t, tau, solved, dead)
+            if dead(q):
+                raise _Singular(np.concatenate((difference(system, q0, q), z[drives.active])))
             # close to it now: Newton finishes from there
             start = np.concatenate((difference(system, q0, q), z[drives.active]))
             polished, z_polished = split(_least_squares(residual, start, max_evaluations, n))
@@ -101,6 +112,13 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
             if solved(polished, z_polished)[0] or not solved(q, z)[0]:
                 q, z = polished, z_polished
             ok, worst = solved(q, z)
+    except _Singular as stop:
+        q, z = split(stop.y)
+        ok, worst = False, float("nan")
+        try:
+            worst = float(np.max(np.abs(reduced_forces(system, q, t, tau, states=z)), initial=0.0))
+        except (SimulationError, np.linalg.LinAlgError):
+            pass
     except (SimulationError, np.linalg.LinAlgError) as exc:
         raise SimulationError(f"no equilibrium found near q = {format_state(q0)}: the search left the region "
                               f"where the model can be evaluated ({exc})") from None
@@ -268,6 +286,19 @@ def changing_inputs(system, q: Any, t: float = 0.0, states: Any = None) -> list[
     return drives.changing(q, z, max(1.0, float(np.max(np.abs(drives.forces(q, z)), initial=0.0))))
 
 
+#: The search stops at a dead point: where the constraint Jacobian's smallest singular value
+#: falls below this fraction of its norm at the guess.
+SINGULAR = 1e-5
+
+
+class _Singular(Exception):
+    """The equilibrium search reached a singular position (``y``: its unknowns there)."""
+
+    def __init__(self, y: np.ndarray):
+        super().__init__("singular position")
+        self.y = np.array(y)
+
+
 #: "Near the guess": each tangent coordinate stays within this distance of the guess (rad or m).
 SEARCH_RADIUS = 2 * np.pi
 
@@ -293,7 +324,7 @@ def _least_squares(residual, x0: np.ndarray, max_evaluations: int, bounded: int 
 
 
 def _continuation(system, q0: np.ndarray, z0: np.ndarray, drives: "DriveRest", t: float, tau: Any, solved,
-                  max_steps: int = 300) -> tuple[np.ndarray, np.ndarray]:
+                  dead=None, max_steps: int = 300) -> tuple[np.ndarray, np.ndarray]:
     """Pseudo-transient continuation (Kelley and Keyes) on the independent coordinates and the
     acting drive states: ``(I / h - da/dx) dx = a`` with ``a`` the accelerations at rest (and
     the states' rates); the pseudo time step ``h`` grows as they shrink (switched evolution
@@ -319,6 +350,8 @@ def _continuation(system, q0: np.ndarray, z0: np.ndarray, drives: "DriveRest", t
     for _ in range(max_steps):
         if solved(q, z)[0] or (h > 1e6 and np.linalg.norm(a) < 1e-6 * max(1.0, np.linalg.norm(D))):
             return q, z  # solved, or Newton-like steps close to the solution: the caller polishes
+        if dead is not None and dead(q):
+            return q, z  # at a dead point of the mechanism: the caller reports it
         try:
             dx = np.linalg.solve(np.eye(size) / h - D, a)
             if float(np.max(np.abs(dx[:chart.k]), initial=0.0)) > MAX_STEP:
