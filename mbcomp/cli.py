@@ -404,13 +404,36 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def _print_entry(label: str, expr, width: int) -> None:
+    """``label = expr`` in sympy's one-line form (``x**2``), broken only between top-level
+    terms into indented lines of at most ``width`` characters: no pretty-printer wrap marks."""
     import sympy as sp
-    text = sp.pretty(sp.N(expr, 6), use_unicode=False, full_prec=False, num_columns=max(width - 4, 40))
-    if "\n" not in text:
-        print(f"{label} = {text}")
-    else:
-        print(f"{label} =")
-        print("\n".join("    " + line for line in text.splitlines()))
+    text = sp.sstr(sp.N(expr, 6), full_prec=False)
+    head = f"{label} = "
+    if len(head) + len(text) <= width:
+        print(head + text)
+        return
+    print(f"{label} =")
+    for line in _wrap_terms(text, max(width - 4, 40)):
+        print("    " + line)
+
+
+def _wrap_terms(text: str, width: int) -> list[str]:
+    """``text`` split before its top-level `` + `` and `` - `` (outside parentheses), the
+    pieces gathered into lines of at most ``width`` (a longer single term keeps its own line)."""
+    pieces, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        depth += ch in "([" and 1 or (-1 if ch in ")]" else 0)
+        if depth == 0 and i > start and text.startswith((" + ", " - "), i):
+            pieces.append(text[start:i])
+            start = i + 1
+    pieces.append(text[start:])
+    lines = [pieces[0]]
+    for piece in pieces[1:]:
+        if len(lines[-1]) + 1 + len(piece) <= width:
+            lines[-1] += " " + piece
+        else:
+            lines.append(piece)
+    return lines
 
 
 # ----------------------------------------------------------------------------------------------
