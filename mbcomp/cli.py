@@ -5,6 +5,7 @@ import argparse
 import functools
 import shutil
 import sys
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -98,6 +99,10 @@ def resolve_model_file(spec: str) -> Path:
         return path
     if path.exists():
         raise CommandError(f"{spec}: not a file", EXIT_BAD_INPUT)
+    from mbcomp.library import ROBOTS, robots_dir
+    if str(spec) in ROBOTS and robots_dir() is None:
+        raise CommandError(f"{spec} is a robot of the optional example-robot-data package, which is not installed: "
+                           f"pip install \"mbcomp[robots]\" (example-robot-data and yourdfpy)", EXIT_BAD_INPUT)
     names = ", ".join(library_models()) or "none found"
     raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
                        EXIT_BAD_INPUT)
@@ -473,12 +478,21 @@ def cmd_library(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------------------------
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning during a command as one clean line (``mbcomp: warning: ...``), without the
+    source file and line Python's default display adds."""
+    text = " ".join(str(message).split())
+    print(f"mbcomp: warning: {text}", file=sys.stderr if file is None else file)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mbcomp`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = args.handler(args)
+        with warnings.catch_warnings():  # restores the warning display afterwards
+            warnings.showwarning = _show_warning
+            code = args.handler(args)
     except CommandError as exc:
         print(f"mbcomp: {exc}" if "\n" not in str(exc) else f"mbcomp: error: {exc}", file=sys.stderr)
         code = exc.code
