@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("matplotlib")
+pytest.importorskip("matplotlib", exc_type=ImportError)
 from PIL import Image  # noqa: E402
 
 import mbcomp as mb  # noqa: E402

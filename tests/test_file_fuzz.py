@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
+hypothesis = pytest.importorskip("hypothesis", exc_type=ImportError)
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
 try:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
+hypothesis = pytest.importorskip("hypothesis", exc_type=ImportError)
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
 import mbcomp as mb  # noqa: E402

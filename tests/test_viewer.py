@@ -205,7 +205,7 @@ def test_unreadable_mesh_falls_back_to_the_stick_figure(tmp_path):
 
 
 def test_mesh_shape_from_a_file(tmp_path):
-    trimesh = pytest.importorskip("trimesh")
+    trimesh = pytest.importorskip("trimesh", exc_type=ImportError)
     path = tmp_path / "tetra.stl"
     trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
                     faces=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]).export(path)

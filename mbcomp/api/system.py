@@ -246,7 +246,8 @@ class System:
         for key, value in values.items():
             found = self._compiled.parameter_spec(key) if key in merged else None
             if found is None:
-                raise ModelError(f"System {self._compiled.model_name!r}", f"unknown parameter {key!r}; known: {sorted(merged)}")
+                known = set(merged) | set(getattr(derivation, "parameters", None) or ())
+                raise ModelError(f"System {self._compiled.model_name!r}", unknown_parameter(key, known))
             owner, spec = found
             new = validate(spec, value, owner)  # the constructors' validator
             if np.shape(new) != np.shape(merged[key]):
@@ -535,10 +536,12 @@ class System:
         cs = self._formulation.constraints
         return [] if cs is None else list(cs.owner)
 
-    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0) -> np.ndarray:
-        """``q`` at rest with every constraint met, near ``q_guess`` (see ``mbcomp.analysis``)."""
+    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0, return_states: bool = False) -> Any:
+        """``q`` at rest with every constraint met and the drive states (currents, PID integrals)
+        at rest, near ``q_guess``; ``return_states=True``: ``(q, {state: value})`` (see
+        ``mbcomp.analysis``)."""
         from mbcomp.analysis import equilibrium
-        return equilibrium(self, q_guess, tau=tau, t=t)
+        return equilibrium(self, q_guess, tau=tau, t=t, return_states=return_states)
 
     def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
                   independent: Any = None, states: Any = None):
@@ -596,6 +599,20 @@ class System:
     def __repr__(self) -> str:
         return (f"System({self._compiled.model_name!r}, coords={list(self.coords)}, ndof={self.ndof}, "
                 f"formulation={self.formulation!r}, backend={self.backend!r})")
+
+
+def unknown_parameter(key: Any, known: Any) -> str:
+    """The message for a parameter name that is not one: a few close matches ("did you mean"),
+    and how many there are, instead of every name."""
+    import difflib
+    names = sorted(str(k) for k in known)
+    close = difflib.get_close_matches(str(key), names, n=3, cutoff=0.6)
+    if not close:  # a misspelt attribute of the right component, or the right attribute elsewhere
+        component, _, attribute = str(key).rpartition(".")
+        close = [n for n in names if component and n.startswith(component + ".")][:3] or \
+            [n for n in names if attribute and n.endswith("." + attribute)][:3]
+    hint = f"; did you mean {' or '.join(map(repr, close))}?" if close else ""
+    return f"unknown parameter {key!r}{hint} ({len(names)} parameters: sys.parameters lists them)"
 
 
 def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, backend: str = "auto",

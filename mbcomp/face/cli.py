@@ -5,6 +5,7 @@ import argparse
 import functools
 import shutil
 import sys
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -101,6 +102,10 @@ def resolve_model_file(spec: str) -> Path:
         if problem is not None:
             raise CommandError(f"{spec}: {problem}", EXIT_BAD_INPUT)
         return path
+    from mbcomp.files.library import ROBOTS, robots_dir
+    if str(spec) in ROBOTS and robots_dir() is None:
+        raise CommandError(f"{spec} is a robot of the optional example-robot-data package, which is not installed: "
+                           f"pip install \"mbcomp[robots]\" (example-robot-data and yourdfpy)", EXIT_BAD_INPUT)
     names = ", ".join(library_models()) or "none found"
     raise CommandError(f"{spec}: no such file, and no library model of that name (library: {names})",
                        EXIT_BAD_INPUT)
@@ -407,13 +412,36 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def _print_entry(label: str, expr, width: int) -> None:
+    """``label = expr`` in sympy's one-line form (``x**2``), broken only between top-level
+    terms into indented lines of at most ``width`` characters: no pretty-printer wrap marks."""
     import sympy as sp
-    text = sp.pretty(sp.N(expr, 6), use_unicode=False, full_prec=False, num_columns=max(width - 4, 40))
-    if "\n" not in text:
-        print(f"{label} = {text}")
-    else:
-        print(f"{label} =")
-        print("\n".join("    " + line for line in text.splitlines()))
+    text = sp.sstr(sp.N(expr, 6), full_prec=False)
+    head = f"{label} = "
+    if len(head) + len(text) <= width:
+        print(head + text)
+        return
+    print(f"{label} =")
+    for line in _wrap_terms(text, max(width - 4, 40)):
+        print("    " + line)
+
+
+def _wrap_terms(text: str, width: int) -> list[str]:
+    """``text`` split before its top-level `` + `` and `` - `` (outside parentheses), the
+    pieces gathered into lines of at most ``width`` (a longer single term keeps its own line)."""
+    pieces, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        depth += ch in "([" and 1 or (-1 if ch in ")]" else 0)
+        if depth == 0 and i > start and text.startswith((" + ", " - "), i):
+            pieces.append(text[start:i])
+            start = i + 1
+    pieces.append(text[start:])
+    lines = [pieces[0]]
+    for piece in pieces[1:]:
+        if len(lines[-1]) + 1 + len(piece) <= width:
+            lines[-1] += " " + piece
+        else:
+            lines.append(piece)
+    return lines
 
 
 # ----------------------------------------------------------------------------------------------
@@ -453,12 +481,21 @@ def cmd_library(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------------------------
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning during a command as one clean line (``mbcomp: warning: ...``), without the
+    source file and line Python's default display adds."""
+    text = " ".join(str(message).split())
+    print(f"mbcomp: warning: {text}", file=sys.stderr if file is None else file)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``mbcomp`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = args.handler(args)
+        with warnings.catch_warnings():  # restores the warning display afterwards
+            warnings.showwarning = _show_warning
+            code = args.handler(args)
     except CommandError as exc:
         print(f"mbcomp: {exc}" if "\n" not in str(exc) else f"mbcomp: error: {exc}", file=sys.stderr)
         code = exc.code

@@ -21,6 +21,8 @@ def register(commands: Any, cli: Any) -> None:
                          help="starting value of a coordinate (rad or m); repeat or separate by commas")
     analyse.add_argument("--held", action="store_true",
                          help="analyse the starting pose held by its holding forces instead of an equilibrium")
+    analyse.add_argument("--time", type=float, default=0.0, metavar="T",
+                         help="time (s) at which inputs that change with time (steps, sines) are held (default 0)")
     analyse.add_argument("--formulation", choices=("lagrange", "dae"), help="default: the file's, else lagrange")
     analyse.set_defaults(handler=lambda args: cmd_analyse(args, cli))
 
@@ -63,20 +65,34 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     print(f"{model.name}: {len(system.coords)} coordinates, {system.ndof} degrees of freedom "
           f"({system.formulation})")
     tau = None
+    t = args.time
+    if not np.isfinite(t):
+        raise CommandError("--time must be a finite number of seconds", cli.EXIT_BAD_INPUT)
+    from mbcomp.analysis import changing_inputs
     try:
         if args.held:
-            q = system.assemble(q_guess)[0] if system.constraint_names else q_guess
-            tau = system.holding_forces(q)
+            q = system.assemble(q_guess, None, t)[0] if system.constraint_names else q_guess
+            tau = system.holding_forces(q, t)
             print("pose held by its holding forces:")
             rows = [["coordinate", "value", "holding force"]]
             rows += [[c, fmt(v), fmt(h)] for c, v, h in zip(system.coords, q, tau)]
         else:
-            q = system.equilibrium(q_guess)
+            q, states = system.equilibrium(q_guess, t=t, return_states=True)
             print("equilibrium:")
             rows = [["coordinate", "start", "equilibrium"]]
             rows += [[c, fmt(g), fmt(v)] for c, g, v in zip(system.coords, q_guess, q)]
         print(table(rows))
-        modes = system.modes(q, tau=tau)
+        if system.extra_states:
+            if args.held:
+                from mbcomp.analysis import rest_states
+                states = dict(zip(system.extra_states, rest_states(system, q, t=t, tau=tau)))
+            print("drive states at rest:")
+            print(table([["state", "value"]] + [[name, fmt(value)] for name, value in states.items()]))
+        changing = changing_inputs(system, q, t, states if system.extra_states else None)
+        if changing:
+            print(f"note: inputs change with time (they act on {', '.join(changing)}); analysed with them held "
+                  f"at their values at t = {fmt(t)} s (--time to choose another)")
+        modes = system.modes(q, t=t, tau=tau)
     except (SimulationError, ModelError) as exc:
         raise CommandError(f"analysis failed: {exc}", EXIT_FAILED) from None
     speeds = modes.speeds
@@ -84,17 +100,38 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     rows = [["mode", "frequency (Hz)", "damping ratio", "eigenvalue (1/s)", "kind", "shape"]]
     for i, (f, z, lam) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.eigenvalues)):
         kind = _kind(lam, z, modes)
-        shape = modes.shapes[:, i]
-        text = ", ".join(f"{s}={fmt(float(np.real(v)))}" for s, v in zip(speeds, shape) if abs(v) > 1e-9)
+        text = shape_text(speeds, modes.shapes[:, i])
         scale = max(1.0, float(np.max(np.abs(modes.all_eigenvalues), initial=0.0)))
         re = 0.0 if abs(lam.real) < 1e-9 * scale else lam.real
         lam_text = fmt(re) if abs(lam.imag) < 1e-9 * scale else f"{re:.4g}{lam.imag:+.4g}j"
         rows.append([str(i + 1), fmt(f), fmt(z), lam_text, kind, text])
     if len(rows) > 1:
         print(table(rows))
+    if system.extra_states:  # the drive states' eigenvalues join the mechanical ones: list them all
+        values = sorted(modes.all_eigenvalues, key=lambda lam: (abs(lam), -lam.imag))
+        print("eigenvalues with the drive states (1/s): " + ", ".join(
+            fmt(lam.real) if abs(lam.imag) < 1e-9 * max(1.0, abs(lam)) else f"{lam.real:.4g}{lam.imag:+.4g}j"
+            for lam in values))
     verdict = "stable" if modes.stable else f"UNSTABLE ({modes.unstable} growing mode{'s' * (modes.unstable > 1)})"
     print(f"stability: {verdict}")
     return EXIT_OK
+
+
+#: The shape column shows at most this many components (the largest), each at least
+#: ``SHAPE_FLOOR`` of the largest; the rest are counted ("+3 smaller").
+SHAPE_COMPONENTS = 3
+SHAPE_FLOOR = 0.05
+
+
+def shape_text(speeds: tuple[str, ...], shape: np.ndarray) -> str:
+    """A mode shape as its dominant components, largest first (``a=1, b=-0.43 (+2 smaller)``),
+    so that the column stays narrow for models with many coordinates."""
+    values = np.real(np.asarray(shape))
+    order = [int(j) for j in np.argsort(-np.abs(values), kind="stable") if abs(values[j]) > 1e-9]
+    shown = [j for j in order[:SHAPE_COMPONENTS] if abs(values[j]) >= SHAPE_FLOOR * abs(values[order[0]])]
+    text = ", ".join(f"{speeds[j]}={values[j]:.3g}" for j in shown)
+    rest = len(order) - len(shown)
+    return text + (f" (+{rest} smaller)" if rest else "")
 
 
 def fmt(x: float) -> str:
