@@ -180,6 +180,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     q0, qd0, warnings = initial_state(model, system)
     for warning in warnings:
         print(f"mbcomp: warning: {warning}", file=sys.stderr)
+    from mbcomp import checks
+    try:  # (before the output times are allocated: they and the output must fit)
+        checks.output_size(samples, len(q0) + len(qd0) + len(getattr(system, "extra_states", ())) + 1,
+                           f"--samples {samples}", fix="ask for fewer samples")
+    except ModelError as exc:
+        raise CommandError(str(exc), EXIT_BAD_INPUT) from None
     t_eval = np.linspace(0.0, t_end, samples)
     try:
         result = system.simulate(t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
