@@ -118,6 +118,6 @@ class StepBudget:
         """Refuse up front a run known to keep ``rows`` rows (fixed steps, prescribed motion)."""
         if rows > self.rows:
             output_size(rows, self.columns, what, fix="pass t_eval (the output times you need) or a larger step")
-            raise ModelError("simulate", f"{what} keeps {float(rows):.3g} steps with t_eval=None, more than "
+            raise ModelError("simulate", f"{what} keeps {int(rows) if rows < 1e12 else f'{rows:.3g}'} steps with t_eval=None, more than "
                                          f"max_samples = {self.max_samples}; pass t_eval (the output times you "
                                          f"need), a larger step, or raise max_samples")

@@ -183,7 +183,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mbcomp import checks
     try:  # (before the output times are allocated: they and the output must fit)
         checks.output_size(samples, len(q0) + len(qd0) + len(getattr(system, "extra_states", ())) + 1,
-                           f"--samples {samples}", fix="ask for fewer samples")
+                           f"--samples {samples}" if args.samples is not None else
+                           f"the file's n_samples = {samples}", fix="ask for fewer samples (--samples)")
     except ModelError as exc:
         raise CommandError(str(exc), EXIT_BAD_INPUT) from None
     t_eval = np.linspace(0.0, t_end, samples)

@@ -96,7 +96,12 @@ class CompiledModel:
         started = time.perf_counter()
         self.cache_hit = False
         self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
-        self.functions = self._load(cache, backend)
+        try:
+            self.functions = self._load(cache, backend)
+        except OSError as exc:  # the build's own files (the cache only costs a rebuild): a full disk
+            from mbcomp.backend import build_failure
+            from mbcomp.errors import CompileError
+            raise CompileError(f"Model {self.model_name!r}", build_failure(exc)) from None
         self.compile_time = time.perf_counter() - started
 
     def parameter_spec(self, key: str):
