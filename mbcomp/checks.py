@@ -121,3 +121,12 @@ class StepBudget:
             raise ModelError("simulate", f"{what} keeps {int(rows) if rows < 1e12 else f'{rows:.3g}'} steps with t_eval=None, more than "
                                          f"max_samples = {self.max_samples}; pass t_eval (the output times you "
                                          f"need), a larger step, or raise max_samples")
+
+
+def prescribed_times(t_end: float, max_step: float, budget: StepBudget | None) -> np.ndarray:
+    """The output times of a run with no degree of freedom and ``t_eval=None``: steps of
+    ``max_step`` (at most t_end / 200), refused up front beyond the step budget."""
+    count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
+    if budget is not None:
+        budget.check_rows(count + 1, f"max_step = {max_step:g} s over t_end = {t_end:g} s")
+    return np.linspace(0.0, t_end, count + 1)

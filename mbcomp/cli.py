@@ -215,15 +215,22 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _save_plot(result, path: str) -> None:
     import matplotlib.pyplot as plt
+    from mbcomp.writing import staged
     figure = result.plot()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    try:
+        with staged(path, "--plot") as scratch:  # (matplotlib does not report every failed write)
+            figure.savefig(scratch, dpi=100, format=Path(path).suffix[1:].lower() or "png")
+    finally:
+        plt.close(figure)
 
 
 def _write(action, path: str) -> None:
     """Run an output step; file-system and missing-feature errors become messages."""
+    from mbcomp.errors import WriteError
     try:
         action()
+    except WriteError as exc:
+        raise CommandError(str(exc)) from None
     except OSError as exc:
         raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
     except (ImportError, NotImplementedError, RuntimeError, ValueError) as exc:

@@ -870,7 +870,7 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
             raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
         if session.ni == 0 and not kernel.compiled.drives.nz:  # nothing to integrate: the motion follows from the constraints
             if t_eval is None:
-                from mbcomp.simulate import prescribed_times
+                from mbcomp.checks import prescribed_times
                 t_eval = prescribed_times(t_end, max_step, budget)
             times, values, stats = session.prescribed(t_end, t_eval, max_step)
             return times, values, stats, time.perf_counter() - started

@@ -431,22 +431,13 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
                    persistent_contacts=[watch.names[i] for i in watch.persistent], closed_contacts=recorder.closed)
 
 
-def prescribed_times(t_end: float, max_step: float, budget) -> np.ndarray:
-    """The output times of a run with no degree of freedom and ``t_eval=None``: steps of
-    ``max_step`` (at most t_end / 200), refused up front beyond the step budget."""
-    count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
-    if budget is not None:
-        budget.check_rows(count + 1, f"max_step = {max_step:g} s over t_end = {t_end:g} s")
-    return np.linspace(0.0, t_end, count + 1)
-
-
 def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started,
                        budget=None) -> Result:
     """No degree of freedom left (every coordinate driven or dependent): nothing to
     integrate; the motion follows from the constraints at each output time (Newton,
     continued from the previous time)."""
     if t_eval is None:
-        t_eval = prescribed_times(t_end, max_step, budget)
+        t_eval = checks.prescribed_times(t_end, max_step, budget)
     qs, qds = [], []
     for t in t_eval:
         q, qd = workspace.full_state(t, np.zeros(0))

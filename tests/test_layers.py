@@ -15,7 +15,7 @@ LAYERS = {
     # 0 foundation
     "errors": 0, "services": 0,
     # 1 core: plain data and helpers without model knowledge
-    "rotations": 1, "expressions": 1, "result": 1, "checks": 1, "library": 1, "params": 1, "shapes": 1, "progress": 1,
+    "rotations": 1, "expressions": 1, "result": 1, "checks": 1, "library": 1, "params": 1, "shapes": 1, "progress": 1, "writing": 1, "names": 1,
     "statemap": 1, "small_linalg": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
     "components.primitives": 1, "components.expr": 1, "components._values": 1,
     # 2 spec: components and the model builder
@@ -48,7 +48,7 @@ SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen
               ("equations", "drive_equations"), ("equations", "param_layout"), ("equations", "recursive"),
               ("simulate", "drive_runtime"),
               ("servo", "components"), ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"), ("statemap", "small_linalg"),
-              ("cli", "cli_analyse"),
+              ("cli", "cli_analyse"), ("result", "writing"),
               ("formulations.lagrange_c", "integrators"), ("formulations.lagrange_c", "expressions_c"),
               ("formulations.dae_c", "expressions_c")}
 #: Private names of a third-party library that a module reads on purpose: ``(file, name)``.

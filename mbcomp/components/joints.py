@@ -321,6 +321,12 @@ class Joint(Component):
             raise ModelError(self, f"coords must be non-empty names without edge spaces, got {coords!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"coords {names} repeat a name")
+        from mbcomp.names import reserved_problem
+        for n in names:
+            problem = reserved_problem(n)
+            if problem is not None:
+                raise ModelError(self, f"coordinate {problem}" + ("" if coords is not None else
+                                                                   " (the default coordinate name is the joint's: give coords)"))
         return names
 
     @property
