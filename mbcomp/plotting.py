@@ -42,7 +42,7 @@ def _save(fig, path: Any, dpi: float | None = None) -> None:
     if path is not None:
         from mbcomp.writing import staged
         with staged(path, "savefig") as scratch:  # (a failed write is an error, not a silent empty file)
-            fig.savefig(scratch, dpi=dpi if dpi is not None else "figure")
+            fig.savefig(scratch, dpi=dpi if dpi is not None else "figure", format=Path(path).suffix[1:].lower() or "png")
 
 
 # ----------------------------------------------------------------------------------------------

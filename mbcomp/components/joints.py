@@ -310,11 +310,12 @@ class Joint(Component):
 
     def _coord_names(self, coords: Any) -> tuple[str, ...]:
         if coords is None:
-            return tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
-        try:
-            names = (coords,) if isinstance(coords, str) else tuple(coords)
-        except TypeError:
-            raise ModelError(self, f"coords must be a name or a sequence of names, got {coords!r}") from None
+            names = tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
+        else:
+            try:
+                names = (coords,) if isinstance(coords, str) else tuple(coords)
+            except TypeError:
+                raise ModelError(self, f"coords must be a name or a sequence of names, got {coords!r}") from None
         if len(names) != self.n_coords:
             raise ModelError(self, f"coords must name {self.n_coords} coordinate(s), got {len(names)}")
         if not all(isinstance(n, str) and n.strip() and n == n.strip() for n in names):
