@@ -59,6 +59,33 @@ def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_spe
     return t_end, t_eval
 
 
+class _Rows:
+    """Rows of equal length appended one by one into one growing float array (8 bytes a
+    value, not a Python array object per row); ``np.array(rows)`` gives the rows."""
+
+    def __init__(self):
+        self.data: np.ndarray | None = None
+        self.n = 0
+
+    def append(self, row: Any) -> None:
+        row = np.asarray(row, dtype=float).reshape(-1)
+        if self.data is None:
+            self.data = np.empty((64, row.size))
+        elif self.n == len(self.data):
+            grown = np.empty((2 * len(self.data), self.data.shape[1]))
+            grown[:self.n] = self.data
+            self.data = grown
+        self.data[self.n] = row
+        self.n += 1
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        rows = np.zeros((0, 0)) if self.data is None else self.data[:self.n]
+        return rows.astype(dtype) if dtype is not None else rows.copy()
+
+
 class _Recorder:
     """Collects output samples: every step, or the requested ``t_eval`` times."""
 
@@ -67,21 +94,21 @@ class _Recorder:
         self.budget = budget if t_eval is None else None  # (StepBudget: every step kept)
         self.closed_now = closed
         self.states_now = states  # drive-element states at the sample (set by full_state)
-        self.z: list[np.ndarray] = []
+        self.z = _Rows()
         self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
         self.t: list[float] = []
-        self.q: list[np.ndarray] = []
-        self.qd: list[np.ndarray] = []
+        self.q = _Rows()
+        self.qd = _Rows()
 
     def add(self, t, q, qd):
         if self.budget is not None and len(self.t) >= self.budget.rows:
             raise self.budget.exceeded(float(t))
         self.closed.append(tuple(self.closed_now()))
-        self.z.append(np.array(self.states_now(), dtype=float))
+        self.z.append(self.states_now())
         self.t.append(float(t))
-        self.q.append(np.array(q, dtype=float))
-        self.qd.append(np.array(qd, dtype=float))
+        self.q.append(q)
+        self.qd.append(qd)
 
     def record_until(self, workspace, solver, dense, t_old, t_stop, q_stop, qd_stop):
         """Samples up to an event at ``t_stop`` (the state there is given)."""
