@@ -18,7 +18,7 @@ from mbcomp.core.result import Energy, Event, Result
 from mbcomp.api.system import BodyState, System
 
 # Errors
-from mbcomp.core.errors import CompileError, ModelError, SimulationError
+from mbcomp.core.errors import CompileError, ModelError, SimulationError, WriteError
 
 # Operations that lower layers offer as methods, implemented above them (see services.py)
 # Operations of rarely needed layers (files, plots, the viewer) import them on first use,
@@ -78,7 +78,7 @@ __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Mesh",
-    "ModelError", "CompileError", "SimulationError", "load", "load_urdf", "sweep",
+    "ModelError", "CompileError", "SimulationError", "WriteError", "load", "load_urdf", "sweep",
     "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
     "Servo",
 ]

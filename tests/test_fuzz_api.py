@@ -204,3 +204,81 @@ def test_urdf_joint_graphs_load_exactly_when_they_are_trees(tmp_path_factory, ed
             return
     assert nx.is_arborescence(graph)
     assert len(model.bodies) == sum(not fixed for _, _, fixed in edges)
+
+# -- limits: what a run keeps ----------------------------------------------------------------------------
+@FUZZ
+@given(max_samples=bad_or(st.integers(min_value=2, max_value=60)), t_end=st.floats(min_value=0.01, max_value=0.5))
+def test_max_samples_bounds_what_a_run_keeps(chain, max_samples, t_end):
+    try:
+        res = chain.simulate(t_end, [1.0, -0.5], max_samples=max_samples)
+    except mb.SimulationError as exc:
+        assert "max_samples" in str(exc) and "t_eval" in str(exc)
+        return
+    except mb.ModelError as exc:
+        assert "max_samples" in str(exc)
+        return
+    limit = mb.core.checks.MAX_SAMPLES if max_samples is None else max_samples
+    assert 2 <= len(res.t) <= limit and res.t[-1] == t_end and _finite(res.q, res.qd)
+
+
+# -- names: one rule, no mixed columns or symbols ------------------------------------------------------------
+name_parts = st.sampled_from(["a", "a_d", "t", "total", "kinetic", "=cmd|' /C calc'!A0", "+x", "-y", "@z", "\tq",
+                              "link1.mass", "gravity[2]", "\\dot{a}", "_d", "<!--<script>", "x\u2028y", "b"])
+coordinate_name = st.one_of(name_parts, st.builds(lambda a, b: a + b, name_parts, name_parts))
+
+
+def _two_rods(c1, c2) -> mb.Model:
+    m = mb.Model("names", gravity=(0, 0, -9.81))
+    link0 = m.add(mb.Body("link0", mass=1.0, com=(0, 0, -0.5)))
+    link1 = m.add(mb.Body("link1", mass=1.0, com=(0, 0, -0.5)))
+    m.add(mb.Revolute("joint0", m.ground, link0, axis="x", coords=c1))
+    m.add(mb.Revolute("joint1", link0, link1, axis="x", coords=c2, parent_point=(0, 0, -1)))
+    return m
+
+
+@settings(max_examples=30, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(c1=coordinate_name, c2=coordinate_name)
+def test_coordinate_names_never_mix_columns_or_symbols(tmp_path, c1, c2):
+    import csv
+    try:
+        system = _two_rods(c1, c2).compile(backend="python", cache=False)
+    except mb.ModelError:
+        return
+    # accepted: every name is its own column and its own symbol
+    res = system.simulate(0.05, [0.3, -0.2], t_eval=[0.0, 0.05])
+    path = tmp_path / "names.csv"
+    res.to_csv(path)
+    with open(path, newline="") as fh:
+        header = next(csv.reader(fh))
+    assert len(set(header)) == len(header)
+    assert not any(cell.startswith(("=", "+", "-", "@", "\t", "\r")) for cell in header)
+    columns = [cell[1:] if cell.startswith("'") and cell[1:2] in ("=", "+", "-", "@", "\t", "\r") else cell
+               for cell in header]
+    assert columns[1:5] == [c1, c2, c1 + "_d", c2 + "_d"]
+    parameters = {f"{k}[{i}]" for k, v in system.parameters.items() for i in range(np.size(v))} | set(system.parameters)
+    assert not {c1, c2, c1 + "_d", c2 + "_d"} & (parameters | {"t", "kinetic", "potential", "total"})
+    np.testing.assert_allclose(res[c1], res.q[:, 0])
+    np.testing.assert_allclose(res[c2], res.q[:, 1])
+
+
+# -- output that others read: CSV cells, the viewer's scene data -------------------------------------------
+@FUZZ
+@given(text=st.text(max_size=12))
+def test_spreadsheet_cells_never_start_a_formula(text):
+    from mbcomp.core.result import spreadsheet_safe
+    safe = spreadsheet_safe(text)
+    assert not safe.startswith(("=", "+", "-", "@", "\t", "\r"))
+    assert safe == text or (safe == "'" + text)
+
+
+@FUZZ
+@given(names=st.lists(st.text(max_size=12), min_size=1, max_size=4))
+def test_scene_json_holds_any_name(names):
+    import json
+    import re
+    from mbcomp.face.viewer.page import scene_json
+    scene = {"title": names[0], "bodies": [{"name": n} for n in names]}
+    data = scene_json(scene)
+    assert not re.search("[<>&\u2028\u2029]", data)
+    assert json.loads(data) == scene

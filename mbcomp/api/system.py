@@ -473,7 +473,7 @@ class System:
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
                  max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-                 dt: float | None = None, x0: Mapping[str, float] | None = None):
+                 dt: float | None = None, x0: Mapping[str, float] | None = None, max_samples: int | None = None):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
@@ -485,13 +485,17 @@ class System:
         contacts, motors or callable inputs); ``"scipy"``
         forces scipy's stepping, ``"compiled"`` insists on the compiled loop.
         ``x0`` gives initial values of ``extra_states`` by name (default 0).
+        ``t_eval=None`` keeps every step, at most ``max_samples`` (default
+        ``mbcomp.core.checks.MAX_SAMPLES``) of them: a run that needs more stops with a
+        ``SimulationError`` naming ``t_eval`` and ``max_samples``.
         """
         from mbcomp.run.simulate import simulate
         system = self.with_parameters(parameters)
         q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
         result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
                           atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
-                          rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0))
+                          rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0),
+                          max_samples=max_samples)
         return result.with_system(system)
 
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import os
 import shutil
 import subprocess
@@ -32,6 +33,31 @@ COLD_FUNCTIONS = ("energy", "kinematics", "contacts")
 #: so a compile returns once the right-hand side is ready.  The model's library calls them
 #: through ``codegen.c_output_stubs``.
 OUTPUT_FUNCTIONS = ("energy", "kinematics")
+
+
+#: errno values of a full disk (or a full quota).
+DISK_FULL = (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
+
+
+def write_file(path: Path, data: str | bytes) -> None:
+    """Write ``data`` to ``path``; an ``OSError`` raised while writing (a full disk raises at
+    the write or the close, where Python leaves the file name out) names ``path``."""
+    try:
+        with open(path, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
+    except OSError as exc:
+        if exc.filename is None:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
+
+
+def build_failure(exc: OSError) -> str:
+    """What a compile that could not write its files says: that the disk is full and where."""
+    where = exc.filename or tempfile.gettempdir()
+    if exc.errno in DISK_FULL:
+        return (f"the disk is full: cannot write {where} ({exc.strerror or exc}); free space there, or point "
+                f"TMPDIR (build files) and MBCOMP_CACHE_DIR (the code cache) at a disk with room")
+    return f"cannot write the build files: {where}: {exc.strerror or exc}"
 
 
 class PythonFunctions:
@@ -307,7 +333,7 @@ class CBuild:
 
     def _queue(self, name: str, text: str, flags: tuple[str, ...], statements: int) -> None:
         """Write unit ``name`` and queue it for a free compiler slot."""
-        (self._tmp / f"{name}.c").write_text(text)
+        write_file(self._tmp / f"{name}.c", text)
         with self._lock:
             self._waiting.append((statements, name, tuple(flags)))
             self._waiting.sort(key=lambda item: item[0])
@@ -387,10 +413,16 @@ class CBuild:
                 if done.returncode == 0:
                     return out.read_bytes()
                 self._failure = done.stderr.decode(errors="replace")[-2000:]
+            if "No space left on device" in self._failure:  # (a compiler's or linker's own writes)
+                raise OSError(errno.ENOSPC, "No space left on device", str(self._tmp))
             warnings.warn(f"mbcomp: the C compiler failed, using the Python backend: {self._failure}",
                           RuntimeWarning, stacklevel=3)
             return None
-        except (OSError, subprocess.SubprocessError):
+        except OSError as exc:
+            if exc.errno in DISK_FULL:
+                raise
+            return None
+        except subprocess.SubprocessError:
             return None
         finally:
             self.cancel()
@@ -443,7 +475,7 @@ def compile_c(source: str, compiler: str, flags: tuple[str, ...] = C_FLAGS, *, i
     tmp = Path(tempfile.mkdtemp(prefix="mbcomp-build-"))
     try:
         unit, out = tmp / "unit.c", tmp / "library.so"
-        unit.write_text(source)
+        write_file(unit, source)
         nice = shutil.which("nice") if idle else None
         command = [*([nice, "-n", str(BACKGROUND_NICE)] if nice else []),
                    compiler, *flags, "-shared", str(unit), "-o", str(out), "-lm"]
@@ -495,7 +527,7 @@ def load_library_bytes(data: bytes) -> ctypes.CDLL:
     tmp = tempfile.mkdtemp(prefix="mbcomp-")
     try:
         path = Path(tmp) / "library.so"
-        path.write_bytes(data)
+        write_file(path, data)
         return ctypes.CDLL(str(path))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -507,7 +539,7 @@ def load_private(data: bytes, sizes: dict) -> "CFunctions":
     tmp = tempfile.mkdtemp(prefix="mbcomp-")
     try:
         path = Path(tmp) / "model.so"
-        path.write_bytes(data)
+        write_file(path, data)
         return CFunctions(path, sizes)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -50,14 +50,27 @@ class CacheWarning(UserWarning):
 # -- where --------------------------------------------------------------------------------
 def configured_dir() -> Path:
     """``$MBCOMP_CACHE_DIR``, else the user cache directory (``~/.cache/mbcomp``,
-    ``~/Library/Caches/mbcomp`` on macOS); not checked (see :func:`cache_dir`)."""
+    ``~/Library/Caches/mbcomp`` on macOS), else, with no home directory (no ``$HOME`` and
+    no passwd entry: a container run with an arbitrary uid), the per-user temporary
+    directory ``<tmp>/mbcomp-<uid>``; not checked (see :func:`cache_dir`)."""
     env = os.environ.get("MBCOMP_CACHE_DIR")
     if env:
         return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    if xdg and sys.platform != "darwin":
+        return Path(xdg) / "mbcomp"
+    try:
+        home = Path.home()
+    except (RuntimeError, KeyError, OSError):  # no $HOME and no passwd entry for this uid
+        return _per_user_temp()
     if sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    return Path(base) / "mbcomp"
+        return home / "Library" / "Caches" / "mbcomp"
+    return home / ".cache" / "mbcomp"
+
+
+def _per_user_temp() -> Path:
+    """``<tmp>/mbcomp-<uid>``: the private directory used when no other is configured or safe."""
+    return Path(tempfile.gettempdir()) / f"mbcomp-{_uid() if _uid() is not None else 'user'}"
 
 
 def _uid() -> int | None:
@@ -130,7 +143,7 @@ def cache_dir() -> Path:
     problem = _prepare(configured)
     if problem is None:
         return configured
-    fallback = Path(tempfile.gettempdir()) / f"mbcomp-{_uid() if _uid() is not None else 'user'}"
+    fallback = _per_user_temp()
     if fallback == configured or _prepare(fallback) is not None:
         fallback = Path(tempfile.mkdtemp(prefix="mbcomp-cache-"))
     message = (f"mbcomp: cache directory {str(configured)!r} {problem}; using the private directory "

@@ -861,35 +861,40 @@ class RankLost(Exception):
 
 
 def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None):
+                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None,
+                 budget=None):
     """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
-    entirely in compiled code; returns ``(t, y, stats, wall)``."""
+    entirely in compiled code; returns ``(t, y, stats, wall)``.  ``budget``: the
+    ``checks.StepBudget`` of a run that keeps every step."""
     lib = kernel.compiled.functions.lib
     with formulation.compiled_setup(lib, kernel=kernel, q0=q0):  # e.g. the dae rows and gains, for this thread only
         tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
         session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
         try:
             if session is None:
-                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0)
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
+                            budget=budget)
             with session:
-                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session)
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session,
+                            budget=budget)
         except SimulationError:
             formulation.explain_compiled_failure(lib)  # raises the cause when it knows one (a motor's law)
             raise
 
 
-def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None):
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None,
+         budget=None):
     hook = _Hook()
     hook.install(lib)
     try:
         return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
-                           session)
+                           session, budget)
     finally:
         hook.remove(lib)
 
 
 def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None,
-                session=None):
+                session=None, budget=None):
     """The compiled loops.  With a ``session`` (a formulation stepping its own reduced state,
     ``Formulation.compiled_session``) the DOP853 loop is ``dop853_reduced_run``: it starts from
     ``session.y0``, writes full ``[q, qd]`` rows, and hands PAUSED and TRIAL_FAILED returns to
@@ -906,6 +911,9 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if method != "DOP853":
             raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
         if session.ni == 0 and not kernel.compiled.drives.nz:  # nothing to integrate: the motion follows from the constraints
+            if t_eval is None:
+                from mbcomp.core.checks import prescribed_times
+                t_eval = prescribed_times(t_end, max_step, budget)
             times, values, stats = session.prescribed(t_end, t_eval, max_step)
             return times, values, stats, time.perf_counter() - started
         run = bind_reduced(lib)
@@ -922,6 +930,8 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
             raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
         counts = np.zeros(3, dtype=np.int64)
         if t_eval is None:  # every step
+            if budget is not None:
+                budget.check_rows(steps + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
             out = np.empty((steps + 1, ny))
             status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
                          counts.ctypes.data)
@@ -951,7 +961,7 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         times, values = t_out, y_out
     else:
         _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end,
-                                                   rtol, atol, max_step, tau_ptr, counts)
+                                                   rtol, atol, max_step, tau_ptr, counts, budget=budget, stored=1)
         times, values = np.concatenate(([0.0], steps_t)), np.concatenate((full0[None, :], steps_y))
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     if session is not None:
@@ -960,12 +970,14 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
 
 
 def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol, atol, max_step, tau_ptr, counts,
-                   t_out=None, i_out=None, y_out=None):
+                   t_out=None, i_out=None, y_out=None, budget=None, stored=0):
     """Run a compiled DOP853 loop (``run``: ``dop853_run`` or ``dop853_reduced_run``) from
     ``state = [t, h]`` (h <= 0: a first step is chosen and ``f`` computed) and ``y`` to
     ``t_end`` or to a step the loop stops at (EVENT).  Output rows at ``t_out`` from index
     ``i_out[0]`` into ``y_out``, or (``t_out`` None) every accepted step.  PAUSED and
-    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``.
+    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``, and so
+    does keeping every step beyond ``budget.rows`` rows in all (``stored`` of them kept before):
+    the step buffers never hold more than one row past the budget.
     Returns ``(status, step times, step rows, y, f)`` (status FINISHED or EVENT; ``y``,
     ``f``: the state the loop stopped at, which a restart may have replaced)."""
     p = kernel.p
@@ -973,9 +985,13 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
     if i_out is None:
         i_out = np.zeros(1, dtype=np.int64)
     chunks_t, chunks_y = [np.zeros(0)], [np.zeros((0, kernel.nq + kernel.nv + kernel.compiled.drives.nz))]
-    cap = 256
+    cap, kept = 256, stored
     while True:
         if t_out is None:
+            if budget is not None:
+                if kept > budget.rows:
+                    raise budget.exceeded(float(state[0]))
+                cap = max(min(cap, budget.rows - kept + 1), 1)
             t_steps, y_steps = np.empty(cap), np.empty((cap, chunks_y[0].shape[1]))
             n_steps[0] = 0
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
@@ -983,6 +999,9 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
             chunks_t.append(t_steps[: n_steps[0]])
             chunks_y.append(y_steps[: n_steps[0]])
+            kept += int(n_steps[0])
+            if budget is not None and kept > budget.rows:
+                raise budget.exceeded(float(state[0]))
         else:
             status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
                          rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,

@@ -63,6 +63,7 @@ class CompiledModel:
         self.layout = parameter_layout(self.default_parameters)
         self.inputs = input_layout(self.topology)
         self.drives = drive_layout(self.topology)
+        self._check_names()
         from mbcomp.build.constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
@@ -97,8 +98,25 @@ class CompiledModel:
         started = time.perf_counter()
         self.cache_hit = False
         self.sizes = {"nq": self.topology.nq, "nv": self.topology.nv, **self.output_layout.sizes()}
-        self.functions = self._load(cache, backend)
+        try:
+            self.functions = self._load(cache, backend)
+        except OSError as exc:  # the build's own files (the cache only costs a rebuild): a full disk
+            from mbcomp.codegen.backend import build_failure
+            from mbcomp.core.errors import CompileError
+            raise CompileError(f"Model {self.model_name!r}", build_failure(exc)) from None
         self.compile_time = time.perf_counter() - started
+
+    def _check_names(self) -> None:
+        """The naming rule (``mbcomp.core.names``): no coordinate, speed column, state or parameter
+        shares a name with another or with a column mbcomp adds (a ``CompileError`` naming both)."""
+        from mbcomp.core import names
+        from mbcomp.core.errors import CompileError
+        keys = []
+        for key, (_, shape) in self.layout.entries.items():
+            keys.extend([key] if not shape else [f"{key}[{i}]" for i in range(shape[0])])
+        problems = names.clashes(names.model_entries(self.topology, self.drives, keys))
+        if problems:
+            raise CompileError(f"Model {self.model_name!r}", problems=problems)
 
     def parameter_spec(self, key: str):
         """``(owner, ParameterSpec)`` of a ``System.parameters`` key (``"spring.stiffness"``):

@@ -64,3 +64,9 @@ class TrialStateError(SimulationError):
 def format_state(values) -> str:
     """A coordinate vector for messages: 6 significant digits, small values kept visible."""
     return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"
+
+
+class WriteError(ModelError, OSError):
+    """An output file could not be written (a full disk, a missing permission, an error that
+    only shows when the file is flushed or closed): a ``ModelError`` naming the writer and
+    the path, and an ``OSError`` as before."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import os
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -12,6 +13,16 @@ import numpy as np
 from mbcomp.core.errors import ModelError, UnknownNameError
 from mbcomp.core.services import service
 
+
+
+#: First characters that make a spreadsheet read a cell as a formula (OWASP's CSV injection list).
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_safe(text: str) -> str:
+    """A text cell a spreadsheet shows as text: one starting like a formula gets a leading
+    ``'`` (``=cmd|' /C calc'!A0`` -> ``'=cmd|' /C calc'!A0``)."""
+    return "'" + text if text.startswith(FORMULA_START) else text
 
 
 @dataclass(frozen=True)
@@ -156,13 +167,15 @@ class Result:
         z = self._z()
         if not isinstance(path, (str, os.PathLike)):
             raise ModelError("to_csv", f"path must be a file name (str or path), got {path!r}")
-        with open(path, "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(header)
-            for i in range(len(self.t)):
-                row = [self.t[i], *self.q[i], *self.qd[i], *z[i], energy.kinetic[i], energy.potential[i],
-                       energy.total[i]]
-                writer.writerow([repr(float(v)) for v in row])
+        text = io.StringIO(newline="")
+        writer = csv.writer(text)
+        writer.writerow([spreadsheet_safe(name) for name in header])
+        for i in range(len(self.t)):
+            row = [self.t[i], *self.q[i], *self.qd[i], *z[i], energy.kinetic[i], energy.potential[i],
+                   energy.total[i]]
+            writer.writerow([repr(float(v)) for v in row])
+        from mbcomp.core.writing import write_file
+        write_file(path, text.getvalue(), "to_csv")
 
     def to_dataframe(self):
         """A pandas DataFrame indexed by t (needs the optional pandas)."""

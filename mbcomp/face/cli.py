@@ -188,6 +188,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     q0, qd0, warnings = initial_state(model, system)
     for warning in warnings:
         print(f"mbcomp: warning: {warning}", file=sys.stderr)
+    from mbcomp.core import checks
+    try:  # (before the output times are allocated: they and the output must fit)
+        checks.output_size(samples, len(q0) + len(qd0) + len(getattr(system, "extra_states", ())) + 1,
+                           f"--samples {samples}" if args.samples is not None else
+                           f"the file's n_samples = {samples}", fix="ask for fewer samples (--samples)")
+    except ModelError as exc:
+        raise CommandError(str(exc), EXIT_BAD_INPUT) from None
     t_eval = np.linspace(0.0, t_end, samples)
     try:
         result = system.simulate(t_end, q0, qd0, method=method, rtol=rtol, atol=atol, t_eval=t_eval,
@@ -216,15 +223,22 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _save_plot(result, path: str) -> None:
     import matplotlib.pyplot as plt
+    from mbcomp.core.writing import staged
     figure = result.plot()
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    try:
+        with staged(path, "--plot") as scratch:  # (matplotlib does not report every failed write)
+            figure.savefig(scratch, dpi=100, format=Path(path).suffix[1:].lower() or "png")
+    finally:
+        plt.close(figure)
 
 
 def _write(action, path: str) -> None:
     """Run an output step; file-system and missing-feature errors become messages."""
+    from mbcomp.core.errors import WriteError
     try:
         action()
+    except WriteError as exc:
+        raise CommandError(str(exc)) from None
     except OSError as exc:
         raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
     except (ImportError, NotImplementedError, RuntimeError, ValueError) as exc:

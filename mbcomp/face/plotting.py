@@ -40,8 +40,9 @@ def _new_figure(figsize: tuple[float, float] | None = None, **kwargs: Any):
 
 def _save(fig, path: Any, dpi: float | None = None) -> None:
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=dpi if dpi is not None else "figure")
+        from mbcomp.core.writing import staged
+        with staged(path, "savefig") as scratch:  # (a failed write is an error, not a silent empty file)
+            fig.savefig(scratch, dpi=dpi if dpi is not None else "figure", format=Path(path).suffix[1:].lower() or "png")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -737,15 +738,18 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
     fig, ax, normal = _scene_figure(scene, points, view, figsize)
     drawing = _Drawing(ax, scene, points[0], centre, half, normal)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".gif":
-        _write_gif(fig, drawing, points, times, path, fps, dpi)
-    else:
-        with writer.saving(fig, str(path), dpi):
-            for k, time in enumerate(times):
-                drawing.update(points[k], float(time))
-                writer.grab_frame()
-    _close(fig)
+    from mbcomp.core.writing import staged
+    try:
+        with staged(path, "animate") as scratch:  # (a failed write is an error, not a silent empty file)
+            if suffix == ".gif":
+                _write_gif(fig, drawing, points, times, scratch, fps, dpi)
+            else:
+                with writer.saving(fig, str(scratch), dpi):
+                    for k, time in enumerate(times):
+                        drawing.update(points[k], float(time))
+                        writer.grab_frame()
+    finally:
+        _close(fig)
     return path
 
 

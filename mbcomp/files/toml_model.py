@@ -792,4 +792,5 @@ def save(model: Model, path: str | os.PathLike) -> None:
     file cannot hold (a Python callable as a force, torque or motor position).
     """
     text = dumps(model)
-    Path(path).write_text(text, encoding="utf-8")
+    from mbcomp.core.writing import write_file
+    write_file(path, text, "save")

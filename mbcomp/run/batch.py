@@ -11,7 +11,7 @@ from mbcomp.core.progress import ProgressBar
 from mbcomp.core.result import Result
 
 _CASE_KEYS = {"q0", "qd0", "t_end", "parameters", "tau", "t_eval", "method", "rtol", "atol", "max_step", "dt",
-              "integrator", "rest_speed"}
+              "integrator", "rest_speed", "max_samples"}
 
 
 def _check_case(case: Mapping[str, Any], index: int, defaults: Mapping[str, Any]) -> dict:

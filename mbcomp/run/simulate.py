@@ -59,26 +59,56 @@ def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_spe
     return t_end, t_eval
 
 
+class _Rows:
+    """Rows of equal length appended one by one into one growing float array (8 bytes a
+    value, not a Python array object per row); ``np.array(rows)`` gives the rows."""
+
+    def __init__(self):
+        self.data: np.ndarray | None = None
+        self.n = 0
+
+    def append(self, row: Any) -> None:
+        row = np.asarray(row, dtype=float).reshape(-1)
+        if self.data is None:
+            self.data = np.empty((64, row.size))
+        elif self.n == len(self.data):
+            grown = np.empty((2 * len(self.data), self.data.shape[1]))
+            grown[:self.n] = self.data
+            self.data = grown
+        self.data[self.n] = row
+        self.n += 1
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        rows = np.zeros((0, 0)) if self.data is None else self.data[:self.n]
+        return rows.astype(dtype) if dtype is not None else rows.copy()
+
+
 class _Recorder:
     """Collects output samples: every step, or the requested ``t_eval`` times."""
 
-    def __init__(self, t_eval, closed=lambda: (), states=lambda: ()):
+    def __init__(self, t_eval, closed=lambda: (), states=lambda: (), budget=None):
         self.t_eval = t_eval
+        self.budget = budget if t_eval is None else None  # (StepBudget: every step kept)
         self.closed_now = closed
         self.states_now = states  # drive-element states at the sample (set by full_state)
-        self.z: list[np.ndarray] = []
+        self.z = _Rows()
         self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
         self.t: list[float] = []
-        self.q: list[np.ndarray] = []
-        self.qd: list[np.ndarray] = []
+        self.q = _Rows()
+        self.qd = _Rows()
 
     def add(self, t, q, qd):
+        if self.budget is not None and len(self.t) >= self.budget.rows:
+            raise self.budget.exceeded(float(t))
         self.closed.append(tuple(self.closed_now()))
-        self.z.append(np.array(self.states_now(), dtype=float))
+        self.z.append(self.states_now())
         self.t.append(float(t))
-        self.q.append(np.array(q, dtype=float))
-        self.qd.append(np.array(qd, dtype=float))
+        self.q.append(q)
+        self.qd.append(qd)
 
     def record_until(self, workspace, solver, dense, t_old, t_stop, q_stop, qd_stop):
         """Samples up to an event at ``t_stop`` (the state there is given)."""
@@ -120,18 +150,25 @@ class _Recorder:
 def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-             dt: float | None = None, z0: np.ndarray | None = None) -> Result:
+             dt: float | None = None, z0: np.ndarray | None = None, max_samples: int | None = None) -> Result:
     """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds; ``z0`` the
     drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
-    ``System.simulate``.  The Result carries no System (the caller binds one)."""
+    ``System.simulate``.  The Result carries no System (the caller binds one).  With
+    ``t_eval=None`` at most ``max_samples`` steps are kept (``checks.StepBudget``)."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
+    columns = len(q0) + len(qd0) + len(z0)
+    budget = checks.StepBudget(max_samples, columns + 1, t_end)  # (a row: t and the state)
+    if t_eval is not None:
+        checks.output_size(len(t_eval), columns + 1, f"t_eval of {len(t_eval)} times", fix="use fewer output times")
     if tau is not None and not callable(tau):
         kernel.tau(tau, 0.0, q0, qd0)
     if integrator not in ("auto", "compiled", "scipy"):
         raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
     if dt is not None:  # fixed steps: every step is stored
         checks.output_size(t_end / dt + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
+        if t_eval is None:
+            budget.check_rows(t_end / dt + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
     reason = why_not_compiled(kernel, formulation, method, tau) if integrator != "scipy" else "integrator='scipy'"
     if method == "RK4" and reason is not None:
         raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
@@ -144,9 +181,9 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         def run():
             if kernel.topology.contacts:  # compiled stretches between contact events
                 return _compiled_contacts(kernel, formulation, t_end, q0, qd0, rtol=rtol, atol=atol, t_eval=t_eval,
-                                          tau=tau, max_step=max_step, rest_speed=rest_speed)
+                                          tau=tau, max_step=max_step, rest_speed=rest_speed, budget=budget)
             return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
-                                atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0)
+                                atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0, budget=budget)
         try:
             if progress:
                 # The compiled loop's step hook reports the time reached; the bar only reads it
@@ -194,7 +231,7 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
         max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
     bar = ProgressBar(t_end, bool(progress), desc="simulating", unit="s", delay=_delay(progress))
     recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()),
-                         (lambda: drive.z) if drive is not None else (lambda: ()))
+                         (lambda: drive.z) if drive is not None else (lambda: ()), budget)
     counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
 
     def fun(t, y):
@@ -217,7 +254,8 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
 
     started = time.perf_counter()
     if workspace.y0.size == 0 and watch is None:
-        return _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started)
+        return _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started,
+                                  budget)
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
@@ -344,7 +382,8 @@ class _EventStep:
         return self._dense
 
 
-def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eval, tau, max_step, rest_speed) -> Result:
+def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eval, tau, max_step, rest_speed,
+                       budget=None) -> Result:
     """Contacts with the compiled loop: the stretches between events run in C (the lagrange
     formulation's reduced loop, watching the contacts after every step); a step with an event
     comes back here, where ``ContactWatch`` locates and applies it exactly as in Python
@@ -361,7 +400,7 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
         applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
     watch = ContactWatch(kernel, formulation, rest_speed, offsets, applied)
     qd0 = watch.start(q0, qd0)
-    recorder = _Recorder(t_eval, lambda: watch.persistent)
+    recorder = _Recorder(t_eval, lambda: watch.persistent, budget=budget)
     if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
         recorder.add(0.0, q0, qd0)
         recorder.next = 1 if t_eval is not None else 0
@@ -383,7 +422,8 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
                 i_out = np.array([recorder.next], dtype=np.int64)
                 status, steps_t, steps_y, y, f = dop853_segment(kernel, run_loop, hook, segment, "DOP853", state, y,
                                                                 np.empty_like(y), t_end, rtol, atol, max_step,
-                                                                tau_ptr, counts, t_out, i_out, y_out)
+                                                                tau_ptr, counts, t_out, i_out, y_out,
+                                                                budget=budget, stored=len(recorder.t))
                 if t_out is not None:
                     for j in range(recorder.next, int(i_out[0])):
                         recorder.add(t_out[j], y_out[j, :n], y_out[j, n:])
@@ -418,13 +458,13 @@ def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eva
                    persistent_contacts=[watch.names[i] for i in watch.persistent], closed_contacts=recorder.closed)
 
 
-def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started) -> Result:
+def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started,
+                       budget=None) -> Result:
     """No degree of freedom left (every coordinate driven or dependent): nothing to
     integrate; the motion follows from the constraints at each output time (Newton,
     continued from the previous time)."""
     if t_eval is None:
-        count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
-        t_eval = np.linspace(0.0, t_end, count + 1)
+        t_eval = checks.prescribed_times(t_end, max_step, budget)
     qs, qds = [], []
     for t in t_eval:
         q, qd = workspace.full_state(t, np.zeros(0))

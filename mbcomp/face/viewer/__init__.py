@@ -24,10 +24,8 @@ class Viewer:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the page to ``path`` (any suffix; ``.html`` is customary) and return it."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(self.html, encoding="utf-8")
-        return path
+        from mbcomp.core.writing import write_file
+        return write_file(path, self.html, "view")
 
     def _repr_html_(self) -> str:
         # An iframe keeps the page's script, style and policy apart from the notebook's.

@@ -77,9 +77,21 @@ html, body { margin: 0; height: 100%; overflow: hidden; font: 14px system-ui, sa
 SPEEDS = (0.1, 0.25, 0.5, 1, 2, 4)
 
 
+#: Characters of the scene JSON written as ``\uXXXX`` escapes: ``<``, ``>`` and ``&`` (no name
+#: can open or close a tag, a comment (``<!--``) or a character reference inside the script
+#: element) and the line separators U+2028/U+2029.  JSON.parse reads the same strings back.
+_JSON_ESCAPES = {"<": "\\u003c", ">": "\\u003e", "&": "\\u0026", "\u2028": "\\u2028", "\u2029": "\\u2029"}
+
+
+def scene_json(scene: dict) -> str:
+    """The scene as JSON safe inside a ``<script>`` element whatever the names hold."""
+    data = json.dumps(scene, separators=(",", ":"), allow_nan=False)
+    return re.sub("[<>&\u2028\u2029]", lambda match: _JSON_ESCAPES[match.group()], data)
+
+
 def render_page(scene: dict) -> str:
     """The complete HTML document for ``scene`` (a ``build_scene`` dict)."""
-    data = json.dumps(scene, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    data = scene_json(scene)
     options = "".join(f'<option value="{s}"{" selected" if s == 1 else ""}>{s}x</option>' for s in SPEEDS)
     title = html.escape(str(scene.get("title", "mbcomp")))
     script = (_safe_script(three_script(), THREE_FILE) + "\n(function (THREE) {\n"

@@ -310,17 +310,24 @@ class Joint(Component):
 
     def _coord_names(self, coords: Any) -> tuple[str, ...]:
         if coords is None:
-            return tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
-        try:
-            names = (coords,) if isinstance(coords, str) else tuple(coords)
-        except TypeError:
-            raise ModelError(self, f"coords must be a name or a sequence of names, got {coords!r}") from None
+            names = tuple(self.name if not s else f"{self.name}_{s}" for s in self.coord_suffixes)
+        else:
+            try:
+                names = (coords,) if isinstance(coords, str) else tuple(coords)
+            except TypeError:
+                raise ModelError(self, f"coords must be a name or a sequence of names, got {coords!r}") from None
         if len(names) != self.n_coords:
             raise ModelError(self, f"coords must name {self.n_coords} coordinate(s), got {len(names)}")
         if not all(isinstance(n, str) and n.strip() and n == n.strip() for n in names):
             raise ModelError(self, f"coords must be non-empty names without edge spaces, got {coords!r}")
         if len(set(names)) != len(names):
             raise ModelError(self, f"coords {names} repeat a name")
+        from mbcomp.core.names import reserved_problem
+        for n in names:
+            problem = reserved_problem(n)
+            if problem is not None:
+                raise ModelError(self, f"coordinate {problem}" + ("" if coords is not None else
+                                                                   " (the default coordinate name is the joint's: give coords)"))
         return names
 
     @property
