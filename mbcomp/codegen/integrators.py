@@ -681,7 +681,9 @@ _NO_HOOK = _HOOK_TYPE()
 def _set_step_budget(lib) -> None:
     """The compiled loops' step budget for this thread: ``limits.max_steps()``."""
     from mbcomp.core.limits import max_steps
-    setter = lib.set_step_budget
+    setter = getattr(lib, "set_step_budget", None)
+    if setter is None:   # (a library without the integrators)
+        return
     if setter.restype is not None:
         setter.argtypes, setter.restype = [ctypes.c_double], None
     setter(float(max_steps()))
