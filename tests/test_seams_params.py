@@ -312,3 +312,62 @@ def test_control_names_resolve_clashes():
     lin = Linearization(A=np.zeros((2, 2)), B=np.zeros((2, 0)), states=("a.b", "a_b"), inputs=(),
                         independent=(), basis=np.zeros((0, 0)), q=np.zeros(0), qd=np.zeros(0))
     assert lin.control_names() == {"a.b": "a_b", "a_b": "a_b_2"}
+
+
+# -- every drive number a part parameter can reach ---------------------------------------------------
+class Drives(mb.Submodel):
+    """PID gains, limit and numeric setpoint, motor numbers, a drive torque, a Sine
+    amplitude and a motor speed, all from part parameters."""
+
+    kp = mb.Parameter(20.0)
+    ki = mb.Parameter(10.0)
+    kd = mb.Parameter(1.0)
+    limit = mb.Parameter(24.0, min=0.0)
+    setpoint = mb.Parameter(0.4)
+    resistance = mb.Parameter(2.0, min=0.0)
+    torque = mb.Parameter(0.3)
+    amplitude = mb.Parameter(0.2)
+    speed = mb.Parameter(1.5)
+
+    def build(self, base: mb.Frame):
+        a = self.add(mb.Body("a", mass=1.0, com=(0, 0.1, 0), inertia=(0.01, 0.01, 0.01)))
+        ja = self.add(mb.Revolute("ja", base, a, axis="x", coords="qa"))
+        pid = self.add(mb.PID("pid", mb.Angle(ja), self.setpoint, kp=self.kp, ki=self.ki, kd=self.kd,
+                              limit=self.limit))
+        self.add(mb.DCMotor("motor", ja, ratio=50.0, resistance=self.resistance, inductance=0.05, k=0.03,
+                            voltage=pid))
+        b = self.add(mb.Body("b", mass=1.0, com=(0, 0.1, 0), inertia=(0.01, 0.01, 0.01)))
+        jb = self.add(mb.Revolute("jb", base, b, axis="y", coords="qb"))
+        self.add(mb.Drive("drive", jb, torque=self.torque))
+        self.add(mb.JointTorque("shake", jb, value=mb.Sine(self.amplitude, 2.0)))
+        c = self.add(mb.Body("c", mass=1.0, com=(0, 0.1, 0), inertia=(0.01, 0.01, 0.01)))
+        jc = self.add(mb.Revolute("jc", base, c, axis="z", coords="qc"))
+        self.add(mb.Motor("spin", jc, speed=self.speed))
+
+
+def drives_model(**values) -> mb.Model:
+    m = mb.Model("drives", gravity=(0, 0, -9.81))
+    m.add(Drives("d", base=m.ground.frame(), **values))
+    return m
+
+
+@pytest.mark.parametrize("formulation", ["lagrange", "dae"])
+def test_every_drive_number_follows_its_part_parameter(formulation):
+    system = drives_model().compile(formulation=formulation)
+    changes = {"kp": 35.0, "ki": 4.0, "kd": 2.0, "limit": 1.0, "setpoint": -0.3, "resistance": 1.0,
+               "torque": -0.2, "amplitude": 0.6, "speed": 0.5}
+
+    def run(s, parameters=None):
+        res = s.simulate(0.5, [0.0, 0.0, 0.0], [0.0, 0.0, s.parameter("d.speed")], t_eval=T_EVAL / 2,
+                         parameters=parameters)
+        return np.column_stack([res[c] for c in ("d.qa", "d.qb", "d.qc")])
+
+    default = run(system)
+    for name, value in changes.items():
+        fresh = drives_model(**{name: value}).compile(formulation=formulation)
+        expected = run(fresh)
+        changed = system.simulate(0.5, [0.0, 0.0, 0.0], [0.0, 0.0, value if name == "speed" else 1.5],
+                                  t_eval=T_EVAL / 2, parameters={f"d.{name}": value})
+        changed = np.column_stack([changed[c] for c in ("d.qa", "d.qb", "d.qc")])
+        assert np.max(np.abs(expected - default)) > 1e-4, f"{name}: the change must matter"
+        np.testing.assert_allclose(changed, expected, rtol=0, atol=1e-9, err_msg=name)
