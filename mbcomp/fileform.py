@@ -433,6 +433,9 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         read = r.number(label, key, value, time=True, owner=owner)
         if read is BAD or isinstance(read, Expression):
             return read
+        if not isinstance(read, (int, float)):   # linked to a part's parameters
+            return r.problem(label, key, f"{value!r} uses the part's parameters: here it would keep its build-time "
+                             "value while listed as a run-time parameter; write a number")
         text = value if isinstance(value, str) else repr(float(read))
         return Expression(text, ("num", float(read)), owner)  # a constant of t
     if option == "rotation":

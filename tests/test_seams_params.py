@@ -371,3 +371,22 @@ def test_every_drive_number_follows_its_part_parameter(formulation):
         changed = np.column_stack([changed[c] for c in ("d.qa", "d.qb", "d.qc")])
         assert np.max(np.abs(expected - default)) > 1e-4, f"{name}: the change must matter"
         np.testing.assert_allclose(changed, expected, rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_a_part_parameter_as_a_constant_motor_position_is_refused(tmp_path):
+    forces = '[constraints.hold]\ntype = "motor"\njoint = "j"\nposition = "target/2"\n'
+    with pytest.raises(mb.ModelError, match=r"\[constraints.hold\] position: 'target/2' uses the part's parameters"):
+        part_model(tmp_path, forces)
+
+
+def test_python_backend_and_scipy_stepping_follow_signal_parameters():
+    """The Python path (generated Python functions, scipy stepping) reads the same
+    parameter vector: a run-time change of a Step's numbers gives a fresh build's numbers."""
+    system = elbow(mb.Step(0.2, 0.8), name="elbow_py").compile(backend="python")
+    changed = system.simulate(0.6, [0.0], t_eval=T_EVAL * 0.6, integrator="scipy",
+                              parameters={"pid.setpoint.time": 0.1, "pid.setpoint.after": 0.5})
+    fresh = elbow(mb.Step(0.1, 0.5), name="elbow_py").compile(backend="python")
+    expected = fresh.simulate(0.6, [0.0], t_eval=T_EVAL * 0.6, integrator="scipy")
+    np.testing.assert_allclose(changed["angle"], expected["angle"], rtol=0, atol=SAME)
+    compiled = elbow(mb.Step(0.1, 0.5)).compile().simulate(0.6, [0.0], t_eval=T_EVAL * 0.6)
+    np.testing.assert_allclose(changed["angle"], compiled["angle"], rtol=0, atol=1e-6)
