@@ -390,3 +390,18 @@ def test_python_backend_and_scipy_stepping_follow_signal_parameters():
     np.testing.assert_allclose(changed["angle"], expected["angle"], rtol=0, atol=SAME)
     compiled = elbow(mb.Step(0.1, 0.5)).compile().simulate(0.6, [0.0], t_eval=T_EVAL * 0.6)
     np.testing.assert_allclose(changed["angle"], compiled["angle"], rtol=0, atol=1e-6)
+
+
+def test_a_callable_returning_a_parameter_expression_is_an_error_not_a_frozen_value():
+    class Pushed(mb.Submodel):
+        a = mb.Parameter(2.0)
+
+        def build(self, joint):
+            self.add(mb.Drive("d", joint, torque=mb.Constant(1.0) + (lambda t: self.a * t)))
+
+    m = mb.Model("pushed")
+    b = m.add(mb.Body("b", mass=1.0, com=(0, 0.1, 0), inertia=(0.01, 0.01, 0.01)))
+    j = m.add(mb.Revolute("j", m.ground, b, axis="x"))
+    m.add(Pushed("p", joint=j))
+    with pytest.raises(mb.SimulationError, match=r"returned the sub-model parameter expression \(p.a \* 0.0\)"):
+        m.compile().simulate(0.1, [0.0])

@@ -383,6 +383,11 @@ class CallableSignal(Signal):
         from ..errors import SimulationError
         try:
             value = self.function(t, q, qd) if self.state_arguments else self.function(t)
+            if type(value) is not float and type(value).__name__ == "Expr":
+                raise SimulationError(f"signal callable {self.function!r} returned the sub-model parameter "
+                                      f"expression {value!r}: inside a Python callable it would keep its "
+                                      "build-time value; build the signal from mb.Step, mb.Sine, mb.Constant "
+                                      "(they take parameter expressions) instead")
             value = float(value)
         except (TypeError, ValueError) as exc:
             raise SimulationError(f"signal callable {self.function!r} failed: {exc}") from None
