@@ -405,3 +405,19 @@ def test_a_callable_returning_a_parameter_expression_is_an_error_not_a_frozen_va
     m.add(Pushed("p", joint=j))
     with pytest.raises(mb.SimulationError, match=r"returned the sub-model parameter expression \(p.a \* 0.0\)"):
         m.compile().simulate(0.1, [0.0])
+
+
+def test_every_signal_table_of_the_drives_page_takes_part_parameters(tmp_path):
+    """constant, sine, step tables with parameter expressions, a speed sensor, a pid
+    reference: loaded in a part, compiled, each number a run-time parameter."""
+    forces = ('[forces.pid]\ntype = "pid"\nmeasured = { type = "speed", joint = "j" }\n'
+              'setpoint = { type = "sine", amplitude = "target", frequency = "1/step_time" }\nkp = 2.0\nki = 1.0\n'
+              '[forces.drive]\ntype = "drive"\njoint = "j"\ntorque = { type = "pid", name = "pid" }\n'
+              '[forces.bias]\ntype = "joint_torque"\njoint = "j"\nvalue = { type = "constant", value = "-amp/60" }\n')
+    system = part_model(tmp_path, forces).compile()
+    assert system.integration_path() == "compiled"
+    assert system.parameters["p.pid.setpoint.frequency"] == 5.0 and system.parameters["p.bias.value.value"] == -0.1
+    change = {"p.target": 0.8, "p.step_time": 0.5, "p.amp": 3.0}
+    changed = system.simulate(1.0, [0.0], t_eval=T_EVAL, parameters=change)
+    fresh = part_model(tmp_path, forces, target=0.8, step_time=0.5, amp=3.0).compile()
+    np.testing.assert_allclose(changed["p.a"], fresh.simulate(1.0, [0.0], t_eval=T_EVAL)["p.a"], rtol=0, atol=SAME)
