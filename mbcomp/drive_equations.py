@@ -150,7 +150,7 @@ class DriveContext:
     def _key_owner(self, signal):
         """``(cache key, owner)``: a controller is its own owner; a source belongs to the
         component being built (the same source under two components is two parameters)."""
-        from .components.base import Component
+        from mbcomp.components.base import Component
         owner = signal if isinstance(signal, Component) else self._owner
         return ((None if owner is None else owner.name), id(signal)), owner
 

@@ -462,7 +462,7 @@ def _uses_time(r: Reader, text: str) -> bool:
 def read_time_signal(r: Reader, label: str, key: str, text: str) -> Any:
     """An expression of t feeding a drive, motor, PID or joint torque: a compiled
     ``TimeExpression`` whose parameter names are run-time parameters."""
-    from .components.signals import TimeExpression
+    from mbcomp.components.signals import TimeExpression
     try:
         signal = TimeExpression(text, r.parameters)
         value = signal.at(0.0)

@@ -27,7 +27,8 @@ from typing import Any, Callable, Iterator
 from .base import Component
 from ._values import name_of, scalar
 from ..errors import ModelError
-from ..params import ParameterSpec, nonnegative, positive
+from ..params import ParameterSpec, positive
+from mbcomp.params import nonnegative
 
 
 class Signal:
@@ -41,7 +42,7 @@ class Signal:
     def __new__(cls, *args: Any, **kwargs: Any):
         obj = super().__new__(cls)
         if args or kwargs:
-            from .expr import contains_expr
+            from mbcomp.components.expr import contains_expr
             if contains_expr(args) or contains_expr(kwargs):
                 object.__setattr__(obj, "signal_args", (args, kwargs))
         return obj
@@ -317,7 +318,7 @@ class TimeExpression(Signal):
     parsed, never evaluated by Python."""
 
     def __init__(self, text: str, parameters: dict | None = None):
-        from ..expressions import ExpressionError, parse_expression
+        from mbcomp.expressions import ExpressionError, parse_expression
         if not isinstance(text, str):
             raise ModelError("TimeExpression", f"text must be a string, got {text!r}")
         names = dict(parameters or {})
@@ -325,7 +326,7 @@ class TimeExpression(Signal):
             self.node = parse_expression(text, {n: _NameLeaf(n) for n in names}, allow_t=True, keep_names=True)
         except ExpressionError as exc:
             raise ModelError("TimeExpression", str(exc)) from None
-        from ..expressions import names_in
+        from mbcomp.expressions import names_in
         used = names_in(self.node)
         self.text = text
         self.values = {n: scalar(names[n], f"TimeExpression {text!r}", n) for n in sorted(used)}
@@ -338,18 +339,18 @@ class TimeExpression(Signal):
 
     def at(self, t: float) -> float:
         """The value at time ``t`` (s) with the current parameter values (for checks)."""
-        from ..expressions import evaluate
+        from mbcomp.expressions import evaluate
         return float(evaluate(self.node, float(t), self.values))
 
     def _sympy(self, node, ctx):
-        from ..expressions import to_sympy
+        from mbcomp.expressions import to_sympy
         return to_sympy(node, ctx.t, lambda name: ctx.field(self, name))
 
     def symbolic(self, ctx):
         return self._sympy(self.node, ctx)
 
     def symbolic_rate(self, ctx):
-        from ..expressions import differentiate
+        from mbcomp.expressions import differentiate
         return self._sympy(differentiate(self.node), ctx)
 
     def describe(self):
@@ -360,7 +361,7 @@ class TimeExpression(Signal):
 
     def file_table(self):
         """The text with the parameters' values in place (a file holds numbers)."""
-        from ..expressions import replace_names, to_text
+        from mbcomp.expressions import replace_names, to_text
         return self.text if not self.values else to_text(replace_names(self.node, self.values))
 
 
@@ -629,7 +630,7 @@ def signal_from_table(table: dict, where: str) -> Signal:
     unknown = [k for k in table if k != "type" and k not in keys]
     if unknown:
         raise ModelError(where, f"unknown key(s) {unknown} for a {kind!r} signal; allowed: {', '.join(keys)}")
-    from .expr import Expr
+    from mbcomp.components.expr import Expr
     values = {k: v for k, v in table.items() if k != "type"}
     for key, value in values.items():
         if key in ("joint", "name"):
