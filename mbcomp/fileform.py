@@ -464,8 +464,12 @@ def read_time_signal(r: Reader, label: str, key: str, text: str) -> Any:
     ``TimeExpression`` whose parameter names are run-time parameters."""
     from mbcomp.components.signals import TimeExpression
     try:
-        signal = TimeExpression(text, r.parameters)
+        used = names_in(parse_expression(text, r.parameters, allow_t=True, keep_names=True))
+        # only the names it uses: a part's other parameters do not rebuild the component
+        signal = TimeExpression(text, {n: r.parameters[n] for n in used})
         value = signal.at(0.0)
+    except ExpressionError as exc:
+        return r.problem(label, key, str(exc))
     except ModelError as exc:
         return r.problem(label, key, str(exc).split(": ", 1)[-1])
     except (ArithmeticError, ValueError) as exc:

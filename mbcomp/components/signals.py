@@ -314,19 +314,19 @@ class TimeExpression(Signal):
     compiled into the generated code with its exact time derivative.  ``parameters`` maps
     names the text may use to their values (numbers or sub-model parameter expressions);
     each name the text uses is a run-time parameter of the component the signal feeds
-    (``"motor.voltage.amplitude"``), the literal numbers are part of the code.  The text is
+    (``"motor.voltage.amp"`` for ``"amp*sin(2*pi*t)"``), the literal numbers are part of
+    the code.  The text is
     parsed, never evaluated by Python."""
 
     def __init__(self, text: str, parameters: dict | None = None):
-        from mbcomp.expressions import ExpressionError, parse_expression
+        from mbcomp.expressions import ExpressionError, names_in, parse_expression
         if not isinstance(text, str):
             raise ModelError("TimeExpression", f"text must be a string, got {text!r}")
         names = dict(parameters or {})
         try:
-            self.node = parse_expression(text, {n: _NameLeaf(n) for n in names}, allow_t=True, keep_names=True)
+            self.node = parse_expression(text, names, allow_t=True, keep_names=True)
         except ExpressionError as exc:
             raise ModelError("TimeExpression", str(exc)) from None
-        from mbcomp.expressions import names_in
         used = names_in(self.node)
         self.text = text
         self.values = {n: scalar(names[n], f"TimeExpression {text!r}", n) for n in sorted(used)}
@@ -363,13 +363,6 @@ class TimeExpression(Signal):
         """The text with the parameters' values in place (a file holds numbers)."""
         from mbcomp.expressions import replace_names, to_text
         return self.text if not self.values else to_text(replace_names(self.node, self.values))
-
-
-class _NameLeaf:
-    """A name of a ``TimeExpression`` while it is parsed (a parameter kept by name)."""
-
-    def __init__(self, name: str):
-        self.name = name
 
 
 class CallableSignal(Signal):
