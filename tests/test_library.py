@@ -311,6 +311,20 @@ def check_servo_arm(model, system):
     assert abs(moved["shoulder.angle"][-1] - 0.3) < 2e-3
 
 
+def check_pid_arm(model, system):
+    # Two `actuated_joint` parts: hanging straight down the arm is at rest, so nothing moves
+    # before the first step; then each PID's integral action holds its joint on its target.
+    # The step times are run-time parameters: moved later, the arm still rests at t = 0.45 s.
+    assert system.integration_path() == "compiled"
+    res = system.simulate(6.0, [0.0, 0.0], t_eval=[0.19, 0.45, 6.0])
+    assert abs(res["shoulder.angle"][0]) < 1e-9 and abs(res["shoulder.angle"][1]) > 0.1
+    assert abs(res["shoulder.angle"][-1] - 0.6) < 2e-3 and abs(res["elbow.angle"][-1] + 0.4) < 2e-3
+    later = system.simulate(6.0, [0.0, 0.0], t_eval=[0.45, 6.0],
+                            parameters={"shoulder.step_time": 0.5, "shoulder.target": 0.3})
+    assert abs(later["shoulder.angle"][0]) < 1e-9 and abs(later["elbow.angle"][0]) < 1e-9
+    assert abs(later["shoulder.angle"][-1] - 0.3) < 2e-3
+
+
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
 
 

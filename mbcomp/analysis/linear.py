@@ -49,14 +49,39 @@ class Linearization:
 
     def to_control(self):
         """A ``control.StateSpace`` (python-control, optional) with the state and input names;
-        outputs are the states.  Same as ``control.ss(lin.A, lin.B, lin.C, lin.D)``."""
+        outputs are the states.  Same as ``control.ss(lin.A, lin.B, lin.C, lin.D)``.
+
+        python-control refuses ``'.'`` in signal names, so the hierarchical names of
+        sub-models (``"shoulder.angle"``) are given to it as ``control_names()`` maps them
+        (``"shoulder_angle"``); the returned object carries both directions of that map:
+        ``sys_c.mbcomp_names`` (control name -> mbcomp name) and ``sys_c.control_names``
+        (mbcomp name -> control name)."""
         try:
             import control
         except ImportError:
             raise ImportError("to_control() needs python-control (pip install control); without it use "
                               "lin.A, lin.B, lin.C, lin.D directly") from None
-        return control.ss(self.A, self.B, self.C, self.D, states=list(self.states),
-                          inputs=list(self.inputs), outputs=list(self.states))
+        names = self.control_names()
+        out = control.ss(self.A, self.B, self.C, self.D, states=[names[s] for s in self.states],
+                         inputs=[names[u] for u in self.inputs], outputs=[names[s] for s in self.states])
+        out.control_names = dict(names)
+        out.mbcomp_names = {c: m for m, c in names.items()}
+        return out
+
+    def control_names(self) -> dict[str, str]:
+        """``{mbcomp name: python-control name}`` for the states and inputs: every ``'.'``
+        becomes ``'_'``; a name that would then clash with another gets ``_2``, ``_3``, ..."""
+        mapping: dict[str, str] = {}
+        used: set[str] = set()
+        for name in dict.fromkeys(tuple(self.states) + tuple(self.inputs)):
+            base = name.replace(".", "_")
+            candidate, k = base, 1
+            while candidate in used:
+                k += 1
+                candidate = f"{base}_{k}"
+            used.add(candidate)
+            mapping[name] = candidate
+        return mapping
 
 
 def _central(fun, z0: np.ndarray, steps: np.ndarray) -> np.ndarray:

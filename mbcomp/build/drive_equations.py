@@ -97,6 +97,8 @@ class DriveContext:
         self._values: dict = {}
         self._rates: dict = {}
         self._busy: set = set()
+        self._owner = None          # the component whose signals are being built
+        self._fields: dict = {}     # component name -> {(id(source), field): parameter key}
 
     def number(self, value: float):
         """A sympy number, exact for integers so that 0 and 1 prune."""
@@ -106,6 +108,25 @@ class DriveContext:
 
     def param(self, comp, attr: str):
         return self.kin.param(comp, attr)
+
+    def field(self, source, field: str):
+        """The parameter symbol of number ``field`` of a signal source, as the component
+        the signal feeds lists it (``SignalOwner.signal_fields``)."""
+        owner = self._owner
+        if owner is None or not hasattr(owner, "signal_fields"):
+            return self.number(source.source_value(field))
+        keys = self._fields.get(owner.name)
+        if keys is None:
+            keys = {(id(s), f): key for key, (s, f) in owner.signal_fields().items()}
+            self._fields[owner.name] = keys
+        key = keys.get((id(source), field))
+        if key is None:
+            return self.number(source.source_value(field))
+        return self.kin.layout.symbols(f"{owner.name}.{key}")
+
+    def owned_by(self, comp):
+        """Build ``comp``'s signals: their sources' numbers are ``comp``'s parameters."""
+        self._owner = comp
 
     def component(self, name: str):
         """A component of the model by its (flattened) name (a ``ControllerRef``'s PID)."""
@@ -126,22 +147,37 @@ class DriveContext:
     def callable_value(self, signal):
         return self._callables[id(signal)]
 
+    def _key_owner(self, signal):
+        """``(cache key, owner)``: a controller is its own owner; a source belongs to the
+        component being built (the same source under two components is two parameters)."""
+        from mbcomp.spec.components.base import Component
+        owner = signal if isinstance(signal, Component) else self._owner
+        return ((None if owner is None else owner.name), id(signal)), owner
+
     def signal(self, signal):
-        """The signal's value as a program symbol (each signal built once)."""
-        key = id(signal)
+        """The signal's value as a program symbol (each signal built once per owner)."""
+        key, owner = self._key_owner(signal)
         if key not in self._values:
             if key in self._busy:
                 raise CompileError(problems=[f"signal {signal.describe()} depends on itself (an algebraic loop "
                                              f"between controllers)"])
             self._busy.add(key)
-            self._values[key] = self.let(signal.symbolic(self))
+            previous, self._owner = self._owner, owner
+            try:
+                self._values[key] = self.let(signal.symbolic(self))
+            finally:
+                self._owner = previous
             self._busy.discard(key)
         return self._values[key]
 
     def rate(self, signal):
-        key = id(signal)
+        key, owner = self._key_owner(signal)
         if key not in self._rates:
-            rate = signal.symbolic_rate(self)
+            previous, self._owner = self._owner, owner
+            try:
+                rate = signal.symbolic_rate(self)
+            finally:
+                self._owner = previous
             self._rates[key] = None if rate is None else self.let(rate)
         return self._rates[key]
 
@@ -161,6 +197,7 @@ def drive_outputs(prog, kin, layout: DriveLayout | None) -> None:
     forces = [sp.Integer(0)] * nv
     rates = []
     for comp in layout.elements:
+        ctx.owned_by(comp)
         for joint, value in comp.drive_loads(ctx):
             k = kin.topology.v_slice[name_of(joint)].start  # a 1-DOF screw joint: its speed
             forces[k] = forces[k] + value

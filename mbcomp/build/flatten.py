@@ -245,5 +245,7 @@ def _dependencies(comp) -> set:
                 visit(v)
         elif type(value).__name__ == "Frame":
             visit(value.point)
+        elif getattr(value, "signal_args", None) is not None:   # a signal source (components/signals.py)
+            visit(value.signal_args)
     visit(comp.expression_args)
     return found

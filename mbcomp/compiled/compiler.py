@@ -126,6 +126,12 @@ class CompiledModel:
         name, _, attr = key.rpartition(".")
         comp = self.topology.components.get(name)
         spec = None if comp is None else type(comp).spec(attr)
+        if spec is None:   # a number inside a signal: "component.attribute.field"
+            for comp in self.topology.components.values():
+                if key.startswith(comp.name + ".") and hasattr(comp, "signal_spec"):
+                    spec = comp.signal_spec(key[len(comp.name) + 1:])
+                    if spec is not None:
+                        break
         return None if spec is None else (comp, spec)
 
     @property

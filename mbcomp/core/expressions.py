@@ -33,15 +33,17 @@ _ALL_FUNCTIONS = dict(FUNCTIONS, log=math.log)
 _BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 
 # A node is a tuple: ("num", value) | ("t",) | (op, a, b) with op in + - * / ** | ("neg", a) |
-# ("call", function name, a).
+# ("call", function name, a) | ("name", parameter name) (kept by name: ``keep_names``) |
+# ("obj", parameter expression object).
 
 
 class ExpressionError(ValueError):
     """An expression that is not in the whitelisted language (message says why)."""
 
 
-def parse_expression(text: str, names: dict[str, float], *, allow_t: bool) -> tuple:
-    """Parse ``text`` into a node tree; parameter names are replaced by their values.
+def parse_expression(text: str, names: dict[str, float], *, allow_t: bool, keep_names: bool = False) -> tuple:
+    """Parse ``text`` into a node tree; parameter names are replaced by their values
+    (``keep_names``: kept as ``("name", name)`` leaves, for run-time parameters).
 
     Raises ``ExpressionError`` for anything outside numbers, ``t`` (when ``allow_t``),
     ``pi``, the given names, ``+ - * / **``, unary minus and ``sin cos exp sqrt`` calls.
@@ -54,10 +56,11 @@ def parse_expression(text: str, names: dict[str, float], *, allow_t: bool) -> tu
         raise ExpressionError(f"{_shown(text)} is not a number or an arithmetic expression ({exc.msg})") from None
     except (RecursionError, MemoryError, ValueError):
         raise ExpressionError(f"{_shown(text)} is too deeply nested") from None
-    return _convert(tree.body, text, names, allow_t, 0)
+    return _convert(tree.body, text, names, allow_t, 0, keep_names)
 
 
-def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, depth: int) -> tuple:
+def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, depth: int,
+             keep_names: bool = False) -> tuple:
     if depth > MAX_DEPTH:
         raise ExpressionError(f"{_shown(text)} is too deeply nested")
     if isinstance(node, ast.Constant):
@@ -77,6 +80,8 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
         if node.id in CONSTANTS:
             return ("num", CONSTANTS[node.id])
         if node.id in names:
+            if keep_names:
+                return ("name", node.id)
             value = names[node.id]
             # a sub-model parameter (an expression object) stays linked; numbers inline
             # A sub-model parameter (an expression object) stays linked, except in
@@ -88,10 +93,10 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
         known = ", ".join(sorted(names)) or "none defined"
         raise ExpressionError(f"{_shown(text)}: unknown name {_short(node.id, 20)} (parameters: {known})")
     if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
-        return (_BINARY[type(node.op)], _convert(node.left, text, names, allow_t, depth + 1),
-                _convert(node.right, text, names, allow_t, depth + 1))
+        return (_BINARY[type(node.op)], _convert(node.left, text, names, allow_t, depth + 1, keep_names),
+                _convert(node.right, text, names, allow_t, depth + 1, keep_names))
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        inner = _convert(node.operand, text, names, allow_t, depth + 1)
+        inner = _convert(node.operand, text, names, allow_t, depth + 1, keep_names)
         return ("neg", inner) if isinstance(node.op, ast.USub) else inner
     if isinstance(node, ast.Call):
         func = node.func.id if isinstance(node.func, ast.Name) else None
@@ -100,27 +105,30 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
             raise ExpressionError(f"{_shown(text)}: calling {shown} is not allowed (only sin, cos, exp, sqrt)")
         if node.keywords or len(node.args) != 1 or isinstance(node.args[0], ast.Starred):
             raise ExpressionError(f"{_shown(text)}: {func}() takes exactly one argument")
-        return ("call", func, _convert(node.args[0], text, names, allow_t, depth + 1))
+        return ("call", func, _convert(node.args[0], text, names, allow_t, depth + 1, keep_names))
     what = type(node).__name__
     raise ExpressionError(f"{_shown(text)}: {what} is not allowed (numbers, parameter names, t, + - * / **, "
                           "sin, cos, exp, sqrt only)")
 
 
-def evaluate(node: tuple, t: float = 0.0) -> float:
-    """Value of a node tree at time ``t``; ``ArithmeticError`` or ``ValueError`` on a math error."""
+def evaluate(node: tuple, t: float = 0.0, env: dict | None = None) -> float:
+    """Value of a node tree at time ``t`` (``env``: values of ``("name", ...)`` leaves);
+    ``ArithmeticError`` or ``ValueError`` on a math error."""
     kind = node[0]
     if kind == "num" or kind == "obj":
         return node[1]
+    if kind == "name":
+        return float(env[node[1]])
     if kind == "t":
         return t
     if kind == "neg":
-        return -evaluate(node[1], t)
+        return -evaluate(node[1], t, env)
     if kind == "call":
-        arg = evaluate(node[2], t)
+        arg = evaluate(node[2], t, env)
         if not isinstance(arg, float) and hasattr(arg, node[1]):
             return getattr(arg, node[1])()   # a parameter expression object
         return _ALL_FUNCTIONS[node[1]](arg)
-    a, b = evaluate(node[1], t), evaluate(node[2], t)
+    a, b = evaluate(node[1], t, env), evaluate(node[2], t, env)
     if kind == "+":
         return a + b
     if kind == "-":
@@ -138,7 +146,7 @@ def uses_t(node: tuple) -> bool:
     """True when the tree depends on the time."""
     if node[0] == "t":
         return True
-    if node[0] == "num":
+    if node[0] in ("num", "name", "obj"):
         return False
     return any(uses_t(child) for child in node[1:] if isinstance(child, tuple))
 
@@ -188,7 +196,7 @@ def _div(a, b):
 def differentiate(node: tuple) -> tuple:
     """d/dt of a node tree (exact, by the usual rules; zeros pruned)."""
     kind = node[0]
-    if kind == "num":
+    if kind in ("num", "name"):
         return _num(0)
     if kind == "t":
         return _num(1)
@@ -226,11 +234,52 @@ def to_text(node: tuple) -> str:
         return repr(node[1]) if node[1] >= 0 else f"({node[1]!r})"
     if kind == "t":
         return "t"
+    if kind == "name":
+        return node[1]
     if kind == "neg":
         return f"(-{to_text(node[1])})"
     if kind == "call":
         return f"{node[1]}({to_text(node[2])})"
     return f"({to_text(node[1])} {kind} {to_text(node[2])})"
+
+
+def names_in(node: tuple) -> set[str]:
+    """The parameter names a tree parsed with ``keep_names`` uses."""
+    if node[0] == "name":
+        return {node[1]}
+    return set().union(*(names_in(child) for child in node[1:] if isinstance(child, tuple)))
+
+
+def replace_names(node: tuple, values: dict) -> tuple:
+    """The tree with its ``("name", ...)`` leaves replaced by the numbers in ``values``."""
+    if node[0] == "name":
+        return _num(values[node[1]])
+    if node[0] in ("num", "t", "obj"):
+        return node
+    return tuple(replace_names(c, values) if isinstance(c, tuple) else c for c in node)
+
+
+def to_sympy(node: tuple, t, name: Callable | None = None):
+    """The tree built from sympy objects in the symbol ``t`` (no parsing of text);
+    ``name(n)``: the sympy object of a ``("name", n)`` leaf."""
+    import sympy as sp
+    functions = {"sin": sp.sin, "cos": sp.cos, "exp": sp.exp, "sqrt": sp.sqrt, "log": sp.log}
+
+    def build(node):
+        kind = node[0]
+        if kind == "num":
+            return sp.Float(node[1]) if not float(node[1]).is_integer() else sp.Integer(int(node[1]))
+        if kind == "t":
+            return t
+        if kind == "name":
+            return name(node[1])
+        if kind == "neg":
+            return -build(node[1])
+        if kind == "call":
+            return functions[node[1]](build(node[2]))
+        a, b = build(node[1]), build(node[2])
+        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b, "**": a ** b}[kind]
+    return build(node)
 
 
 class Expression:
@@ -264,22 +313,7 @@ class Expression:
 
     def to_sympy(self, t):
         """The expression built from sympy objects, in the symbol ``t``."""
-        import sympy as sp
-        functions = {"sin": sp.sin, "cos": sp.cos, "exp": sp.exp, "sqrt": sp.sqrt, "log": sp.log}
-
-        def build(node):
-            kind = node[0]
-            if kind == "num":
-                return sp.Float(node[1]) if not float(node[1]).is_integer() else sp.Integer(int(node[1]))
-            if kind == "t":
-                return t
-            if kind == "neg":
-                return -build(node[1])
-            if kind == "call":
-                return functions[node[1]](build(node[2]))
-            a, b = build(node[1]), build(node[2])
-            return {"+": a + b, "-": a - b, "*": a * b, "/": a / b, "**": a ** b}[kind]
-        return build(self.node)
+        return to_sympy(self.node, t)
 
     def __repr__(self) -> str:
         return f"Expression({self.source!r})"

@@ -109,9 +109,11 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
         print(table(rows))
     if system.extra_states:  # the drive states' eigenvalues join the mechanical ones: list them all
         values = sorted(modes.all_eigenvalues, key=lambda lam: (abs(lam), -lam.imag))
-        print("eigenvalues with the drive states (1/s): " + ", ".join(
+        import textwrap
+        text = "eigenvalues with the drive states (1/s): " + ", ".join(
             fmt(lam.real) if abs(lam.imag) < 1e-9 * max(1.0, abs(lam)) else f"{lam.real:.4g}{lam.imag:+.4g}j"
-            for lam in values))
+            for lam in values)
+        print(textwrap.fill(text, width=100, subsequent_indent="  ", break_on_hyphens=False))
     verdict = "stable" if modes.stable else f"UNSTABLE ({modes.unstable} growing mode{'s' * (modes.unstable > 1)})"
     print(f"stability: {verdict}")
     return EXIT_OK

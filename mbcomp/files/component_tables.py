@@ -23,7 +23,8 @@ import numpy as np
 from mbcomp.spec.components.base import Component, component_class, kinds_in
 from mbcomp.spec.components.frame import Frame, rotation_matrix
 from mbcomp.core.errors import ModelError, describe
-from mbcomp.core.expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression, uses_t
+from mbcomp.core.expressions import (RESERVED, Expression, ExpressionError, TimeVector, evaluate, names_in, parse_expression,
+                          uses_t)
 from mbcomp.core.params import ParameterError, ParameterSpec, axis_name, spd_inertia, unit_vector, validate
 
 __all__ = ["BAD", "Reader", "read_component", "component_table", "SECTIONS", "TYPED_SECTIONS", "toml_key",
@@ -76,6 +77,9 @@ class Reader:
         self.problems: list[str] = []
         self.parameters: dict[str, float] = {}
         self.ports: set[str] = set()   # names bound to Frames by the user of a sub-model file
+        #: Sub-model instances that failed to read (their problems are recorded): a reference
+        #: to one of their bodies or ports is not reported again.
+        self.failed: set[str] = set()
 
     # -- reporting ------------------------------------------------------------------------
     def problem(self, table: str | None, key: str | None, message: str) -> _Bad:
@@ -112,6 +116,14 @@ class Reader:
             except ExpressionError as exc:
                 return self.problem(table, key, str(exc))
             if time and uses_t(node):
+                frozen = sorted(n for n in names_in(parse_expression(value, self.parameters, allow_t=True,
+                                                                     keep_names=True))
+                                if not isinstance(self.parameters[n], (int, float)))
+                if frozen:
+                    return self.problem(table, key, f"the part's parameter(s) {', '.join(map(repr, frozen))} cannot "
+                                        f"be used in an expression of t here: it would keep its build-time value "
+                                        "while listed as a run-time parameter (drive torques, motor voltages and "
+                                        "PID setpoints take them)")
                 expr = Expression(value, node, owner or f"[{table}] {key}")
                 try:
                     check = evaluate(node, 0.0)
@@ -120,6 +132,8 @@ class Reader:
                 if not math.isfinite(check):
                     return self.problem(table, key, f"{short(value, 24)} is not finite at t = 0")
                 return expr
+            if time:   # no t in it: a number, its parameters kept linked
+                node = parse_expression(value, self.parameters, allow_t=False)
             try:
                 x = evaluate(node)
             except (ArithmeticError, ValueError) as exc:
@@ -176,6 +190,8 @@ class Reader:
         if not isinstance(value, str):
             return self.problem(table, key, f"must be the name of a {kind}, got {type_name(value)} ({short(value)})")
         if value not in known:
+            if value.split(".")[0] in self.failed and self.problems:
+                return BAD   # inside a sub-model that failed: its own problem says why
             names = ", ".join(known) or "none declared"
             hint = close_match(value, tuple(known))
             plural = "bodies" if kind == "body" else kind + "s"
@@ -391,6 +407,8 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
     if cls.file_options.get(key) == "signal":  # drive inputs (components/signals.py)
         if isinstance(value, dict):
             return read_signal(r, label, key, value, joints)
+        if isinstance(value, str) and _uses_time(r, value):
+            return read_time_signal(r, label, key, value)
         if cls.spec(key) is None:
             return r.number(label, key, value, time=True, owner=owner)
     role = cls.refs.get(key)
@@ -415,6 +433,9 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         read = r.number(label, key, value, time=True, owner=owner)
         if read is BAD or isinstance(read, Expression):
             return read
+        if not isinstance(read, (int, float)):   # linked to a part's parameters
+            return r.problem(label, key, f"{value!r} uses the part's parameters: here it would keep its build-time "
+                             "value while listed as a run-time parameter; write a number")
         text = value if isinstance(value, str) else repr(float(read))
         return Expression(text, ("num", float(read)), owner)  # a constant of t
     if option == "rotation":
@@ -429,10 +450,47 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
     raise TypeError(f"{cls.__name__}.file_keys names {key!r}, which is not a reference, parameter or option")
 
 
+def _uses_time(r: Reader, text: str) -> bool:
+    """True when ``text`` is an expression of t (False when it is not an expression at all:
+    the number reader reports that)."""
+    try:
+        return uses_t(parse_expression(text, r.parameters, allow_t=True))
+    except ExpressionError:
+        return False
+
+
+def read_time_signal(r: Reader, label: str, key: str, text: str) -> Any:
+    """An expression of t feeding a drive, motor, PID or joint torque: a compiled
+    ``TimeExpression`` whose parameter names are run-time parameters."""
+    from mbcomp.spec.components.signals import TimeExpression
+    try:
+        used = names_in(parse_expression(text, r.parameters, allow_t=True, keep_names=True))
+        # only the names it uses: a part's other parameters do not rebuild the component
+        signal = TimeExpression(text, {n: r.parameters[n] for n in used})
+        value = signal.at(0.0)
+    except ExpressionError as exc:
+        return r.problem(label, key, str(exc))
+    except ModelError as exc:
+        return r.problem(label, key, str(exc).split(": ", 1)[-1])
+    except (ArithmeticError, ValueError) as exc:
+        return r.problem(label, key, f"{text!r} cannot be evaluated at t = 0 ({exc})")
+    if not math.isfinite(value):
+        return r.problem(label, key, f"{text!r} is not finite at t = 0")
+    return signal
+
+
 def read_signal(r: Reader, label: str, key: str, value: dict, joints: dict) -> Any:
     """A signal table (``{type = "step", time = 0.2, after = 1.0}``, ``{type = "angle", joint =
-    "elbow"}``, ``{type = "pid", name = "pid"}``, ...): its joints must be declared above."""
+    "elbow"}``, ``{type = "pid", name = "pid"}``, ...): its joints must be declared above; its
+    numbers may be parameter expressions (``time = "step_time"``)."""
     from mbcomp.spec.components.signals import signal_from_table
+    value = dict(value)
+    for k, v in list(value.items()):
+        if k not in ("type", "joint", "name") and isinstance(v, str):
+            read = r.number(label, f"{key}.{k}", v)
+            if read is BAD:
+                return BAD
+            value[k] = read
     try:
         signal = signal_from_table(value, f"[{label}] {key}")
     except ModelError as exc:
@@ -512,8 +570,8 @@ def component_table(comp: Component) -> tuple[str, dict]:
         value = comp.file_value(key)
         if value is None:
             continue
-        if isinstance(value, dict) and cls.file_options.get(key) == "signal":
-            table[key] = value  # a signal's table (components/signals.py)
+        if isinstance(value, (dict, str)) and cls.file_options.get(key) == "signal":
+            table[key] = value  # a signal's table or expression of t (components/signals.py)
             continue
         role = cls.refs.get(key)
         spec = cls.spec(key)

@@ -242,6 +242,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
     for comp_name, label, table in named_tables("submodels"):
         instance = _read_submodel(r, comp_name, label, table, bodies, context)
         if instance is None:
+            r.failed.add(comp_name)
             all_joints_read = False
             continue
         try:
@@ -249,6 +250,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
         except ModelError as exc:
             r.problems.extend(p if p.startswith(r.label.split(" ")[0]) else f"{r.label} [{label}]: {p}"
                               for p in exc.problems)
+            r.failed.add(comp_name)
             all_joints_read = False
             continue
         for key, value in vars(instance).items():

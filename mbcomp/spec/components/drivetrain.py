@@ -92,7 +92,7 @@ class Drive(SignalOwner, _OnJoint):
         return {"joint": self.joint, **signal_references(self.signals())}
 
     def structure(self):
-        return ("number",) if self.torque_is_number else (self.torque.describe(),)
+        return ("number",) if self.torque_is_number else (self.torque.structure_text(),)
 
     def state_names(self) -> tuple[str, ...]:
         return ()
@@ -161,7 +161,7 @@ class DCMotor(SignalOwner, _OnJoint):
         return {"joint": self.joint, **signal_references(self.signals())}
 
     def structure(self):
-        return ("number",) if self.voltage_is_number else (self.voltage.describe(),)
+        return ("number",) if self.voltage_is_number else (self.voltage.structure_text(),)
 
     def state_names(self) -> tuple[str, ...]:
         return ("current",)

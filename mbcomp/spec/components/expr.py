@@ -141,6 +141,8 @@ def contains_expr(value: Any) -> bool:
         return True
     if isinstance(value, (str, bytes, int, float)) or value is None:
         return False
+    if _signal_args(value) is not None:   # a signal source built from parameter expressions
+        return True
     if isinstance(value, (tuple, list)):
         return any(contains_expr(v) for v in value)
     if isinstance(value, dict):
@@ -159,6 +161,9 @@ def substitute(value: Any, env: Mapping[str, float]) -> Any:
         return value.evaluate(env)
     if isinstance(value, (str, bytes, int, float)) or value is None:
         return value
+    args = _signal_args(value)
+    if args is not None:   # a signal: built again from the new numbers
+        return type(value)(*substitute(args[0], env), **substitute(args[1], env))
     if isinstance(value, tuple):
         return tuple(substitute(v, env) for v in value)
     if isinstance(value, list):
@@ -173,3 +178,15 @@ def substitute(value: Any, env: Mapping[str, float]) -> Any:
         import numpy as np
         return np.array(substitute(value.tolist(), env), dtype=float)
     return value
+
+
+def _signal_args(value: Any) -> Any:
+    """``(args, kwargs)`` of a signal built from parameter expressions (``Signal.signal_args``),
+    else None (components, such as a PID inside a signal, follow their own)."""
+    args = getattr(type(value), "signal_args", _NOT_A_SIGNAL)
+    if args is _NOT_A_SIGNAL:
+        return None
+    return getattr(value, "signal_args", None)
+
+
+_NOT_A_SIGNAL = object()

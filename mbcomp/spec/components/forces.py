@@ -236,7 +236,9 @@ class JointTorque(SignalOwner, ForceElement):
             return None
 
     def parameter_values(self) -> dict[str, Any]:
-        return {} if self.signal is not None else super().parameter_values()
+        if self.signal is not None:   # the numbers inside the signal only
+            return {key: source.source_value(field) for key, (source, field) in self.signal_fields().items()}
+        return super().parameter_values()
 
     def references(self):
         if self.signal is not None:
@@ -246,7 +248,7 @@ class JointTorque(SignalOwner, ForceElement):
 
     def structure(self):
         if self.signal is not None:
-            return ("signal", self.signal.describe())
+            return ("signal", self.signal.structure_text())
         return ("callable" if self.is_callable else "constant",)
 
     # A signal value makes this a drive element (drive_equations): generated with the drives.

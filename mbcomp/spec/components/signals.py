@@ -12,8 +12,12 @@ model with one integrates in the slower Python-stepped path (``System.integratio
 
 Every signal provides ``symbolic(ctx)``, its symbolic value, and ``symbolic_rate(ctx)``, its time
 derivative when that is known without accelerations (``None`` otherwise); ``ctx`` is the
-``DriveContext`` of ``drive_equations``.  Numbers inside sources are constants of the
-generated code (a change compiles again); a PID's gains are parameters.
+``DriveContext`` of ``drive_equations``.  Every number of a source (``Step`` time and
+values, ``Sine`` amplitude, ...) is a run-time parameter of the component the signal feeds,
+``"COMPONENT.ATTRIBUTE.FIELD"`` (``"pid.setpoint.time"``; see ``SignalOwner.signal_fields``),
+and so are a PID's gains: changing one does not compile again.  A source built from
+sub-model parameter expressions keeps them (``signal_args``), so a run-time change of
+those parameters reaches it as a fresh build would.
 """
 from __future__ import annotations
 
@@ -24,10 +28,40 @@ from mbcomp.spec.components.base import Component
 from mbcomp.spec.components.values import name_of, scalar
 from mbcomp.core.errors import ModelError
 from mbcomp.core.params import ParameterSpec, positive
+from mbcomp.core.params import nonnegative
 
 
 class Signal:
     """A scalar signal (base class).  Units are those of whatever it feeds."""
+
+    #: ``(args, kwargs)`` of the constructor call when they hold sub-model parameter
+    #: expressions (``None`` otherwise): a run-time parameter change rebuilds the signal
+    #: from them (``mbcomp.spec.components.expr.substitute``).
+    signal_args: Any = None
+
+    def __new__(cls, *args: Any, **kwargs: Any):
+        obj = super().__new__(cls)
+        if args or kwargs:
+            from mbcomp.spec.components.expr import contains_expr
+            if contains_expr(args) or contains_expr(kwargs):
+                object.__setattr__(obj, "signal_args", (args, kwargs))
+        return obj
+
+    def source_fields(self) -> tuple[str, ...]:
+        """The numbers of this source that are run-time parameters (none for others)."""
+        return ()
+
+    def source_value(self, field: str) -> float:
+        """The current value of one of ``source_fields``."""
+        return float(getattr(self, field))
+
+    def source_spec(self, field: str) -> ParameterSpec:
+        """What a new value of ``field`` must satisfy (the constructor's check)."""
+        return ParameterSpec(field, ())
+
+    def structure_text(self) -> str:
+        """``describe`` without the numbers that are parameters: what decides the code."""
+        return self.describe()
 
     def symbolic(self, ctx):
         raise NotImplementedError
@@ -61,10 +95,10 @@ class Signal:
         return _Combination("+", (as_signal(other, "signal", "+"), self))
 
     def __sub__(self, other):
-        return _Combination("+", (self, _Combination("*", (Constant(-1.0), as_signal(other, "signal", "-")))))
+        return _Combination("+", (self, _Combination("*", (_MINUS_ONE, as_signal(other, "signal", "-")))))
 
     def __rsub__(self, other):
-        return _Combination("+", (as_signal(other, "signal", "-"), _Combination("*", (Constant(-1.0), self))))
+        return _Combination("+", (as_signal(other, "signal", "-"), _Combination("*", (_MINUS_ONE, self))))
 
     def __mul__(self, other):
         return _Combination("*", (self, as_signal(other, "signal", "*")))
@@ -73,7 +107,7 @@ class Signal:
         return _Combination("*", (as_signal(other, "signal", "*"), self))
 
     def __neg__(self):
-        return _Combination("*", (Constant(-1.0), self))
+        return _Combination("*", (_MINUS_ONE, self))
 
     def __repr__(self) -> str:
         return self.describe()
@@ -86,7 +120,27 @@ def as_signal(value: Any, owner: Any, what: str, *, state_callable: bool = False
         return value
     if callable(value):
         return CallableSignal(value, state_arguments=state_callable)
-    return Constant(scalar(value, owner, what))
+    scalar(value, owner, what)   # the check, naming the owner
+    return Constant(value)       # keeps a sub-model parameter expression (signal_args)
+
+
+class _Literal(Signal):
+    """A fixed number inside a signal (the -1 of a difference): not a parameter."""
+
+    def __init__(self, value: float):
+        self.value = float(value)
+
+    def symbolic(self, ctx):
+        return ctx.number(self.value)
+
+    def symbolic_rate(self, ctx):
+        return 0
+
+    def describe(self):
+        return repr(self.value)
+
+
+_MINUS_ONE = _Literal(-1.0)
 
 
 class _Combination(Signal):
@@ -114,6 +168,9 @@ class _Combination(Signal):
 
     def describe(self):
         return "(" + f" {self.op} ".join(a.describe() for a in self.args) + ")"
+
+    def structure_text(self):
+        return "(" + f" {self.op} ".join(a.structure_text() for a in self.args) + ")"
 
 
 class Angle(Signal):
@@ -163,14 +220,20 @@ class Constant(Signal):
     def __init__(self, value: float):
         self.value = scalar(value, "Constant", "value")
 
+    def source_fields(self):
+        return ("value",)
+
     def symbolic(self, ctx):
-        return ctx.number(self.value)
+        return ctx.field(self, "value")
 
     def symbolic_rate(self, ctx):
         return 0
 
     def describe(self):
         return f"Constant({self.value!r})"
+
+    def structure_text(self):
+        return "Constant"
 
     def file_table(self) -> dict:
         return {"type": "constant", "value": self.value}
@@ -184,15 +247,22 @@ class Step(Signal):
         self.after = scalar(after, "Step", "after")
         self.before = scalar(before, "Step", "before")
 
+    def source_fields(self):
+        return ("time", "after", "before")
+
     def symbolic(self, ctx):
         import sympy as sp
-        return sp.Piecewise((ctx.number(self.after), ctx.t >= ctx.number(self.time)), (ctx.number(self.before), True))
+        return sp.Piecewise((ctx.field(self, "after"), ctx.t >= ctx.field(self, "time")),
+                            (ctx.field(self, "before"), True))
 
     def symbolic_rate(self, ctx):
         return 0
 
     def describe(self):
         return f"Step({self.time!r}, {self.after!r}, {self.before!r})"
+
+    def structure_text(self):
+        return "Step"
 
     def file_table(self) -> dict:
         return {"type": "step", "time": self.time, "after": self.after, "before": self.before}
@@ -207,23 +277,92 @@ class Sine(Signal):
         self.phase = scalar(phase, "Sine", "phase")
         self.offset = scalar(offset, "Sine", "offset")
 
+    def source_fields(self):
+        return ("amplitude", "frequency", "phase", "offset")
+
+    def source_spec(self, field):
+        return ParameterSpec(field, (), check=nonnegative) if field == "frequency" else ParameterSpec(field, ())
+
+    def _omega(self, ctx):
+        return ctx.number(2 * math.pi) * ctx.field(self, "frequency")
+
     def _argument(self, ctx):
-        return ctx.number(2 * math.pi * self.frequency) * ctx.t + ctx.number(self.phase)
+        return self._omega(ctx) * ctx.t + ctx.field(self, "phase")
 
     def symbolic(self, ctx):
         import sympy as sp
-        return ctx.number(self.offset) + ctx.number(self.amplitude) * sp.sin(ctx.let(self._argument(ctx)))
+        return ctx.field(self, "offset") + ctx.field(self, "amplitude") * sp.sin(ctx.let(self._argument(ctx)))
 
     def symbolic_rate(self, ctx):
         import sympy as sp
-        return ctx.number(self.amplitude * 2 * math.pi * self.frequency) * sp.cos(ctx.let(self._argument(ctx)))
+        return ctx.field(self, "amplitude") * self._omega(ctx) * sp.cos(ctx.let(self._argument(ctx)))
 
     def describe(self):
         return f"Sine({self.amplitude!r}, {self.frequency!r}, {self.phase!r}, {self.offset!r})"
 
+    def structure_text(self):
+        return "Sine"
+
     def file_table(self) -> dict:
         return {"type": "sine", "amplitude": self.amplitude, "frequency": self.frequency, "phase": self.phase,
                 "offset": self.offset}
+
+
+class TimeExpression(Signal):
+    """An expression of the time ``t`` in the language of model files (``"6*sin(2*pi*t)"``;
+    ``mbcomp.core.expressions``: numbers, ``t``, ``pi``, ``+ - * / **``, ``sin cos exp sqrt``),
+    compiled into the generated code with its exact time derivative.  ``parameters`` maps
+    names the text may use to their values (numbers or sub-model parameter expressions);
+    each name the text uses is a run-time parameter of the component the signal feeds
+    (``"motor.voltage.amp"`` for ``"amp*sin(2*pi*t)"``), the literal numbers are part of
+    the code.  The text is
+    parsed, never evaluated by Python."""
+
+    def __init__(self, text: str, parameters: dict | None = None):
+        from mbcomp.core.expressions import ExpressionError, names_in, parse_expression
+        if not isinstance(text, str):
+            raise ModelError("TimeExpression", f"text must be a string, got {text!r}")
+        names = dict(parameters or {})
+        try:
+            self.node = parse_expression(text, names, allow_t=True, keep_names=True)
+        except ExpressionError as exc:
+            raise ModelError("TimeExpression", str(exc)) from None
+        used = names_in(self.node)
+        self.text = text
+        self.values = {n: scalar(names[n], f"TimeExpression {text!r}", n) for n in sorted(used)}
+
+    def source_fields(self):
+        return tuple(self.values)
+
+    def source_value(self, field):
+        return self.values[field]
+
+    def at(self, t: float) -> float:
+        """The value at time ``t`` (s) with the current parameter values (for checks)."""
+        from mbcomp.core.expressions import evaluate
+        return float(evaluate(self.node, float(t), self.values))
+
+    def _sympy(self, node, ctx):
+        from mbcomp.core.expressions import to_sympy
+        return to_sympy(node, ctx.t, lambda name: ctx.field(self, name))
+
+    def symbolic(self, ctx):
+        return self._sympy(self.node, ctx)
+
+    def symbolic_rate(self, ctx):
+        from mbcomp.core.expressions import differentiate
+        return self._sympy(differentiate(self.node), ctx)
+
+    def describe(self):
+        return f"TimeExpression({self.text!r})"
+
+    def structure_text(self):
+        return self.describe()
+
+    def file_table(self):
+        """The text with the parameters' values in place (a file holds numbers)."""
+        from mbcomp.core.expressions import replace_names, to_text
+        return self.text if not self.values else to_text(replace_names(self.node, self.values))
 
 
 class CallableSignal(Signal):
@@ -238,6 +377,11 @@ class CallableSignal(Signal):
         from mbcomp.core.errors import SimulationError
         try:
             value = self.function(t, q, qd) if self.state_arguments else self.function(t)
+            if type(value) is not float and type(value).__name__ == "Expr":
+                raise SimulationError(f"signal callable {self.function!r} returned the sub-model parameter "
+                                      f"expression {value!r}: inside a Python callable it would keep its "
+                                      "build-time value; build the signal from mb.Step, mb.Sine, mb.Constant "
+                                      "(they take parameter expressions) instead")
             value = float(value)
         except (TypeError, ValueError) as exc:
             raise SimulationError(f"signal callable {self.function!r} failed: {exc}") from None
@@ -258,6 +402,47 @@ class SignalOwner:
     files hold them as signal tables (``file_value``)."""
 
     signal_attrs: tuple = ()
+
+    def signal_fields(self) -> dict[str, tuple[Signal, str]]:
+        """The run-time parameters inside this component's own signals: ``{"ATTR.FIELD":
+        (source, field)}`` for a source given directly (``"setpoint.time"``), else
+        ``"ATTR.KIND.FIELD"`` (``"voltage.sine.amplitude"``; ``KIND1``, ``KIND2``, ... when a
+        kind repeats).  Controllers inside (a PID) keep their own."""
+        found: dict[str, tuple[Signal, str]] = {}
+        for attr in self.signal_attrs:
+            root = getattr(self, attr, None)
+            if not isinstance(root, Signal) or isinstance(root, Component):
+                continue
+            sources, seen = [], set()
+            for s in root.walk():
+                if s.source_fields() and not isinstance(s, Component) and id(s) not in seen:
+                    seen.add(id(s))
+                    sources.append(s)
+            kinds = [type(s).__name__.lower() for s in sources]
+            for k, source in enumerate(sources):
+                if source is root:
+                    prefix = attr
+                elif kinds.count(kinds[k]) == 1:
+                    prefix = f"{attr}.{kinds[k]}"
+                else:
+                    prefix = f"{attr}.{kinds[k]}{kinds[:k + 1].count(kinds[k])}"
+                for field in source.source_fields():
+                    found[f"{prefix}.{field}"] = (source, field)
+        return found
+
+    def parameter_values(self) -> dict[str, Any]:
+        values = super().parameter_values()
+        values.update({key: source.source_value(field) for key, (source, field) in self.signal_fields().items()})
+        return values
+
+    def signal_spec(self, key: str) -> ParameterSpec | None:
+        """The ``ParameterSpec`` of a signal parameter ``"ATTR.FIELD"`` (None when not one)."""
+        found = self.signal_fields().get(key)
+        if found is None:
+            return None
+        source, field = found
+        spec = source.source_spec(field)
+        return ParameterSpec(key, spec.shape, spec.unit, spec.check)
 
     def file_value(self, key: str):
         value = super().file_value(key)
@@ -355,7 +540,7 @@ class PID(SignalOwner, Component, Signal):
         return signal_references(self.signals(), owner=self)
 
     def structure(self):
-        return (self.measured.describe(), self._setpoint_signal().describe(), self.has_derivative,
+        return (self.measured.structure_text(), self._setpoint_signal().structure_text(), self.has_derivative,
                 self.limit is not None)
 
     def describe(self):
@@ -429,7 +614,8 @@ SIGNAL_TYPES = {"constant": (Constant, ("value",)), "step": (Step, ("time", "aft
 
 def signal_from_table(table: dict, where: str) -> Signal:
     """The signal a model-file table describes, else a ``ModelError`` naming ``where``
-    and the key (numbers must be numbers; joints and controllers are names)."""
+    and the key (numbers are numbers or sub-model parameter expressions, as the file
+    reader turned them; joints and controllers are names)."""
     kind = table.get("type")
     if kind not in SIGNAL_TYPES:
         raise ModelError(where, f"signal type must be one of {', '.join(map(repr, SIGNAL_TYPES))}, got {kind!r}")
@@ -437,13 +623,14 @@ def signal_from_table(table: dict, where: str) -> Signal:
     unknown = [k for k in table if k != "type" and k not in keys]
     if unknown:
         raise ModelError(where, f"unknown key(s) {unknown} for a {kind!r} signal; allowed: {', '.join(keys)}")
+    from mbcomp.spec.components.expr import Expr
     values = {k: v for k, v in table.items() if k != "type"}
     for key, value in values.items():
         if key in ("joint", "name"):
             if not isinstance(value, str):
                 raise ModelError(where, f"{key} must be a name, got {value!r}")
-        elif isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ModelError(where, f"{key} must be a number, got {value!r}")
+        elif isinstance(value, bool) or not isinstance(value, (int, float, Expr)):
+            raise ModelError(where, f"{key} must be a number or a parameter expression, got {value!r}")
     if kind in ("angle", "speed", "pid") and not values:
         raise ModelError(where, f"a {kind!r} signal needs {keys[0]}")
     return cls(**values)
