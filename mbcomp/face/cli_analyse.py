@@ -90,8 +90,10 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
             print(table([["state", "value"]] + [[name, fmt(value)] for name, value in states.items()]))
         changing = changing_inputs(system, q, t, states if system.extra_states else None)
         if changing:
-            print(f"note: inputs change with time (they act on {', '.join(changing)}); analysed with them held "
-                  f"at their values at t = {fmt(t)} s (--time to choose another)")
+            import textwrap
+            print(textwrap.fill(f"note: inputs change with time (they act on {', '.join(changing)}); analysed with "
+                                f"them held at their values at t = {fmt(t)} s (--time to choose another)",
+                                width=100, subsequent_indent="  ", break_on_hyphens=False))
         modes = system.modes(q, t=t, tau=tau)
     except (SimulationError, ModelError) as exc:
         raise CommandError(f"analysis failed: {exc}", EXIT_FAILED) from None
