@@ -55,12 +55,13 @@ class Modes:
         return f"Modes([{rows}], stable={self.stable})"
 
 
-def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> Modes:
+def modes(system, q: Any, t: float | None = None, tau: Any = None, states: Any = None) -> Modes:
     """Modes of the motion about the equilibrium ``q`` (``tau``: generalised forces held constant,
     e.g. ``system.holding_forces(q)`` to study a pose held by constant torques; ``states``: values
     of drive-element states, default those at rest there (``rest_states``); their eigenvalues
     join the mechanical ones, so a model with drive states has more modes than degrees of
-    freedom).  ``SimulationError`` when ``q`` is not an equilibrium (find one with ``equilibrium``)."""
+    freedom; ``t`` as in ``linearize``).  ``SimulationError`` when ``q`` is not an equilibrium (find one
+    with ``equilibrium``)."""
     lin = linearize(system, q, None, t=t, tau=tau, states=states)
     k = len(lin.independent)
     A = lin.A
