@@ -153,6 +153,8 @@ def test_time_varying_inputs_are_held_at_t_and_a_prescribed_motion_has_no_rest()
     q = system.equilibrium([0.0])                                     # by default: where the inputs settle
     assert_close(q, [0.8], rtol=1e-10, name="settled")
     assert system.modes(q).stable                                     # at the same time: an equilibrium
+    current = gravity_torque(0.8) / (MOTOR["ratio"] * MOTOR["k"])
+    assert_close(mb.analysis.rest_states(system, q)[1], current, rtol=1e-9, name="settled current")
     assert mb.analysis.changing_inputs(system, [0.2], t=0.0)          # the step is ahead
     assert not mb.analysis.changing_inputs(system, [0.8], t=1.0)      # nothing changes after it
     # a sine never settles: held at t = 0, where the setpoint is its offset

@@ -153,12 +153,13 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float | None = None, m
     return q
 
 
-def rest_states(system, q: Any, qd: Any = None, t: float = 0.0, tau: Any = None) -> np.ndarray:
+def rest_states(system, q: Any, qd: Any = None, t: float | None = None, tau: Any = None) -> np.ndarray:
     """The drive states (``system.extra_states`` order: currents in A, PID integrals) at which
     the model rests at ``(q, qd)``: their rates vanish and the accelerations as far as they can
     (a least-squares fit; exact at an equilibrium).  ``modes`` and ``linearize`` take them
-    when no ``states`` are given; states nothing depends on stay 0."""
+    when no ``states`` are given; states nothing depends on stay 0.  ``t`` as in ``equilibrium``."""
     q = system.state_vector(q)
+    t = operating_time(system, q, t)
     v = speed_vector(system, qd)
     return DriveRest(system, t, tau, q).rest(q, v)
 
