@@ -148,10 +148,19 @@ def test_constrained_model_with_a_pid_motor_in_both_formulations():
 
 def test_time_varying_inputs_are_held_at_t_and_a_prescribed_motion_has_no_rest():
     system = servo_pendulum(setpoint=mb.Step(0.5, 0.8, 0.2), name="stepped").compile()
-    assert_close(system.equilibrium([0.0]), [0.2], rtol=1e-10, name="before the step")
+    assert_close(system.equilibrium([0.0], t=0.0), [0.2], rtol=1e-10, name="before the step")
     assert_close(system.equilibrium([0.0], t=1.0), [0.8], rtol=1e-10, name="after the step")
+    q = system.equilibrium([0.0])                                     # by default: where the inputs settle
+    assert_close(q, [0.8], rtol=1e-10, name="settled")
+    assert system.modes(q).stable                                     # at the same time: an equilibrium
+    current = gravity_torque(0.8) / (MOTOR["ratio"] * MOTOR["k"])
+    assert_close(mb.analysis.rest_states(system, q)[1], current, rtol=1e-9, name="settled current")
     assert mb.analysis.changing_inputs(system, [0.2], t=0.0)          # the step is ahead
     assert not mb.analysis.changing_inputs(system, [0.8], t=1.0)      # nothing changes after it
+    # a sine never settles: held at t = 0, where the setpoint is its offset
+    waving = servo_pendulum(setpoint=mb.Sine(0.3, 0.5, offset=0.4), name="waving").compile()
+    assert mb.analysis.operating_time(waving, [0.0]) == 0.0
+    assert_close(waving.equilibrium([0.0]), [0.4], rtol=1e-10, name="sine held at t = 0")
     driven = mb.load(str(ROOT / "library" / "double_pendulum_motor.toml")).compile()
     with pytest.raises(mb.SimulationError, match="'motor' prescribes motion in time"):
         driven.equilibrium([0.0, 0.3])

@@ -7,6 +7,7 @@ import numpy as np
 import scipy.optimize
 
 from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.core.errors import ModelError
 from mbcomp.formulations.base import independent_rows
 from mbcomp.analysis.space import Chart, difference, force_vector, integrate, model_forces, speed_names
 from mbcomp.analysis.space import speed_vector
@@ -18,7 +19,7 @@ FORCE_TOLERANCE = 1e-9
 POSITION_TOLERANCE = 1e-10
 
 
-def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evaluations: int = 2000,
+def equilibrium(system, q_guess: Any, tau: Any = None, t: float | None = None, max_evaluations: int = 2000,
                 return_states: bool = False) -> Any:
     """Configuration ``q`` near ``q_guess`` where the system rests: every constraint met, the
     generalised forces (gravity, springs, drives, ``tau``) balanced by constraint reactions and
@@ -35,12 +36,15 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
     ``tau``: constant generalised forces (array, one per speed) or a callable ``(t, q, qd)``.
     Which equilibrium is found (a pendulum has two) depends on the guess; stable or not
     (see ``modes``).  Inputs that change with time (a ``Step`` setpoint, a ``Sine`` voltage)
-    are held at their values at ``t`` (``changing_inputs`` names them).  ``return_states=True``
+    are held at their values at ``t``; by default (``t=None``) at the values they settle to
+    (after every step), or at t = 0 when they never settle (``operating_time``;
+    ``changing_inputs`` names them).  ``return_states=True``
     returns ``(q, {state: value})`` with the drive states (``system.extra_states``) at rest.
     ``SimulationError`` when none is found near the guess, or when a motor prescribes motion
     (such a model is never at rest).
     """
     q0 = system.state_vector(q_guess, "q_guess")
+    t = operating_time(system, q0, t)
     n = len(speed_names(system))
     zero = np.zeros(n)
     if system.constraint_names:
@@ -149,12 +153,13 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float = 0.0, max_evalu
     return q
 
 
-def rest_states(system, q: Any, qd: Any = None, t: float = 0.0, tau: Any = None) -> np.ndarray:
+def rest_states(system, q: Any, qd: Any = None, t: float | None = None, tau: Any = None) -> np.ndarray:
     """The drive states (``system.extra_states`` order: currents in A, PID integrals) at which
     the model rests at ``(q, qd)``: their rates vanish and the accelerations as far as they can
     (a least-squares fit; exact at an equilibrium).  ``modes`` and ``linearize`` take them
-    when no ``states`` are given; states nothing depends on stay 0."""
+    when no ``states`` are given; states nothing depends on stay 0.  ``t`` as in ``equilibrium``."""
     q = system.state_vector(q)
+    t = operating_time(system, q, t)
     v = speed_vector(system, qd)
     return DriveRest(system, t, tau, q).rest(q, v)
 
@@ -273,6 +278,27 @@ class DriveRest:
             changed += [self.names[self.active[i]] for i in
                         np.flatnonzero(np.abs(frozen.rates(q, z) - r_now) > 1e3 * FORCE_TOLERANCE * self.rate_scale)]
         return list(dict.fromkeys(changed))
+
+
+#: Where inputs that change with time are looked at for the values they settle to (s).
+SETTLED_TIME = 1e6
+
+
+def operating_time(system, q: Any, t: float | None = None) -> float:
+    """The time at which an analysis without a given ``t`` holds the model's inputs: 0 when
+    they are constant, else ``SETTLED_TIME`` when they have settled by then (a ``Step``: its
+    final value), else 0 (a ``Sine`` never settles).  A given ``t`` is returned as it is."""
+    if t is not None:
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            raise ModelError("t", f"must be a number of seconds, got {t!r}") from None
+        if not np.isfinite(t):
+            raise ModelError("t", f"must be finite, got {t!r}")
+        return t
+    if not changing_inputs(system, q, 0.0):
+        return 0.0
+    return SETTLED_TIME if not changing_inputs(system, q, SETTLED_TIME) else 0.0
 
 
 def changing_inputs(system, q: Any, t: float = 0.0, states: Any = None) -> list[str]:

@@ -95,7 +95,7 @@ def _central(fun, z0: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return np.column_stack(cols) if cols else np.zeros((len(fun(z0)), 0))
 
 
-def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[str] | str | None = None,
+def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Sequence[str] | str | None = None,
               tau: Any = None, independent: Sequence[str] | None = None, step: float = STEP,
               states: Any = None) -> Linearization:
     """Linearise the equations of motion about ``(q, qd)`` at time ``t`` (``tau``: constant or
@@ -112,6 +112,9 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     step ``step``; error ~1e-10 relative); ``B`` is exact (the accelerations are linear in the
     forces).  ``inputs``: joints (all their speeds) or speeds whose generalised forces are inputs.
 
+    ``t=None`` (the default): 0, or where inputs that change with time have settled
+    (``operating_time``: after a ``Step``), as ``equilibrium`` takes it.
+
     States of drive elements (motor currents, PID integrals; ``system.extra_states``) follow
     the mechanical ones in the state vector (rows and columns of ``A``), at the values
     ``states`` (``{name: value}`` or an array in ``extra_states`` order); when not given, the
@@ -120,6 +123,8 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     holds the values used.
     """
     q = system.state_vector(q)
+    from mbcomp.analysis.equilibrium import operating_time
+    t = operating_time(system, q, t)
     n = len(speed_names(system))
     v0 = speed_vector(system, qd)
     chart = Chart(system, q, t, independent)

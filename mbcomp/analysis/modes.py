@@ -55,12 +55,13 @@ class Modes:
         return f"Modes([{rows}], stable={self.stable})"
 
 
-def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> Modes:
+def modes(system, q: Any, t: float | None = None, tau: Any = None, states: Any = None) -> Modes:
     """Modes of the motion about the equilibrium ``q`` (``tau``: generalised forces held constant,
     e.g. ``system.holding_forces(q)`` to study a pose held by constant torques; ``states``: values
     of drive-element states, default those at rest there (``rest_states``); their eigenvalues
     join the mechanical ones, so a model with drive states has more modes than degrees of
-    freedom).  ``SimulationError`` when ``q`` is not an equilibrium (find one with ``equilibrium``)."""
+    freedom; ``t`` as in ``linearize``).  ``SimulationError`` when ``q`` is not an equilibrium (find one
+    with ``equilibrium``)."""
     lin = linearize(system, q, None, t=t, tau=tau, states=states)
     k = len(lin.independent)
     A = lin.A
@@ -77,8 +78,11 @@ def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -
         moving = f"accelerations {format_state(accel)}"
         if rates.size:
             moving += f", drive state rates {format_state(rates)}"
-        raise SimulationError(f"q = {format_state(lin.q)} is not an equilibrium ({moving}): find one with "
-                              f"equilibrium(), or hold the pose with tau=holding_forces(q)")
+        hint = "find one with equilibrium(), or hold the pose with tau=holding_forces(q)"
+        if np.max(np.abs(rates[acting]), initial=0.0) > EQUILIBRIUM_TOLERANCE * rate_scale:
+            hint = ("the drive states cannot rest there (a PID with an integral rests only on its setpoint); find "
+                    "the equilibrium with equilibrium()")
+        raise SimulationError(f"q = {format_state(lin.q)} is not an equilibrium ({moving}): {hint}")
     values, vectors = scipy.linalg.eig(A) if k else (np.zeros(0, complex), np.zeros((0, 0), complex))
     scale = max(1.0, float(np.max(np.abs(values), initial=0.0)))
     groups = _pair(values, vectors[:k] if k else vectors, scale)

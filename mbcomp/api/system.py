@@ -540,20 +540,20 @@ class System:
         cs = self._formulation.constraints
         return [] if cs is None else list(cs.owner)
 
-    def equilibrium(self, q_guess: Any, tau: Any = None, t: float = 0.0, return_states: bool = False) -> Any:
+    def equilibrium(self, q_guess: Any, tau: Any = None, t: float | None = None, return_states: bool = False) -> Any:
         """``q`` at rest with every constraint met and the drive states (currents, PID integrals)
         at rest, near ``q_guess``; ``return_states=True``: ``(q, {state: value})`` (see
         ``mbcomp.analysis``)."""
         from mbcomp.analysis import equilibrium
         return equilibrium(self, q_guess, tau=tau, t=t, return_states=return_states)
 
-    def linearize(self, q: Any, qd: Any = None, t: float = 0.0, inputs: Any = None, tau: Any = None,
+    def linearize(self, q: Any, qd: Any = None, t: float | None = None, inputs: Any = None, tau: Any = None,
                   independent: Any = None, states: Any = None):
         """State-space ``.A``, ``.B`` in the independent coordinates (see ``mbcomp.analysis``)."""
         from mbcomp.analysis import linearize
         return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent, states=states)
 
-    def modes(self, q: Any, t: float = 0.0, tau: Any = None, states: Any = None):
+    def modes(self, q: Any, t: float | None = None, tau: Any = None, states: Any = None):
         """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
         from mbcomp.analysis import modes
         return modes(self, q, t=t, tau=tau, states=states)

@@ -21,8 +21,9 @@ def register(commands: Any, cli: Any) -> None:
                          help="starting value of a coordinate (rad or m); repeat or separate by commas")
     analyse.add_argument("--held", action="store_true",
                          help="analyse the starting pose held by its holding forces instead of an equilibrium")
-    analyse.add_argument("--time", type=float, default=0.0, metavar="T",
-                         help="time (s) at which inputs that change with time (steps, sines) are held (default 0)")
+    analyse.add_argument("--time", type=float, default=None, metavar="T",
+                         help="time (s) at which inputs that change with time (steps, sines) are held (default: "
+                              "the values they settle to, else t = 0)")
     analyse.add_argument("--formulation", choices=("lagrange", "dae"), help="default: the file's, else lagrange")
     analyse.set_defaults(handler=lambda args: cmd_analyse(args, cli))
 
@@ -65,11 +66,14 @@ def cmd_analyse(args: argparse.Namespace, cli: Any) -> int:
     print(f"{model.name}: {len(system.coords)} coordinates, {system.ndof} degrees of freedom "
           f"({system.formulation})")
     tau = None
-    t = args.time
-    if not np.isfinite(t):
+    if args.time is not None and not np.isfinite(args.time):
         raise CommandError("--time must be a finite number of seconds", cli.EXIT_BAD_INPUT)
-    from mbcomp.analysis import changing_inputs
+    from mbcomp.analysis import changing_inputs, operating_time
     try:
+        t = operating_time(system, q_guess, args.time)
+        if args.time is None and t != 0.0:
+            print(f"note: inputs change with time; analysed with the values they settle to (t = {fmt(t)} s; "
+                  f"--time to choose another time)")
         if args.held:
             q = system.assemble(q_guess, None, t)[0] if system.constraint_names else q_guess
             tau = system.holding_forces(q, t)
