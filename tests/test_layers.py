@@ -32,7 +32,7 @@ LAYERS = {
     # 6 formulations: how constraints and contacts enter
     "formulations": 6, "impact": 6,
     # 7 running: time stepping, events, sweeps, derived series, analyses
-    "simulate": 7, "drive_runtime": 7, "events": 7, "batch": 7, "post": 7, "analysis": 7,
+    "simulate": 7, "drive_runtime": 7, "events": 7, "batch": 7, "post": 7, "analysis": 7, "scene": 7,
     # 8 the public facade
     "system": 8,
     # 9 user-facing output
