@@ -142,7 +142,12 @@ def _read_model(r: Reader, data: dict, path: Path) -> Model:
         g = r.vector("", "gravity", data["gravity"])
         gravity = g if g is not BAD else gravity
 
-    model = Model(name.strip() if isinstance(name, str) else "model", gravity=gravity)
+    name = name.strip() if isinstance(name, str) else "model"
+    try:
+        model = Model(name, gravity=gravity)
+    except ModelError as exc:   # e.g. a magnitude that would overflow: located at its key
+        r.problem(None, "gravity", getattr(exc, "detail", str(exc)))
+        model = Model(name)
     sections = _sections(r, data, ("initial", "simulation"))
     bodies: dict[str, Any] = {"ground": model.ground}
     external, exposed = _read_ports(r, data.get("ports", {}))
