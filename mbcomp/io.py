@@ -27,6 +27,8 @@ from .fileform import (BAD, ZERO3, Reader, close_match, component_table, floats,
 from .library import (find_library_model, find_library_part, library_dirs, library_models, library_parts,
                       read_description, resolve_model_path)
 from .model import Model
+from mbcomp.fileform import read_shapes
+from mbcomp.shapes import shape_table
 from .compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from .components.frame import Frame
 
@@ -125,7 +127,7 @@ def load(path: str | os.PathLike) -> Model:
 
 
 def _read_model(r: Reader, data: dict, path: Path) -> Model:
-    r.keys("", data, TOP_KEYS)
+    r.keys("", data, TOP_KEYS + ("ground_shape",))   # shapes fixed to the ground: a model's own
 
     name = data.get("name", path.stem or "model")
     if not isinstance(name, str) or not name.strip():
@@ -157,6 +159,10 @@ def _read_model(r: Reader, data: dict, path: Path) -> Model:
     context = _FileContext(path, (path.resolve(),), {})
     coords_seen = _read_parts(r, data, model, bodies, context, exposed)
 
+    if "ground_shape" in data:
+        shapes = read_shapes(r, "", "ground_shape", data["ground_shape"])
+        if shapes is not BAD:
+            model.ground.shape = shapes
     model.description = description
     model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
     # With a broken joint the coordinate names are incomplete: check the values only.
@@ -615,6 +621,8 @@ def dumps(model: Model) -> str:
         lines.append(f"description = {toml_value(description)}")
     lines.append(f"name = {toml_value(model.name)}")
     lines.append(f"gravity = {toml_value(floats(model.gravity))}")
+    if model.ground.shape:
+        lines.append(f"ground_shape = {toml_value([shape_table(s) for s in model.ground.shape])}")
     parameters = getattr(model, "named_parameters", None) or {}
     if parameters:
         lines += ["", "[parameters]"] + [f"{toml_key(k)} = {toml_value(float(v))}" for k, v in parameters.items()]

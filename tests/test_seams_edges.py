@@ -94,3 +94,83 @@ def test_a_submodel_expression_that_overflows_names_the_expression():
     m = mb.Model("m")
     with pytest.raises(mb.ModelError, match=f"Body 'rod': inertia {TOO_LARGE}"):
         m.add(Rod("upper", parent=m.ground.frame(), length=1e60))
+
+
+# -- body shapes through save and load ---------------------------------------------------------
+def shaped_model():
+    m = mb.Model("shapes", gravity=(0, 0, -9.81))
+    turned = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    link = m.add(mb.Body("link", mass=1.0, com=(0.2, 0, 0), inertia=(1e-3, 1e-2, 1e-2),
+                         shape=[mb.Box((0.4, 0.1, 0.05), origin=(0.2, 0, 0), rotation=turned, color="red"),
+                                mb.Cylinder(0.03, 0.4, axis=(1.0, 1.0, 0.0), origin=(0.2, 0, 0))]))
+    ball = m.add(mb.Body("ball", mass=0.5, inertia=(5e-4,) * 3, shape=mb.Sphere(0.05, origin=(0, 0, 0.01),
+                                                                             color=(0, 0, 1))))
+    part = m.add(mb.Body("part", mass=0.5, inertia=(5e-4,) * 3,
+                         shape=mb.Mesh("meshes/part.stl", scale=(0.001, 0.002, 0.001), color="#00ff00")))
+    plain = m.add(mb.Body("plain", mass=0.1, inertia=(1e-4,) * 3))
+    m.ground.shape = (mb.Box((2.0, 2.0, 0.01), origin=(0, 0, -0.5)),)
+    m.add(mb.Revolute("hinge", m.ground, link, axis="y"))
+    m.add(mb.Revolute("tip", link, ball, axis="y", parent_point=(0.4, 0, 0)))
+    m.add(mb.Ball("socket", ball, part))
+    m.add(mb.Prismatic("slide", part, plain, axis="x"))
+    return m
+
+
+def test_shapes_survive_save_and_load(tmp_path):
+    m = shaped_model()
+    path = tmp_path / "shapes.toml"
+    m.save(path)
+    again = mb.load(path)
+    for name in ("link", "ball", "part", "plain"):
+        assert again[name].shape == m[name].shape, name      # every field: sizes, placement, colour
+    assert again.ground.shape == m.ground.shape
+    assert [type(s).__name__ for s in again["link"].shape] == ["Box", "Cylinder"]
+    assert again["link"].shape[1].axis == pytest.approx((2 ** -0.5, 2 ** -0.5, 0.0))
+    assert again["part"].shape[0].scale == (0.001, 0.002, 0.001)
+    assert again["plain"].shape == ()
+    # Saving the loaded model writes the same text: nothing is lost or added on the way.
+    assert mb.io.dumps(again) == path.read_text()
+
+
+def test_shapes_in_a_submodel_survive_save_and_load(tmp_path):
+    class Arm(mb.Submodel):
+        length = mb.Parameter(0.5, unit="m", min=0.0)
+
+        def build(self, parent: mb.Frame):
+            rod = self.add(mb.Body("rod", mass=1.0, com=(0, 0, -self.length / 2), inertia=(0.02, 0.02, 0.0),
+                                   shape=mb.Cylinder(0.02, 0.5, axis="z", origin=(0, 0, -0.25), color="gray")))
+            self.add(mb.Revolute("joint", parent, rod, axis="x"))
+
+    m = mb.Model("arms")
+    m.add(Arm("upper", parent=m.ground.frame()))
+    m.save(tmp_path / "arms.toml")
+    again = mb.load(tmp_path / "arms.toml")
+    assert again["upper.rod"].shape == m["upper.rod"].shape and len(m["upper.rod"].shape) == 1
+
+
+@pytest.mark.parametrize("shape, where, expected", [
+    ('{ type = "cone", radius = 1 }', "shape", "type must be one of box, cylinder, sphere, mesh"),
+    ('[{ type = "box", size = [1, 1, -1] }]', "shape[0]", "size must be positive"),
+    ('{ type = "sphere", radius = 0.1, size = [1, 1, 1] }', "shape", "unknown key 'size' for a sphere"),
+    ('{ type = "cylinder", radius = 0.1 }', "shape", "a cylinder needs length"),
+    ('{ type = "box", size = ["a*b", 1, 1] }', "shape", "size must be numbers"),
+    ('[{ type = "sphere", radius = 0.1, color = "no-such-colour" }]', "shape[0]", "color must be"),
+])
+def test_bad_shape_tables_are_located(tmp_path, shape, where, expected):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'name = "m"\n[bodies.b]\nmass = 1.0\nshape = {shape}\n')
+    with pytest.raises(mb.ModelError) as info:
+        mb.load(path)
+    assert f"[bodies.b] {where}: {expected}" in str(info.value), info.value
+
+
+def test_the_page_of_a_loaded_model_draws_the_same_shapes(tmp_path):
+    from mbcomp.viewer import build_scene
+    m = shaped_model()
+    for body in ("part",):              # no mesh file here: leave the mesh out of the drawing
+        m[body].shape = (mb.Sphere(0.02),)
+    m.save(tmp_path / "shapes.toml")
+    q0 = [0.1, 0.2, 1.0, 0.0, 0.0, 0.0, 0.05]
+    pages = [build_scene(model.compile().simulate(0.05, q0)) for model in (m, mb.load(tmp_path / "shapes.toml"))]
+    assert pages[0]["bodies"] == pages[1]["bodies"] and pages[0]["ground"] == pages[1]["ground"]
+    assert [s["type"] for s in pages[1]["bodies"][0]["shapes"]] == ["box", "cylinder"]
