@@ -500,9 +500,10 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
     Each body is a ball at its COM (area by mass) joined by sticks to its joint locations and
     attachment points; ground attachments are black triangles, joints white circles, springs
     dashed lines, prismatic travel and loop closures dotted lines.  The axis limits are fixed
-    from the whole motion, so the picture does not jump.  The result is resampled (cubic
-    Hermite interpolation of q with qd) at evenly spaced frame times, since solver steps are not
-    evenly spaced.
+    from the whole motion, so the picture does not jump.  The result is resampled at evenly
+    spaced frame times by ``mbcomp.scene.resample_result`` (cubic Hermite through q and its rate
+    G(q) qd, quaternions kept at unit length), the resampling the 3D viewer uses, since solver
+    steps are not evenly spaced.
 
     Parameters
     ----------

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from mbcomp.errors import ModelError
 from mbcomp.layout import body_fields
 
-__all__ = ["pieces", "resample", "resample_result", "Scene"]
+__all__ = ["pieces", "resample", "resample_result", "local_value", "Scene"]
 
 
 def pieces(t: np.ndarray) -> list[tuple[int, int]]:
@@ -73,7 +73,7 @@ def resample_result(result: Any, times: np.ndarray) -> np.ndarray:
     return resample(t, q, times, rates, state_map.normalize)
 
 
-def _local(system: Any, comp: Any, attr: str) -> np.ndarray:
+def local_value(system: Any, comp: Any, attr: str) -> np.ndarray:
     """A component's vector at the system's current parameter value (parameters can be
     rebound without recompiling, so the component's own attribute may be stale)."""
     value = system.parameters.get(f"{comp.name}.{attr}", getattr(comp, attr))
@@ -128,30 +128,30 @@ class Scene:
             return index
 
         for joint in topology.tree_joints:
-            on_parent = attach(joint.parent, _local(system, joint, "parent_point"))
-            hub = attach(joint.child, _local(system, joint, "child_point"))
+            on_parent = attach(joint.parent, local_value(system, joint, "parent_point"))
+            hub = attach(joint.child, local_value(system, joint, "child_point"))
             self.joint_marks.append(hub)
             self.links.append((on_parent, hub))
         for joint in getattr(topology, "cut_joints", ()):
-            a = attach(joint.parent, _local(system, joint, "parent_point"))
-            b = attach(joint.child, _local(system, joint, "child_point"))
+            a = attach(joint.parent, local_value(system, joint, "parent_point"))
+            b = attach(joint.child, local_value(system, joint, "child_point"))
             self.joint_marks.extend((a, b))
             self.links.append((a, b))
         for comp in getattr(topology, "forces", ()):
             ends = [role for role, how in getattr(comp, "refs", {}).items() if how == "attachment"]
             if len(ends) == 2:
-                a, b = (attach(getattr(comp, f"body_{role}"), _local(system, comp, f"point_{role}")) for role in ends)
+                a, b = (attach(getattr(comp, f"body_{role}"), local_value(system, comp, f"point_{role}")) for role in ends)
                 self.springs.append((a, b))
             elif _placed(comp):
-                attach(comp.body, _local(system, comp, "point"))
+                attach(comp.body, local_value(system, comp, "point"))
         for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
             if _placed(comp):
-                attach(comp.body, _local(system, comp, "point"))
+                attach(comp.body, local_value(system, comp, "point"))
             if getattr(comp, "kind", "") == "slider":
-                self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
+                self.sliders.append((local_value(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
         self.rods: list[tuple[int, int, int]] = []      # (COM point, other point, index in bodies)
         for k, body in enumerate(self.bodies, start=1):
-            com = add(body, _local(system, body, "com"))
+            com = add(body, local_value(system, body, "com"))
             self.com_points.append(com)
             seen: list[np.ndarray] = []
             for other in on_body[k]:

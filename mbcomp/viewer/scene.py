@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mbcomp.errors import ModelError
-from mbcomp.scene import Scene, resample_result
+from mbcomp.scene import Scene, local_value, resample_result
 from mbcomp.shapes import Box, Cylinder, Mesh, Sphere
 
 #: Colors given to bodies without their own, in turn (Tableau 10, readable on a light background).
@@ -31,12 +31,6 @@ def frame_times(t: np.ndarray, fps: float, max_frames: int) -> np.ndarray:
         return np.array([t0])
     count = int(min(max(round((t1 - t0) * fps) + 1, 2), max_frames))
     return np.linspace(t0, t1, count)
-
-
-def _value(system: Any, comp: Any, attr: str) -> np.ndarray:
-    """A component's body-frame vector at the system's current parameter value."""
-    value = system.parameters.get(f"{comp.name}.{attr}", getattr(comp, attr))
-    return np.asarray(value, dtype=float).reshape(3)
 
 
 def _placement(shape: Any) -> list[float]:
@@ -109,9 +103,9 @@ def marks(scene: Scene, size: float) -> dict:
             # The axis is in the joint frame, which sits rotated in the child body.
             axis = np.asarray(joint.child_frame_rotation, dtype=float) @ np.asarray(axis, dtype=float)
         joints.append({"name": joint.name, "kind": type(joint).__name__.lower(), "body": number(joint.child),
-                       "point": [*map(float, _value(system, joint, "child_point"))],
+                       "point": [*map(float, local_value(system, joint, "child_point"))],
                        "parent": number(joint.parent),
-                       "parent_point": [*map(float, _value(system, joint, "parent_point"))],
+                       "parent_point": [*map(float, local_value(system, joint, "parent_point"))],
                        "axis": None if axis is None else [*map(float, axis)]})
     springs = []
     for comp in topology.forces:
@@ -119,22 +113,22 @@ def marks(scene: Scene, size: float) -> dict:
         if len(ends) == 2:
             a, b = ends
             springs.append({"name": comp.name, "a": number(getattr(comp, f"body_{a}")),
-                            "pa": [*map(float, _value(system, comp, f"point_{a}"))],
+                            "pa": [*map(float, local_value(system, comp, f"point_{a}"))],
                             "b": number(getattr(comp, f"body_{b}")),
-                            "pb": [*map(float, _value(system, comp, f"point_{b}"))]})
+                            "pb": [*map(float, local_value(system, comp, f"point_{b}"))]})
     contacts, sliders = [], []
     for comp in topology.contacts:
         if getattr(comp, "kind", "") != "contact":
             continue   # e.g. a joint stop: a coordinate gap, nothing to mark in space
         contacts.append({"name": comp.name, "body": number(comp.body),
-                         "point": [*map(float, _value(system, comp, "point"))],
-                         "origin": [*map(float, _value(system, comp, "origin"))],
+                         "point": [*map(float, local_value(system, comp, "point"))],
+                         "origin": [*map(float, local_value(system, comp, "origin"))],
                          "normal": [*map(float, comp.normal)]})
     for comp in topology.constraints:
         if getattr(comp, "kind", "") == "slider":
             sliders.append({"name": comp.name, "body": number(comp.body),
-                            "point": [*map(float, _value(system, comp, "point"))],
-                            "origin": [*map(float, _value(system, comp, "origin"))],
+                            "point": [*map(float, local_value(system, comp, "point"))],
+                            "origin": [*map(float, local_value(system, comp, "origin"))],
                             "axis": [*map(float, comp.axis)]})
     return {"joints": joints, "springs": springs, "contacts": contacts, "sliders": sliders,
             "mark_size": size * 0.03}
