@@ -93,7 +93,8 @@ class Scene:
     Bodies are numbered as in ``names``: 0 is the ground, ``k + 1`` is ``bodies[k]``.  Every
     point of interest (joint locations, spring ends, slider and contact points, each body's
     COM) is one row of ``locals_array`` (body frame, m) owned by ``owner_array``.  A body
-    without shapes of its own is drawn as ``rods``: one from its COM to each of its points.
+    is drawn from its ``shapes``, or without them as ``rods``: one from its COM to each of its
+    points.
     """
 
     def __init__(self, system: Any):
@@ -165,6 +166,9 @@ class Scene:
         self.locals_array = np.array(self.locals, dtype=float).reshape(-1, 3)
         self.owner_array = np.array(self.owner, dtype=int)
         self.masses = np.array([float(system.parameters.get(f"{b.name}.mass", b.mass)) for b in self.bodies])
+        #: Each body's own shapes (``mb.Box``, ...; empty: drawn as ``rods``), and the ground's.
+        self.shapes = [tuple(getattr(b, "shape", ()) or ()) for b in self.bodies]
+        self.ground_shapes = tuple(getattr(self.ground, "shape", ()) or ())
         self._fast: bool | None = None
 
     def body_index(self, ref: Any) -> int:

@@ -155,9 +155,9 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
 
     bodies = []
     for k, body in enumerate(scene.bodies):
-        records = _records(getattr(body, "shape", ()) or (), PALETTE[k % len(PALETTE)], body.name)
+        records = _records(scene.shapes[k], PALETTE[k % len(PALETTE)], body.name)
         bodies.append({"name": body.name, "shapes": records or default_shapes(scene, k, size)})
-    ground = _records(getattr(scene.ground, "shape", ()) or (), "#8c8c8c", scene.ground.name)
+    ground = _records(scene.ground_shapes, "#8c8c8c", scene.ground.name)
 
     gravity = np.asarray(system.parameters.get("gravity", (0.0, 0.0, -9.81)), dtype=float)
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else np.array([0.0, 0.0, 1.0])
