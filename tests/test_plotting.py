@@ -16,6 +16,7 @@ from PIL import Image  # noqa: E402
 import mbcomp as mb  # noqa: E402
 from mbcomp.face import plotting  # noqa: E402
 from mbcomp.face.plotting import animate_result, plot_result, render_frame, work_precision_plot  # noqa: E402
+from mbcomp.face.scene import Scene, resample  # noqa: E402
 
 
 # ----------------------------------------------------------------------------------
@@ -201,7 +202,7 @@ class TestRenderFrame:
 class TestScene:
     def test_points_are_where_body_state_puts_them(self, dp_result):
         system = dp_result.system
-        scene = plotting._Scene(system)
+        scene = Scene(system)
         q = dp_result.q[-1]
         points = scene.points(q)
         points = scene.points(q)            # the second call takes the fast kinematics path
@@ -216,7 +217,7 @@ class TestScene:
 
     def test_rebound_parameters_move_the_points(self, dp_result):
         system = dp_result.system.with_parameters({"j2.parent_point": (0.5, 0.0, 0.0)})
-        scene = plotting._Scene(system)
+        scene = Scene(system)
         q = np.array([0.0, 0.0])
         on_parent, hub = scene.links[1]
         np.testing.assert_allclose(scene.points(q)[hub], [0.5, 0.0, 0.0], atol=1e-12)
@@ -224,14 +225,14 @@ class TestScene:
     def test_resampling_without_speeds_is_linear(self):
         t = np.array([0.0, 1.0, 3.0])
         q = np.column_stack([2 * t, t ** 2])
-        out = plotting._resample(t, q, np.array([0.5, 2.0]))
+        out = resample(t, q, np.array([0.5, 2.0]))
         np.testing.assert_allclose(out, [[1.0, 0.5], [4.0, 5.0]])
 
     def test_resampling_with_speeds_is_exact_for_cubics(self):
         t = np.array([0.0, 1.0, 3.0])
         q, qd = np.column_stack([t ** 3, np.sin(t)]), np.column_stack([3 * t ** 2, np.cos(t)])
         times = np.linspace(0.0, 3.0, 13)
-        out = plotting._resample(t, q, times, qd)
+        out = resample(t, q, times, qd)
         np.testing.assert_allclose(out[:, 0], times ** 3, atol=1e-12)
         np.testing.assert_allclose(out[:, 1], np.sin(times), atol=0.05)   # h^4 max|q""|/384
 
@@ -240,7 +241,7 @@ class TestScene:
         t = np.array([0.0, 1.0, 1.0, 2.0])
         q = np.abs(t - 1.0)[:, None]
         qd = np.array([-1.0, -1.0, 1.0, 1.0])[:, None]
-        out = plotting._resample(t, q, np.array([0.5, 1.0, 1.5]), qd)
+        out = resample(t, q, np.array([0.5, 1.0, 1.5]), qd)
         np.testing.assert_allclose(out[:, 0], [0.5, 0.0, 0.5], atol=1e-12)
 
 

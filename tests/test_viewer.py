@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 import mbcomp as mb
 from mbcomp.face.viewer import Viewer, build_scene, render_page
 from mbcomp.face.viewer.page import CSP, three_script
-from mbcomp.face.viewer.scene import frame_times, resample
+from mbcomp.face.scene import resample
+from mbcomp.face.viewer.scene import frame_times
 
 
 def decode(scene, key="poses"):
@@ -57,9 +58,11 @@ def test_resample_is_exact_at_samples_and_cubic_between():
     out = resample(t, q, times, qd)
     np.testing.assert_allclose(out[:, 0], times ** 3, atol=1e-12)      # Hermite is exact for cubics
     np.testing.assert_allclose(out[::8], q, atol=1e-14)
-    # Speeds of another length (nq != nv): linear interpolation.
-    lin = resample(t, q, times, qd[:, :1])
+    # Without rates: linear interpolation; rates of another shape (speeds where nq != nv) are refused.
+    lin = resample(t, q, times)
     np.testing.assert_allclose(lin[:, 1], np.interp(times, t, q[:, 1]))
+    with pytest.raises(mb.ModelError, match="rates"):
+        resample(t, q, times, qd[:, :1])
 
 
 def test_impact_splits_the_interpolation():

@@ -19,7 +19,14 @@ import numpy as np
 from mbcomp.core.errors import ModelError
 
 __all__ = ["Check", "ParameterSpec", "ParameterError", "REQUIRED", "validate", "finite", "positive", "nonnegative",
-           "in_range", "unit_vector", "spd_inertia", "spec_of", "axis_name"]
+           "in_range", "unit_vector", "spd_inertia", "spec_of", "axis_name", "MAX_MAGNITUDE"]
+
+#: The largest magnitude a parameter may have (SI units).  The equations of motion multiply up
+#: to three parameters (``m c^2``, ``I + m c^2``, ``m g c``), so values up to 1e100 keep every
+#: product below the float range (1.8e308) while a value whose square overflows (> 1.3e154) is
+#: refused by name instead of turning into inf or NaN inside the generated code.  No physical
+#: quantity of a mechanism comes near it; directions (normalised) are exempt.
+MAX_MAGNITUDE = 1e100
 
 
 class _Required:
@@ -244,6 +251,10 @@ def validate(spec: ParameterSpec, value: Any, owner: Any) -> Any:
         if arr.ndim == 0:
             raise ParameterError(owner, name, f"must be finite, got {_show(arr)}")
         raise ParameterError(owner, name, f"has a non-finite entry: {_show(arr)}")
+    if check.normalise is not _unit and arr.size and float(np.max(np.abs(arr))) > MAX_MAGNITUDE:
+        raise ParameterError(owner, name, f"is too large to handle: {_show(arr)} (magnitudes above "
+                             f"{MAX_MAGNITUDE:g} overflow the equations of motion: their squares and products "
+                             "exceed the float range)")
     problem = check(arr)
     if problem:
         raise ParameterError(owner, name, f"{problem}")

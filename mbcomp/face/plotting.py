@@ -7,7 +7,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from mbcomp.build.layout import body_fields
+from mbcomp.face.scene import Scene, pieces, resample, resample_result
 
 __all__ = ["plot_result", "animate_result", "render_frame", "work_precision_plot"]
 
@@ -86,13 +86,6 @@ def _parse_what(what: str | Sequence[str], states: Sequence[str] = ()) -> list[s
     return list(dict.fromkeys(kinds))       # keep the order, drop repeats
 
 
-def _pieces(t: np.ndarray) -> list[tuple[int, int]]:
-    """``(start, stop)`` index ranges between repeated sample times (an impact repeats its time
-    with the speeds before and after)."""
-    breaks = np.flatnonzero(np.diff(t) <= 0) + 1
-    return list(zip([0, *breaks], [*breaks, len(t)]))
-
-
 def _smooth_series(result: Any, max_points: int = 3000):
     """``(t, q, qd)`` refined between the solver's samples, or None when that is not possible.
 
@@ -101,7 +94,6 @@ def _smooth_series(result: Any, max_points: int = 3000):
     instead of straight chords between large steps).  Each piece between impacts is refined
     on its own, so jumps in qd stay vertical.
     """
-    from scipy.interpolate import CubicHermiteSpline
     t = np.asarray(result.t, dtype=float)
     q, qd = np.asarray(result.q, dtype=float), np.asarray(result.qd, dtype=float)
     per_step = min(max_points // max(len(t), 1), 12)
@@ -118,17 +110,14 @@ def _smooth_series(result: Any, max_points: int = 3000):
     if not np.all(np.isfinite(qdd)):
         return None
     ts, qs, qds = [], [], []
-    for start, stop in _pieces(t):
+    for start, stop in pieces(t):       # both sides of an impact stay in the series
         piece = t[start:stop]
-        if len(piece) == 1:
-            ts.append(piece), qs.append(q[start:stop]), qds.append(qd[start:stop])
-            continue
         fine = np.concatenate([np.linspace(a, b, per_step, endpoint=False) for a, b in zip(piece[:-1], piece[1:])]
                               + [piece[-1:]])
         ts.append(fine)
-        qs.append(CubicHermiteSpline(piece, q[start:stop], rate[start:stop], axis=0)(fine))
-        qds.append(CubicHermiteSpline(piece, qd[start:stop], qdd[start:stop], axis=0)(fine))
-    return np.concatenate(ts), state_map.normalize(np.concatenate(qs)), np.concatenate(qds)
+        qs.append(resample(piece, q[start:stop], fine, rate[start:stop], state_map.normalize))
+        qds.append(resample(piece, qd[start:stop], fine, qdd[start:stop]))
+    return np.concatenate(ts), np.concatenate(qs), np.concatenate(qds)
 
 
 def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), *, path: Any = None,
@@ -264,145 +253,6 @@ def plot_result(result: Any, what: str | Sequence[str] = ("q", "qd", "energy"), 
 # ----------------------------------------------------------------------------------------------
 # 3D stick-and-ball scene
 # ----------------------------------------------------------------------------------------------
-def _local(system, comp, attr: str) -> np.ndarray:
-    """A component's body-frame point as the system's current parameter value (parameters can
-    be rebound without recompiling, so the component's own attribute may be stale)."""
-    value = system.parameters.get(f"{comp.name}.{attr}", getattr(comp, attr))
-    return np.asarray(value, dtype=float).reshape(3)
-
-
-class _Scene:
-    """Everything drawn in the animation, as body-frame points resolved per configuration.
-
-    Each body is a stick figure: segments from its hub (where its tree joint attaches it) to its
-    COM and to every other point of interest on it (outgoing joints, loop-closing joints, spring,
-    slider and contact points).  ``points(q)`` returns the world position of every such point at
-    one configuration.
-    """
-
-    def __init__(self, system):
-        self.system = system
-        topology = system.topology
-        self.ground = topology.ground
-        self.bodies = list(topology.bodies)
-        self.names = [topology.ground.name] + [b.name for b in self.bodies]
-        self.index_of = {name: i for i, name in enumerate(self.names)}
-        self.locals: list[np.ndarray] = []         # body-frame points, one row each
-        self.owner: list[int] = []                 # index into self.names
-        self.sticks: list[tuple[int, int, int]] = []   # (point a, point b, body index)
-        self.links: list[tuple[int, int]] = []     # joint gaps: prismatic travel, loop closures
-        self.springs: list[tuple[int, int]] = []
-        self.ground_marks: list[int] = []
-        self.joint_marks: list[int] = []
-        self.com_points: list[int] = []
-        self.sliders: list[tuple[np.ndarray, np.ndarray]] = []
-
-        def add(body: Any, local: np.ndarray) -> int:
-            self.locals.append(np.asarray(local, dtype=float))
-            self.owner.append(self.index_of[topology.resolve(body).name])
-            return len(self.locals) - 1
-
-        hubs: dict[str, int] = {}
-        extras: dict[str, list[int]] = {b.name: [] for b in self.bodies}
-
-        def attach(body: Any, local: np.ndarray) -> int:
-            index = add(body, local)
-            name = topology.resolve(body).name
-            if name == self.ground.name:
-                self.ground_marks.append(index)
-            else:
-                extras[name].append(index)
-            return index
-
-        for body, joint in zip(self.bodies, topology.tree_joints):
-            on_parent = attach(joint.parent, _local(system, joint, "parent_point"))
-            hub = add(body, _local(system, joint, "child_point"))
-            hubs[body.name] = hub
-            self.joint_marks.append(hub)
-            self.links.append((on_parent, hub))
-        for joint in getattr(topology, "cut_joints", ()):
-            a = attach(joint.parent, _local(system, joint, "parent_point"))
-            b = attach(joint.child, _local(system, joint, "child_point"))
-            self.joint_marks.extend((a, b))
-            self.links.append((a, b))
-        for comp in getattr(topology, "forces", ()):
-            ends = [role for role, how in comp.refs.items() if how == "attachment"]
-            if len(ends) == 2:
-                a, b = (attach(getattr(comp, f"body_{role}"), _local(system, comp, f"point_{role}")) for role in ends)
-                self.springs.append((a, b))
-        for comp in tuple(getattr(topology, "constraints", ())) + tuple(getattr(topology, "contacts", ())):
-            if comp.refs.get("body") == "body" and comp.spec("point") is not None:
-                attach(comp.body, _local(system, comp, "point"))
-            if comp.kind == "slider":
-                self.sliders.append((_local(system, comp, "origin"), np.asarray(comp.axis, dtype=float)))
-        for k, body in enumerate(self.bodies):
-            com = add(body, _local(system, body, "com"))
-            self.com_points.append(com)
-            hub = hubs[body.name]
-            for other in [com] + extras[body.name]:
-                self.sticks.append((hub, other, k))
-        if not self.ground_marks:
-            self.ground_marks.append(add(self.ground, np.zeros(3)))
-        self.locals_array = np.array(self.locals).reshape(-1, 3)
-        self.owner_array = np.array(self.owner, dtype=int)
-        masses = np.array([float(system.parameters.get(f"{b.name}.mass", b.mass)) for b in self.bodies])
-        # Ball area grows with mass^(2/3) (volume ~ mass), within readable bounds.
-        scale = (masses / masses.max()) ** (2.0 / 3.0) if masses.size else masses
-        self.ball_sizes = np.clip(40.0 + 200.0 * scale, 30.0, 260.0)
-        self._fast: bool | None = None
-
-    # -- kinematics -----------------------------------------------------------------------------
-    def _poses_public(self, q: np.ndarray):
-        """(R_WB, p_WB) of every body through the public ``body_state`` (ground first)."""
-        rotations, origins = [np.eye(3)], [np.zeros(3)]
-        for body in self.bodies:
-            state = self.system.body_state(body, q, point=(0.0, 0.0, 0.0))
-            rotations.append(state.rotation)
-            origins.append(state.position)
-        return np.array(rotations), np.array(origins)
-
-    def _poses_fast(self, q: np.ndarray):
-        """The same from one evaluation of the generated kinematics (no accelerations)."""
-        kernel = self.system.kernel
-        per_body = body_fields(kernel.kinematics(q, np.zeros(kernel.nv))[0])
-        rotations = np.concatenate([np.eye(3)[None], per_body["rotation"]])
-        origins = np.concatenate([np.zeros((1, 3)), per_body["origin"]])
-        return rotations, origins
-
-    def poses(self, q: np.ndarray):
-        if self._fast is None:
-            # Use the fast path only once it agrees with the public API at this configuration.
-            # (body_state also evaluates accelerations, which can fail off the constraints, e.g.
-            # at a drifted sample; then the kinematics alone are all there is to go on.)
-            try:
-                reference = self._poses_public(q)
-            except Exception as exc:     # noqa: BLE001 - fall back to the kinematics below
-                reference, failure = None, exc
-            try:
-                fast = self._poses_fast(q)
-            except Exception:            # noqa: BLE001 - any failure means: use the public API
-                fast = None
-            if reference is None:
-                if fast is None:
-                    raise failure
-                self._fast = True
-                return fast
-            self._fast = fast is not None and all(np.allclose(a, b, rtol=1e-9, atol=1e-9)
-                                                  for a, b in zip(fast, reference))
-            return reference
-        return self._poses_fast(q) if self._fast else self._poses_public(q)
-
-    def points(self, q: np.ndarray) -> np.ndarray:
-        """(npoints, 3) world positions (m) of every scene point at configuration ``q``."""
-        rotations, origins = self.poses(np.asarray(q, dtype=float))
-        R = rotations[self.owner_array]
-        return origins[self.owner_array] + np.einsum("nij,nj->ni", R, self.locals_array)
-
-    def all_points(self, qs: np.ndarray) -> np.ndarray:
-        """(nframes, npoints, 3) world positions for a sequence of configurations."""
-        return np.array([self.points(q) for q in qs])
-
-
 def _limits(points: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre and half-width (m) of one cube that holds every point of the whole motion."""
     flat = points.reshape(-1, 3)
@@ -475,7 +325,7 @@ def _clip_line(origin: np.ndarray, axis: np.ndarray, low: np.ndarray, high: np.n
 class _Drawing:
     """The matplotlib artists of one scene, created once and moved per frame."""
 
-    def __init__(self, ax, scene: _Scene, first: np.ndarray, centre: np.ndarray, half: float,
+    def __init__(self, ax, scene: Scene, first: np.ndarray, centre: np.ndarray, half: float,
                  normal: int | None = None):
         import matplotlib as mpl
         self.ax, self.scene = ax, scene
@@ -499,19 +349,23 @@ class _Drawing:
         ground = first[scene.ground_marks]
         ax.plot(*ground.T, linestyle="none", marker="^", markersize=11, color="0.15",
                 markeredgecolor="black", label="ground")
-        self.sticks = self._collection(first, scene.sticks, linewidths=3.0,
-                                       colors=[self.body_colors[k] for _, _, k in scene.sticks])
+        self.sticks = self._collection(first, scene.rods, linewidths=3.0,
+                                       colors=[self.body_colors[k] for _, _, k in scene.rods])
         self.links = self._collection(first, scene.links, colors="0.35", linewidths=1.5, linestyles="dotted")
         self.springs = self._collection(first, scene.springs, colors="tab:gray", linewidths=1.2,
                                         linestyles="dashed")
         joints = first[scene.joint_marks] if scene.joint_marks else np.empty((0, 3))
         (self.joint_line,) = ax.plot(*joints.T, linestyle="none", marker="o", markersize=4.5,
                                      markerfacecolor="white", markeredgecolor="black")
+        # Ball area grows with mass^(2/3) (volume ~ mass), within readable bounds.
+        masses = scene.masses
+        scale = (masses / masses.max()) ** (2.0 / 3.0) if masses.size else masses
+        ball_sizes = np.clip(40.0 + 200.0 * scale, 30.0, 260.0)
         self.balls = []
         for k, body in enumerate(scene.bodies):
             p = first[scene.com_points[k]]
             (ball,) = ax.plot([p[0]], [p[1]], [p[2]], linestyle="none", marker="o",
-                              markersize=float(np.sqrt(scene.ball_sizes[k])), color=self.body_colors[k],
+                              markersize=float(np.sqrt(ball_sizes[k])), color=self.body_colors[k],
                               markeredgecolor="black", label=body.name)
             self.balls.append(ball)
         # Time at the top left, legend at the top right: both clear of the 3D box and its labels.
@@ -558,7 +412,7 @@ class _Drawing:
 
     def update(self, points: np.ndarray, t: float) -> None:
         scene = self.scene
-        for collection, pairs in ((self.sticks, scene.sticks), (self.links, scene.links),
+        for collection, pairs in ((self.sticks, scene.rods), (self.links, scene.links),
                                   (self.springs, scene.springs)):
             if collection is not None:
                 collection.set_segments(self._segments(points, pairs))
@@ -571,7 +425,7 @@ class _Drawing:
         self.title.set_text(f"t = {t:.3f} s")
 
 
-def _scene_figure(scene: _Scene, points: np.ndarray, view: Any, figsize: tuple[float, float] | None):
+def _scene_figure(scene: Scene, points: np.ndarray, view: Any, figsize: tuple[float, float] | None):
     fig = _new_figure(figsize=figsize or (6.0, 6.0))
     ax = fig.add_subplot(projection="3d")
     elev, azim, vertical, normal = _resolve_view(view, points, scene.system)
@@ -601,33 +455,6 @@ def _frame_times(t: np.ndarray, fps: float, duration: float | None, frames: Any)
     return np.linspace(t0, t1, count) if t1 > t0 else np.full(count, t0)
 
 
-def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray, qd: np.ndarray | None = None) -> np.ndarray:
-    """q at ``times``: cubic Hermite interpolation through the samples and their speeds ``qd``
-    (third-order accurate, so sparse solver output still animates smoothly), or linear without
-    ``qd``.  Repeated sample times (before/after an impact) split the series into pieces that
-    are interpolated separately, since ``qd`` jumps there while ``q`` is continuous.
-    """
-    from scipy.interpolate import CubicHermiteSpline
-    t = np.asarray(t, dtype=float)
-    q = np.asarray(q, dtype=float).reshape(len(t), -1)
-    times = np.asarray(times, dtype=float)
-    out = np.repeat(q[:1], len(times), axis=0)
-    for start, stop in _pieces(t):
-        piece = t[start:stop]
-        inside = (times >= piece[0]) & (times <= piece[-1])   # later pieces win at a shared time
-        if not np.any(inside) or q.shape[1] == 0:
-            continue
-        if len(piece) == 1:
-            out[inside] = q[start]
-        elif qd is not None:
-            spline = CubicHermiteSpline(piece, q[start:stop], np.asarray(qd, dtype=float)[start:stop], axis=0)
-            out[inside] = spline(times[inside])
-        else:
-            out[inside] = np.column_stack([np.interp(times[inside], piece, q[start:stop, i])
-                                           for i in range(q.shape[1])])
-    return out
-
-
 def render_frame(result: Any, index: int = 0, path: Any = None, *, view: Any = None,
                  figsize: tuple[float, float] | None = None):
     """Draw the mechanism at one sample of ``result`` as a 3D stick-and-ball figure.
@@ -655,7 +482,7 @@ def render_frame(result: Any, index: int = 0, path: Any = None, *, view: Any = N
     n = len(t)
     if not -n <= int(index) < n:
         raise IndexError(f"index {index} is out of range for a result with {n} samples")
-    scene = _Scene(result.system)
+    scene = Scene(result.system)
     everything = scene.all_points(q)
     centre, half = _limits(everything)
     fig, ax, normal = _scene_figure(scene, everything, view, figsize)
@@ -674,9 +501,10 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
     Each body is a ball at its COM (area by mass) joined by sticks to its joint locations and
     attachment points; ground attachments are black triangles, joints white circles, springs
     dashed lines, prismatic travel and loop closures dotted lines.  The axis limits are fixed
-    from the whole motion, so the picture does not jump.  The result is resampled (cubic
-    Hermite interpolation of q with qd) at evenly spaced frame times, since solver steps are not
-    evenly spaced.
+    from the whole motion, so the picture does not jump.  The result is resampled at evenly
+    spaced frame times by ``mbcomp.face.scene.resample_result`` (cubic Hermite through q and its rate
+    G(q) qd, quaternions kept at unit length), the resampling the 3D viewer uses, since solver
+    steps are not evenly spaced.
 
     Parameters
     ----------
@@ -729,10 +557,8 @@ def animate_result(result: Any, path: Any, *, fps: float = 30, duration: float |
                          f"use .gif or .mp4 (got {path.suffix or 'none'!r})")
     t = np.asarray(result.t, dtype=float)
     times = _frame_times(t, fps, duration, frames)
-    state_map = result.system.topology.state_map
-    q_samples = np.asarray(result.q, dtype=float)
-    q = state_map.normalize(_resample(t, q_samples, times, state_map.qdot(q_samples, np.asarray(result.qd, dtype=float))))
-    scene = _Scene(result.system)
+    q = resample_result(result, times)
+    scene = Scene(result.system)
     points = scene.all_points(q)
     centre, half = _limits(points)
     fig, ax, normal = _scene_figure(scene, points, view, figsize)

@@ -26,6 +26,7 @@ from mbcomp.core.errors import ModelError, describe
 from mbcomp.core.expressions import (RESERVED, Expression, ExpressionError, TimeVector, evaluate, names_in, parse_expression,
                           uses_t)
 from mbcomp.core.params import ParameterError, ParameterSpec, axis_name, spd_inertia, unit_vector, validate
+from mbcomp.spec.shapes import shape_from_table, shape_table
 
 __all__ = ["BAD", "Reader", "read_component", "component_table", "SECTIONS", "TYPED_SECTIONS", "toml_key",
            "toml_value", "axis_value", "type_name", "short", "close_match"]
@@ -440,6 +441,8 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         return Expression(text, ("num", float(read)), owner)  # a constant of t
     if option == "rotation":
         return read_rotation(r, label, key, value)
+    if option == "shapes":  # display data: a shape table or a list of them
+        return read_shapes(r, label, key, value)
     if option == "axis":  # "x", "-y" or a 3-vector
         return r.axis(label, key, value)
     if option == "axes":  # a list of axes ("x", "-y" or 3-vectors)
@@ -500,6 +503,19 @@ def read_signal(r: Reader, label: str, key: str, value: dict, joints: dict) -> A
             if r.reference(label, f"{key}.joint", joint, joints, "joint") is BAD:
                 return BAD
     return signal
+
+
+def read_shapes(r: Reader, label: str, key: str, value: Any) -> Any:
+    """A body's shapes: one table (``{ type = "box", size = [...] }``) or a list of them."""
+    tables = value if isinstance(value, list) else [value]
+    shapes = []
+    for i, table in enumerate(tables):
+        where = key if not isinstance(value, list) else f"{key}[{i}]"
+        try:
+            shapes.append(shape_from_table(table, where))
+        except ModelError as exc:
+            return r.problem(label, where, str(exc).split(": ", 1)[-1])
+    return tuple(shapes)
 
 
 def read_parameter(r: Reader, spec: ParameterSpec, label: str, key: str, value: Any, owner: str = "") -> Any:
@@ -594,6 +610,9 @@ def component_table(comp: Component) -> tuple[str, dict]:
                 table[key] = [axis_value(axis) for axis in value]
             elif option == "axis":
                 table[key] = axis_value(value)
+            elif option == "shapes":
+                if value:
+                    table[key] = [shape_table(shape) for shape in value]
             else:
                 table[key] = value
     return cls.section, table

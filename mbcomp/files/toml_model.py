@@ -31,6 +31,8 @@ from mbcomp.files.library import LIBRARY_PREFIX, library_name_problem
 from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting, read_file
 from mbcomp.spec.compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from mbcomp.spec.components.frame import Frame
+from mbcomp.files.component_tables import read_shapes
+from mbcomp.spec.shapes import shape_table
 
 __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
            "library_dirs", "library_models", "find_library_model", "read_description"]
@@ -140,7 +142,7 @@ def load(path: str | os.PathLike) -> Model:
 
 
 def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
-    r.keys("", data, TOP_KEYS)
+    r.keys("", data, TOP_KEYS + ("ground_shape",))   # shapes fixed to the ground: a model's own
 
     name = data.get("name", path.stem or "model")
     if not isinstance(name, str) or not name.strip():
@@ -157,7 +159,12 @@ def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
         g = r.vector("", "gravity", data["gravity"])
         gravity = g if g is not BAD else gravity
 
-    model = Model(name.strip() if isinstance(name, str) else "model", gravity=gravity)
+    name = name.strip() if isinstance(name, str) else "model"
+    try:
+        model = Model(name, gravity=gravity)
+    except ModelError as exc:   # e.g. a magnitude that would overflow: located at its key
+        r.problem(None, "gravity", getattr(exc, "detail", str(exc)))
+        model = Model(name)
     sections = _sections(r, data, ("initial", "simulation"))
     bodies: dict[str, Any] = {"ground": model.ground}
     external, exposed = _read_ports(r, data.get("ports", {}))
@@ -167,6 +174,10 @@ def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
     context = _FileContext(path, (path.resolve(),), {}, files)
     coords_seen = _read_parts(r, data, model, bodies, context, exposed)
 
+    if "ground_shape" in data:
+        shapes = read_shapes(r, "", "ground_shape", data["ground_shape"])
+        if shapes is not BAD:
+            model.ground.shape = shapes
     model.description = description
     model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
     # With a broken joint the coordinate names are incomplete: check the values only.
@@ -725,6 +736,8 @@ def dumps(model: Model) -> str:
         lines.append(f"description = {toml_value(description)}")
     lines.append(f"name = {toml_value(model.name)}")
     lines.append(f"gravity = {toml_value(floats(model.gravity))}")
+    if model.ground.shape:
+        lines.append(f"ground_shape = {toml_value([shape_table(s) for s in model.ground.shape])}")
     parameters = getattr(model, "named_parameters", None) or {}
     if parameters:
         lines += ["", "[parameters]"] + [f"{toml_key(k)} = {toml_value(float(v))}" for k, v in parameters.items()]

@@ -23,7 +23,7 @@ import numpy as np
 
 from mbcomp.core.errors import ModelError
 
-__all__ = ["Shape", "Box", "Cylinder", "Sphere", "Mesh", "as_shapes"]
+__all__ = ["Shape", "Box", "Cylinder", "Sphere", "Mesh", "as_shapes", "shape_table", "shape_from_table", "SHAPE_KEYS"]
 
 
 def _vector(value: Any, owner: str, what: str, *, positive: bool = False) -> tuple[float, float, float]:
@@ -87,6 +87,8 @@ def _axis(value: Any, owner: str) -> tuple[float, float, float]:
     norm = float(np.linalg.norm(v))
     if norm == 0:
         raise ModelError(owner, "axis must not be the zero vector")
+    if abs(norm - 1.0) <= 4 * np.finfo(float).eps:
+        norm = 1.0   # a unit vector to rounding stays as given (a saved axis reads back bit for bit)
     return tuple(float(c) for c in v / norm)
 
 
@@ -199,3 +201,68 @@ def as_shapes(value: Any, owner: Any = "Body") -> tuple[Shape, ...]:
             raise ModelError(owner, f"shape must be mb.Box, mb.Cylinder, mb.Sphere, mb.Mesh or a list of "
                                     f"them, got {item!r}")
     return tuple(items)
+
+
+_IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+#: The keys of a shape's table in a model file, by its ``type``.
+SHAPE_KEYS = {"box": ("size",), "cylinder": ("radius", "length", "axis"), "sphere": ("radius",),
+              "mesh": ("path", "scale")}
+_CLASSES = {"box": Box, "cylinder": Cylinder, "sphere": Sphere, "mesh": Mesh}
+_PLACEMENT = {"box": ("origin", "rotation", "color"), "cylinder": ("origin", "rotation", "color"),
+              "sphere": ("origin", "color"), "mesh": ("origin", "rotation", "color")}
+
+
+def shape_table(shape: Shape) -> dict:
+    """The table a model file holds for ``shape``: ``{type = "box", size = [...], ...}`` (m;
+    ``rotation`` as 3 rows, body frame from shape frame); defaults are left out."""
+    kind = next(k for k, cls in _CLASSES.items() if type(shape) is cls)
+    table: dict[str, Any] = {"type": kind}
+    for key in SHAPE_KEYS[kind]:
+        value = getattr(shape, key)
+        table[key] = list(value) if isinstance(value, tuple) else value
+    if kind == "cylinder":
+        table["axis"] = next((name for name, unit in (("x", (1.0, 0.0, 0.0)), ("y", (0.0, 1.0, 0.0)),
+                                                      ("z", (0.0, 0.0, 1.0))) if shape.axis == unit), list(shape.axis))
+    if kind == "mesh" and len(set(shape.scale)) == 1:
+        table["scale"] = shape.scale[0]
+    if any(shape.origin):
+        table["origin"] = list(shape.origin)
+    if shape.rotation != _IDENTITY:
+        table["rotation"] = [list(shape.rotation[i:i + 3]) for i in (0, 3, 6)]
+    if shape.color is not None:
+        table["color"] = shape.color
+    return table
+
+
+def shape_from_table(table: Any, owner: str = "shape") -> Shape:
+    """The shape a model file's table describes (see ``shape_table``); ``ModelError`` names
+    the key of a bad value.  Values are data: numbers, number lists and strings only."""
+    if not isinstance(table, dict):
+        raise ModelError(owner, f"must be a table such as {{ type = \"box\", size = [0.1, 0.1, 0.1] }}, "
+                                f"got {type(table).__name__}")
+    kind = table.get("type")
+    if kind not in _CLASSES:
+        raise ModelError(owner, f"type must be one of {', '.join(_CLASSES)}, got {kind!r}")
+    allowed = ("type",) + SHAPE_KEYS[kind] + _PLACEMENT[kind]
+    unknown = [k for k in table if k not in allowed]
+    if unknown:
+        raise ModelError(owner, f"unknown key {unknown[0]!r} for a {kind}; allowed: {', '.join(allowed[1:])}")
+    required = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("path",)}[kind]
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ModelError(owner, f"a {kind} needs {', '.join(missing)}")
+    for key, value in table.items():
+        if key in ("type", "path", "color", "axis"):
+            continue   # checked by the shape's own constructor
+        flat = value if isinstance(value, list) else [value]
+        flat = [x for row in flat for x in (row if isinstance(row, list) else [row])]
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in flat):
+            raise ModelError(owner, f"{key} must be numbers, got {value!r}")
+    if "path" in table and not isinstance(table["path"], str):
+        raise ModelError(owner, f"path must be a string, got {table['path']!r}")
+    values = {k: v for k, v in table.items() if k != "type"}
+    try:
+        return _CLASSES[kind](**values)
+    except ModelError as exc:
+        detail = str(exc).split(": ", 1)[-1]
+        raise ModelError(owner, detail) from None

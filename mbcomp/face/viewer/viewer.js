@@ -250,7 +250,7 @@ const timeLabel = document.getElementById("mbcomp-time");
 const speedSelect = document.getElementById("mbcomp-speed");
 document.getElementById("mbcomp-title").textContent = S.title;
 slider.min = S.t0; slider.max = S.t1; slider.step = (S.t1 - S.t0) / Math.max(NF - 1, 1) || 1;
-const state = { t: S.t0, playing: NF > 1, speed: 1, last: null };
+const state = { t: S.t0, playing: false, speed: 1, last: null };
 const digits = Math.max(2, Math.min(6, 2 - Math.floor(Math.log10(Math.max((S.t1 - S.t0) / Math.max(NF - 1, 1), 1e-9)))));
 function show() {
   pose(state.t);
@@ -266,6 +266,9 @@ function requestRender() {
   pending = true;
   requestAnimationFrame(() => { pending = false; renderer.render(scene, camera); document.body.dataset.rendered = "1"; });
 }
+// One animation loop at most: `looping` says whether a tick is scheduled (so a page that opens
+// playing starts its loop, and play/pause/play never starts a second one).
+let looping = false;
 function tick(now) {
   if (state.playing) {
     if (state.last !== null) {
@@ -275,13 +278,18 @@ function tick(now) {
     state.last = now;
     show();
     requestAnimationFrame(tick);
-  } else state.last = null;
+  } else {
+    state.last = null;
+    looping = false;
+  }
 }
 function setPlaying(on) {
-  const was = state.playing;
   state.playing = on && NF > 1;
   show();
-  if (state.playing && !was) requestAnimationFrame(tick);
+  if (state.playing && !looping) {
+    looping = true;
+    requestAnimationFrame(tick);
+  }
 }
 playButton.addEventListener("click", () => setPlaying(!state.playing));
 slider.addEventListener("input", () => { state.t = parseFloat(slider.value); setPlaying(false); });
@@ -289,7 +297,7 @@ speedSelect.addEventListener("change", () => { state.speed = parseFloat(speedSel
 document.addEventListener("keydown", (e) => {
   if (e.key === " ") { e.preventDefault(); setPlaying(!state.playing); }
 });
-function fromHash() {
+function fromHash(opening) {
   const args = new URLSearchParams(location.hash.replace(/^#/, ""));
   if (args.has("speed")) {
     state.speed = parseFloat(args.get("speed")) || 1;
@@ -299,9 +307,9 @@ function fromHash() {
     const t = parseFloat(args.get("t"));
     if (isFinite(t)) state.t = Math.min(Math.max(t, S.t0), S.t1);
     setPlaying(args.get("play") === "1");
-  } else setPlaying(state.playing);
+  } else setPlaying(opening || state.playing);   // a page opened without a time plays from the start
 }
-window.addEventListener("hashchange", fromHash);
+window.addEventListener("hashchange", () => fromHash(false));
 
 function resize() {
   const w = root.clientWidth || window.innerWidth, h = root.clientHeight || window.innerHeight;
@@ -313,4 +321,4 @@ function resize() {
 window.addEventListener("resize", resize);
 placeCamera();
 resize();
-fromHash();
+fromHash(true);

@@ -37,8 +37,9 @@ class Body(Component):
     )
     display = ("shape",)   #: structure-free display data (not parameters, not in structure())
 
-    file_keys = ("mass", "com", "inertia")
+    file_keys = ("mass", "com", "inertia", "shape")
     file_required = ("mass",)
+    file_options = {"shape": "shapes"}   # a table or a list of tables (mbcomp.spec.shapes.shape_table)
 
     def __init__(self, name: str, mass: float = 1.0, com: Any = (0.0, 0.0, 0.0), inertia: Any = None,
                  shape: Any = None):

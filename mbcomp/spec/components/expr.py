@@ -72,6 +72,9 @@ class Expr:
             value = _BINARY[op](va, vb)
         except ZeroDivisionError:
             raise ModelError(f"expression {a} {op} {b}", "divides by zero") from None
+        except OverflowError:
+            raise ModelError(f"expression {a} {op} {b}", f"overflows the float range with the values {va:g} "
+                                                         f"and {vb:g}") from None
         if isinstance(value, complex):
             raise ModelError(f"expression {a} {op} {b}", "has no real value")
         return Expr(op, (a, b), value)
