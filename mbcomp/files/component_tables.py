@@ -375,7 +375,7 @@ def read_component(r: Reader, section: str, name: str, label: str, table: dict, 
     # Checks against what the references are (a torque's size, a motor's 1-DOF joint).
     known = {**bodies, **joints}
     resolved = {role: known.get(name_of(ref)) for role, ref in comp.references().items()}
-    if hasattr(comp, "check") and all(isinstance(v, Component) for v in resolved.values()):
+    if all(isinstance(v, Component) for v in resolved.values()):
         problems = comp.check(resolved)
         for problem in problems:
             r.problem(label, *_locate(ModelError(comp, problem[len(describe(comp)) + 2:]
