@@ -257,3 +257,52 @@ def test_the_old_private_hook_names_still_work_with_a_warning(kinds):
         m.add(mb.Prismatic("rail", m.ground, box, axis="x", coords="x"))
         m.add(OldPush("push", box))
         assert m.compile().accelerations([0.0], [0.0])[0] == pytest.approx(0.5, rel=1e-14)  # F / m
+
+
+# -- hooks instead of type tests: a joint given backwards, a parametrisation's singularity -----------
+def test_a_joint_given_backwards_is_turned_round_by_its_own_hook():
+    """A revolute joint from the bob to the ground (``Joint.reversed``: about -z from the
+    ground) has the forward pendulum's dynamics with the angle's sign flipped:
+    ``theta''_backward(theta) = -theta''_forward(-theta)``."""
+    def pendulum(backward: bool) -> mb.System:
+        m = mb.Model("pendulum", gravity=(0, -9.81, 0))
+        bob = m.add(mb.Body("bob", mass=1.2, com=(0.0, -0.3, 0.0), inertia=(1e-3, 1e-3, 2e-3)))
+        if backward:
+            m.add(mb.Revolute("pivot", bob, m.ground, axis="z", parent_point=(0.0, 0.5, 0.0),
+                              child_point=(0.1, 0.0, 0.0), coords="theta"))
+        else:
+            m.add(mb.Revolute("pivot", m.ground, bob, axis="z", parent_point=(0.1, 0.0, 0.0),
+                              child_point=(0.0, 0.5, 0.0), coords="theta"))
+        return m.compile()
+
+    forward, backward = pendulum(False), pendulum(True)
+    assert backward.coords == ("theta",)
+    for theta, rate in ((0.4, 0.0), (-1.1, 2.0)):
+        expected = -forward.accelerations([-theta], [-rate])[0]
+        assert backward.accelerations([theta], [rate])[0] == pytest.approx(expected, rel=1e-12)
+    # closed form: theta'' = -m g r sin(theta) / (m r^2 + I_zz), r = 0.8 m below the pivot
+    assert forward.accelerations([0.4], [0.0])[0] == pytest.approx(
+        -1.2 * 9.81 * 0.8 * np.sin(0.4) / (1.2 * 0.8 ** 2 + 2e-3), rel=1e-12)
+
+
+def test_a_user_joints_singularity_hook_names_it_when_the_mass_matrix_is_singular():
+    """A gimbal written as three rotations (x, y, x) is singular where y's angle is 0; its
+    ``singularity`` hook gives the message the simulation error carries."""
+    class Gimbal(Joint):
+        n_coords = 3
+        coord_suffixes = ("a", "b", "c")
+
+        def screws(self):
+            return [("R", (1.0, 0.0, 0.0)), ("R", (0.0, 1.0, 0.0)), ("R", (1.0, 0.0, 0.0))]
+
+        def singularity(self, q):
+            return f"gimbal {self.name!r} locked (b = {q[1]:g})" if abs(np.sin(q[1])) < 1e-6 else None
+
+    m = mb.Model("gimbal", gravity=(0, 0, 0))
+    rotor = m.add(mb.Body("rotor", mass=1.0, inertia=(1.0, 2.0, 3.0)))
+    m.add(Gimbal("mount", m.ground, rotor))
+    system = m.compile()
+    assert np.linalg.matrix_rank(system.mass_matrix([0.2, 0.0, 0.1])) == 2
+    with pytest.raises(mb.SimulationError, match="gimbal 'mount' locked \\(b = 0\\)"):
+        system.accelerations([0.2, 0.0, 0.1], [0.0, 0.0, 0.0])
+    assert np.all(np.isfinite(system.accelerations([0.2, 0.5, 0.1], [0.0, 0.0, 0.0])))

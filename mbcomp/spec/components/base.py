@@ -252,6 +252,12 @@ class ForceElement(Component):
     def is_conservative(self) -> bool:
         return False
 
+    def line_ends(self) -> tuple | None:
+        """``((body_a, key_a), (body_b, key_b))`` (the parameter keys of two body points, m)
+        when the element acts along the line between them, which is undefined where they
+        meet (``Kernel.check_finite`` names the element then); None otherwise."""
+        return None
+
     def input_size(self, joint: Any = None) -> int:
         """Number of run-time input values (a callable force or torque) this element reads; 0 by default."""
         return 0

@@ -59,6 +59,11 @@ class _TwoPointElement(ForceElement):
     def references(self):
         return {"a": self.body_a, "b": self.body_b}
 
+    def line_ends(self) -> tuple:
+        """Both ends, as ``(body, parameter key of the point)``: the force's line is undefined
+        where they meet."""
+        return (self.body_a, f"{self.name}.point_a"), (self.body_b, f"{self.name}.point_b")
+
     def _line(self, kin):
         """World positions, separation ``d = p_b - p_a``, its rate, and the length."""
         pa = kin.position(self.body_a, kin.param(self, "point_a"))

@@ -23,7 +23,7 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from mbcomp.core.errors import ModelError
+from mbcomp.core.errors import ModelError, describe
 from mbcomp.core.params import ParameterSpec, axis_name, unit_vector
 from mbcomp.core.rotations import (normals, AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
@@ -142,6 +142,17 @@ class Joint(Component):
     def reaction_unit(self, resolve) -> str:
         """Unit of the reactions of this joint when it closes a loop (forces, then torques)."""
         return "N, N m"
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint | None":
+        """The same joint seen from its child: ``parent`` and ``child`` are this joint's child
+        and parent frames; same name and coordinates, with the sign the motion needs.  None
+        when the type has no such form (the joint then stays as given)."""
+        return None
+
+    def singularity(self, q: np.ndarray) -> str | None:
+        """Why the mass matrix may be singular at this joint's coordinates ``q`` (a
+        parametrisation's singular point), or None; ``Kernel.diagnose`` reports it."""
+        return None
 
     def closure_equations(self, ground: Any) -> list:
         """The equations that hold when this joint closes a loop (it is cut from the tree and
@@ -438,6 +449,11 @@ class Revolute(Joint):
     def screws(self):
         return [("R", self.axis)]
 
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """About ``-axis`` seen from the child (the axis has the same components in both
+        joint frames, which differ by a rotation about it); the same coordinate."""
+        return type(self)(self.name, parent, child, axis=tuple(-float(a) + 0.0 for a in self.axis), coords=self.coords)
+
 
 class Prismatic(Joint):
     """Translation of the child by ``q`` (m) along ``axis`` (parent frame)."""
@@ -455,6 +471,10 @@ class Prismatic(Joint):
 
     def screws(self):
         return [("P", self.axis)]
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """Along ``-axis`` seen from the child; the same coordinate."""
+        return type(self)(self.name, parent, child, axis=tuple(-float(a) + 0.0 for a in self.axis), coords=self.coords)
 
 
 class Spherical(Joint):
@@ -487,6 +507,17 @@ class Spherical(Joint):
     def screws(self):
         return [("R", AXIS_NAMES[ch]) for ch in self.sequence]
 
+    def singularity(self, q: np.ndarray) -> str | None:
+        """The gimbal lock of a 3-axis sequence: first and last axes aligned."""
+        if len(self.sequence) != 3:
+            return None
+        middle = float(q[1])
+        value = np.sin(middle) if self.sequence[0] == self.sequence[2] else np.cos(middle)
+        if abs(value) < 1e-6:
+            return (f"{describe(self)} is at its Euler-angle singularity "
+                    f"({self.coords[1]} = {middle:.6g} rad: first and last axes align)")
+        return None
+
 
 class Fixed(Joint):
     """Rigid connection: the child frame keeps the parent frame's orientation."""
@@ -497,6 +528,10 @@ class Fixed(Joint):
 
     def screws(self):
         return []
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """The frames swapped."""
+        return type(self)(self.name, parent, child)
 
 
 class Ball(Joint):
