@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
+from mbcomp.core.params import ParameterSpec, nonnegative
 from mbcomp.spec.components.base import KINDS, ForceElement
 from mbcomp.spec.components.joints import Joint
 
@@ -194,8 +195,6 @@ def test_the_pages_force_element_is_saved_and_loaded(tmp_path, kinds):
 def test_a_force_element_on_a_joint_gets_its_file_form(tmp_path, kinds):
     """An element that names a joint: the argument ``joint`` is a joint reference in the file,
     a constructor argument without a default is required, and the rest are parameters."""
-    from mbcomp.core.params import ParameterSpec, nonnegative
-
     class Brake(ForceElement):
         """A viscous torque -c q' (N m) on a 1-DOF joint."""
 
@@ -306,3 +305,39 @@ def test_a_user_joints_singularity_hook_names_it_when_the_mass_matrix_is_singula
     with pytest.raises(mb.SimulationError, match="gimbal 'mount' locked \\(b = 0\\)"):
         system.accelerations([0.2, 0.0, 0.1], [0.0, 0.0, 0.0])
     assert np.all(np.isfinite(system.accelerations([0.2, 0.5, 0.1], [0.0, 0.0, 0.0])))
+
+
+def test_a_reference_of_no_known_role_names_a_body_or_a_joint(tmp_path, kinds):
+    """A constructor argument the role rule does not know (``target``) is a reference to a
+    body or a joint by name: a joint's name is written and read back, an unknown name is
+    refused with the file's location."""
+    class Pull(ForceElement):
+        """A constant generalised force (N or N m) on a 1-DOF joint."""
+
+        kind = "test_pull"
+        params = (ParameterSpec("size", (), "N"),)
+
+        def __init__(self, name, target, size):
+            super().__init__(name)
+            self.target, self.size = target, size
+
+        def references(self):
+            return {"target": self.target}
+
+        def loads(self, kin):
+            return [("generalized", self.target, [kin.param(self, "size")])]
+
+    assert Pull.refs == {"target": "component"}
+    m = mb.Model("pulled", gravity=(0, 0, 0))
+    box = m.add(mb.Body("box", mass=2.0, inertia=(1e-3, 1e-3, 1e-3)))
+    m.add(mb.Prismatic("rail", m.ground, box, axis="x", coords="x"))
+    m.add(Pull("pull", "rail", size=3.0))
+    path = tmp_path / "pulled.toml"
+    m.save(path)
+    assert 'target = "rail"' in path.read_text()
+    again = mb.load(path)
+    assert again["pull"].target == "rail"
+    assert again.compile().accelerations([0.0], [0.0])[0] == pytest.approx(3.0 / 2.0, rel=1e-14)   # F / m
+    path.write_text(path.read_text().replace('target = "rail"', 'target = "rial"'))
+    with pytest.raises(mb.ModelError, match=r"\[forces.pull\] target: unknown body or joint 'rial' \(did you mean 'rail'\?\)"):
+        mb.load(path)

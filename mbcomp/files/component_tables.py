@@ -403,6 +403,14 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         return r.reference(label, key, value, joints, "joint")
     if role == "attachment":
         return r.attachment(label, key, value, bodies)
+    if role == "component":  # a derived file form's reference (Component.refs): a body or a joint
+        if isinstance(value, str) and value in joints and value not in bodies:
+            return r.reference(label, key, value, joints, "joint")
+        if isinstance(value, str) and value not in bodies:
+            hint = close_match(value, tuple(bodies) + tuple(joints))
+            return r.problem(label, key, f"unknown body or joint {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+                             + f"; bodies: {', '.join(bodies) or 'none declared'}; joints: {', '.join(joints) or 'none declared'}")
+        return r.reference(label, key, value, bodies, "body")
     spec = cls.spec(key)
     if spec is not None:
         return read_parameter(r, spec, label, key, value, owner)

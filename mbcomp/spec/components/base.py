@@ -78,9 +78,9 @@ class Component:
       (read as the spec says: number, 3-vector, axis, inertia, time input) or an option
       (``file_options``);
     - ``file_required``: the keys a file must give;
-    - ``refs``: ``{role: "body" | "joint" | "attachment"}``; an attachment is a body
-      name or ``{body = "...", point = [...]}`` and its point is the parameter
-      ``point_<role>``;
+    - ``refs``: ``{role: "body" | "joint" | "attachment" | "component"}``; an attachment
+      is a body name or ``{body = "...", point = [...]}`` and its point is the parameter
+      ``point_<role>``; a component is the name of a body or a joint;
     - ``file_options``: ``{key: "names" | "string" | "time" | "rotation"}`` for values
       that are not parameters (coordinate names, an Euler sequence, an expression of t,
       a frame rotation);
