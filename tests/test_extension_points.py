@@ -341,3 +341,30 @@ def test_a_reference_of_no_known_role_names_a_body_or_a_joint(tmp_path, kinds):
     path.write_text(path.read_text().replace('target = "rail"', 'target = "rial"'))
     with pytest.raises(mb.ModelError, match=r"\[forces.pull\] target: unknown body or joint 'rial' \(did you mean 'rail'\?\)"):
         mb.load(path)
+
+
+def test_an_argument_that_is_neither_parameter_nor_reference_is_not_guessed(tmp_path, kinds):
+    """A derived file form takes an unknown argument for a reference; when the element does
+    not list it in ``references()``, saving refuses with the argument's name instead of
+    writing a file that cannot be read back."""
+    class Nudge(ForceElement):
+        kind = "test_nudge"
+        params = (ParameterSpec("size", (), "N"),)
+
+        def __init__(self, name, body, size, mode="push"):
+            super().__init__(name)
+            self.body, self.size, self.mode = body, size, mode
+
+        def references(self):
+            return {"body": self.body}
+
+        def loads(self, kin):
+            return [("point", self.body, kin.position(self.body, (0.0, 0.0, 0.0)), [kin.param(self, "size"), 0.0, 0.0])]
+
+    m = mb.Model("nudged", gravity=(0, 0, 0))
+    box = m.add(mb.Body("box", mass=2.0, inertia=(1e-3, 1e-3, 1e-3)))
+    m.add(mb.Prismatic("rail", m.ground, box, axis="x", coords="x"))
+    m.add(Nudge("nudge", box, 1.0))
+    with pytest.raises(mb.ModelError, match="Nudge 'nudge'.*argument 'mode' is neither a declared parameter"):
+        m.save(tmp_path / "nudged.toml")
+    assert not (tmp_path / "nudged.toml").exists()

@@ -529,6 +529,9 @@ def component_table(comp: Component) -> tuple[str, dict]:
             body, point = value
             table[key] = {"body": name_of(body), "point": floats(point)} if any(point) else name_of(body)
         elif role is not None:
+            if role == "component" and key not in comp.references():  # a derived file form's guess
+                raise ModelError(comp, f"cannot be saved: its argument {key!r} is neither a declared parameter "
+                                       "(ParameterSpec) nor one of its references(); declare file_keys and file_options")
             table[key] = name_of(value)
         elif spec is not None:
             written = _parameter_value(spec, value, owner, key)
