@@ -39,6 +39,8 @@ def _on_first_use(module: str, name: str):
 
 
 _services.provide("compile", _compile_model)
+_services.provide("flatten_instances", _on_first_use("mbcomp.build.flatten", "flatten_instances"))
+_services.provide("orient_joints", _on_first_use("mbcomp.build.flatten", "orient_joints"))
 _services.provide("save", _on_first_use("mbcomp.files.toml_model", "save"))
 _services.provide("energy", _post.energy)
 _services.provide("reactions", _post.reactions)

@@ -34,13 +34,7 @@ THIRD_PARTY: dict[tuple[str, str], str] = {
     "tests/test_symbolic_build.py compares every such construction with sympy's result",
 }
 #: Known breaches being removed: ``(file, problem)``.  Do not add to this list.
-KNOWN: set[tuple[str, str]] = {
-    ('mbcomp/build/constraint_set.py', 'reads ._equations, a private name of another module'),
-    ('mbcomp/build/equations.py', 'reads ._gap_equation, a private name of another module'),
-    ('mbcomp/build/equations.py', 'reads ._loads, a private name of another module'),
-    ('mbcomp/build/equations.py', 'reads ._potential, a private name of another module'),
-    ('mbcomp/spec/model.py', 'imports mbcomp.build.flatten (layer 2) from layer 1'),
-}
+KNOWN: set[tuple[str, str]] = set()
 
 
 def modules() -> dict[str, Path]:

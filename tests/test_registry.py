@@ -36,7 +36,7 @@ def thruster_class():
         def references(self):
             return {"body": self.body}
 
-        def _loads(self, kin):
+        def loads(self, kin):
             R = kin.rotation(self.body)
             f = kin.param(self, "thrust")
             return [("point", self.body, kin.position(self.body, kin.param(self, "point")),
@@ -113,7 +113,7 @@ def test_unknown_type_lists_the_registered_ones(tmp_path):
 
 def test_component_without_a_file_form_cannot_be_saved():
     class Anonymous(ForceElement):
-        def _loads(self, kin):
+        def loads(self, kin):
             return []
 
     m = mb.Model("m")

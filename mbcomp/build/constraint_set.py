@@ -55,9 +55,9 @@ class ConstraintSet:
         self.groups: list[tuple[str, Any, list]] = []   # (reaction name, component, equations)
         for joint in topology.cut_joints:
             closure = LoopClosure(joint)
-            self.groups.append((joint.name, closure, closure._equations(ground)))
+            self.groups.append((joint.name, closure, closure.equations(ground)))
         for comp in topology.constraints:
-            self.groups.append((comp.name, comp, comp._equations(ground)))
+            self.groups.append((comp.name, comp, comp.equations(ground)))
         self.equations = [eq for _, _, eqs in self.groups for eq in eqs]
         self.owner = [name for name, _, eqs in self.groups for _ in eqs]
         self.labels = [f"{name}.{eq.label}" if eq.label else name for name, _, eqs in self.groups for eq in eqs]

@@ -387,7 +387,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
     for body in topology.bodies:
         potential.append(-(inertia[body.name].mass * dot(kin.position(body, kin.param(body, "com")), gravity)))
     for element in topology.forces:
-        for load in element._loads(kin):
+        for load in element.loads(kin):
             if load[0] == "generalized":
                 sl = topology.v_slice[name_of(load[1])]
                 for k, value in zip(range(sl.start, sl.stop), load[2]):
@@ -398,7 +398,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
                 continue
             wrench = cross(load[2], load[3]) + list(load[3]) if load[0] == "point" else list(load[2]) + [0, 0, 0]
             external[target] = prog.lets([a + b for a, b in zip(external[target], wrench)])
-        potential.append(element._potential(kin))
+        potential.append(element.potential(kin))
 
     # Backward pass: composite inertias and wrenches, projected on the motion columns.
     composite = {b.name: inertia[b.name] for b in topology.bodies}
@@ -454,7 +454,7 @@ def build_program(topology, layout: ParameterLayout, inputs: dict, equations=(),
         aba_outputs(prog, kin, topology, inertia, own_wrench, generalized, armature, factors=factors)
         ready(prog, ["aba"])
     constraint_outputs(prog, kin, equations)
-    constraint_outputs(prog, kin, [c._gap_equation(topology.ground) for c in topology.contacts], "contacts")
+    constraint_outputs(prog, kin, [c.gap_equation(topology.ground) for c in topology.contacts], "contacts")
     from mbcomp.build.drive_equations import drive_outputs
     drive_outputs(prog, kin, drives)
     prog.kin = kin

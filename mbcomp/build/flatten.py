@@ -23,7 +23,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from mbcomp.spec.components import Component, Fixed, Joint, Prismatic, Revolute
+from mbcomp.spec.components import Component, Joint
 from mbcomp.spec.components.frame import Frame
 from mbcomp.spec.components.values import name_of
 from mbcomp.spec.compose import copy_component
@@ -31,22 +31,10 @@ from mbcomp.spec.compose import copy_component
 
 def reversed_joint(joint: Joint) -> Joint | None:
     """The same joint with parent and child swapped (same name, coordinate and its sign),
-    or ``None`` when the joint type has no such form.
-
-    A revolute or prismatic joint about ``a`` seen from its child is one about ``-a``
-    (``a`` has the same components in both joint frames, which differ by a motion along
-    or about ``a``); a fixed joint just swaps its frames.
-    """
+    or ``None`` when the joint type has no such form (``Joint.reversed``)."""
     parent = Frame(joint.child, joint.child_point, joint.child_rotation)
     child = Frame(joint.parent, joint.parent_point, joint.parent_rotation)
-    if isinstance(joint, (Revolute, Prismatic)):
-        axis = tuple(-float(a) + 0.0 for a in joint.axis)
-        flipped = type(joint)(joint.name, parent, child, axis=axis, coords=joint.coords)
-    elif isinstance(joint, Fixed):
-        flipped = Fixed(joint.name, parent, child)
-    else:
-        return None
-    return flipped
+    return joint.reversed(parent, child)
 
 
 def orient_joints(components: dict, ground_name: str) -> dict:
@@ -174,7 +162,7 @@ def flatten_instances(model) -> tuple[dict, "Derivation"]:
         else:
             new = comp
         components[full] = new
-        if getattr(comp, "expression_args", None) is not None:
+        if comp.expression_args is not None:
             expressions.append((full, comp))
     registry = model.registry
     return components, Derivation(dict(registry.parameters), expressions)
@@ -243,7 +231,7 @@ def _dependencies(comp) -> set:
         elif isinstance(value, dict):
             for v in value.values():
                 visit(v)
-        elif type(value).__name__ == "Frame":
+        elif isinstance(value, Frame):
             visit(value.point)
         elif getattr(value, "signal_args", None) is not None:   # a signal source (components/signals.py)
             visit(value.signal_args)

@@ -193,12 +193,11 @@ def build_topology(model) -> Topology:
     input_sizes: dict[str, int] = {}
     for comp in forces:
         resolved = {role: components[name_of(ref)] for role, ref in comp.references().items()}
-        if hasattr(comp, "check"):
-            problems.extend(comp.check(resolved))
+        problems.extend(comp.check(resolved))
         joint = resolved.get("joint")
         if joint is not None and joint in cut_joints:
             problems.append(f"{describe(comp)}: joint {joint.name!r} closes a loop and has no coordinates")
-        size = comp.input_size(joint) if hasattr(comp, "input_size") else 0
+        size = comp.input_size(joint)
         if size:
             input_sizes[comp.name] = size
     constraints = tuple(c for c in components.values() if isinstance(c, Constraint) and c.name not in broken)

@@ -12,7 +12,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from mbcomp.spec.components import Spherical
 from mbcomp.spec.components.forces import checked_output
 from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import ModelError, SimulationError, describe, format_state
@@ -39,7 +38,7 @@ class Kernel:
         p.flags.writeable = False
         self.p = p
         self.nq = compiled.topology.nq
-        self.nv = getattr(compiled.topology, "nv", self.nq)
+        self.nv = compiled.topology.nv
         self.n_inputs = compiled.n_inputs
         self.layout = compiled.output_layout
         self._pointer = None  # the parameter vector's ctypes pointer, bound on first compiled call
@@ -217,12 +216,9 @@ class Kernel:
         """Name the components that can make the tree mass matrix singular at ``q``."""
         hints = []
         for joint in self.topology.tree_joints:
-            if isinstance(joint, Spherical) and len(joint.sequence) == 3:
-                middle = q[self.topology.q_slice[joint.name]][1]
-                value = np.sin(middle) if joint.sequence[0] == joint.sequence[2] else np.cos(middle)
-                if abs(value) < 1e-6:
-                    hints.append(f"{describe(joint)} is at its Euler-angle singularity "
-                                 f"({joint.coords[1]} = {middle:.6g} rad: first and last axes align)")
+            hint = joint.singularity(q[self.topology.q_slice[joint.name]])
+            if hint:
+                hints.append(hint)
         return "; ".join(hints) if hints else "check for massless bodies or bodies without inertia on rotating joints"
 
     def check_finite(self, values: np.ndarray, what: str, q: np.ndarray) -> np.ndarray:
@@ -230,9 +226,11 @@ class Kernel:
         if not np.isfinite(values).all():
             springs = []
             for comp in self.topology.forces:
-                if comp.refs.get("a") == "attachment":  # two-point elements (springs, dampers)
-                    pa = self.point_position(comp.body_a, self.parameters[f"{comp.name}.point_a"], q)
-                    pb = self.point_position(comp.body_b, self.parameters[f"{comp.name}.point_b"], q)
+                ends = comp.line_ends()  # elements acting along a line between two points
+                if ends is not None:
+                    (body_a, key_a), (body_b, key_b) = ends
+                    pa = self.point_position(body_a, self.parameters[key_a], q)
+                    pb = self.point_position(body_b, self.parameters[key_b], q)
                     if np.linalg.norm(pb - pa) < 1e-12:
                         springs.append(f"{describe(comp)} has zero length (its direction is undefined)")
             reason = "; ".join(springs) if springs else "the generated equations produced NaN/inf"

@@ -1,7 +1,8 @@
 """Operations a lower-layer class offers as a method but a higher layer implements.
 
-``Model.compile`` needs the compiler and ``Model.save`` the file writer, both of which
-import the model layer.  Rather than importing upwards, ``Model`` looks the operation up
+``Model.compile`` needs the compiler, ``Model.save`` the file writer and ``Model.flat``
+the build layer's ``flatten_instances`` and ``orient_joints``, all of which import the
+model layer.  Rather than importing upwards, ``Model`` looks the operation up
 here, and the package registers it when it is imported (``mbcomp/__init__.py``), so the
 import graph keeps one direction.
 """

@@ -392,7 +392,7 @@ def read_component(r: Reader, section: str, name: str, label: str, table: dict, 
     # Checks against what the references are (a torque's size, a motor's 1-DOF joint).
     known = {**bodies, **joints}
     resolved = {role: known.get(name_of(ref)) for role, ref in comp.references().items()}
-    if hasattr(comp, "check") and all(isinstance(v, Component) for v in resolved.values()):
+    if all(isinstance(v, Component) for v in resolved.values()):
         problems = comp.check(resolved)
         for problem in problems:
             r.problem(label, *_locate(ModelError(comp, problem[len(describe(comp)) + 2:]
@@ -422,6 +422,14 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         return r.reference(label, key, value, joints, "joint")
     if role == "attachment":
         return r.attachment(label, key, value, bodies)
+    if role == "component":  # a derived file form's reference (Component.refs): a body or a joint
+        if isinstance(value, str) and value in joints and value not in bodies:
+            return r.reference(label, key, value, joints, "joint")
+        if isinstance(value, str) and value not in bodies:
+            hint = close_match(value, tuple(bodies) + tuple(joints))
+            return r.problem(label, key, f"unknown body or joint {value!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+                             + f"; bodies: {', '.join(bodies) or 'none declared'}; joints: {', '.join(joints) or 'none declared'}")
+        return r.reference(label, key, value, bodies, "body")
     spec = cls.spec(key)
     if spec is not None:
         return read_parameter(r, spec, label, key, value, owner)
@@ -595,6 +603,9 @@ def component_table(comp: Component) -> tuple[str, dict]:
             body, point = value
             table[key] = {"body": name_of(body), "point": floats(point)} if any(point) else name_of(body)
         elif role is not None:
+            if role == "component" and key not in comp.references():  # a derived file form's guess
+                raise ModelError(comp, f"cannot be saved: its argument {key!r} is neither a declared parameter "
+                                       "(ParameterSpec) nor one of its references(); declare file_keys and file_options")
             table[key] = name_of(value)
         elif spec is not None:
             written = _parameter_value(spec, value, owner, key)

@@ -90,11 +90,10 @@ class Model:
         """The model the compiler reads: sub-model instances expanded into components with
         dotted names, joints oriented along the spanning tree (the model itself when
         nothing changes).  The user's components are never modified."""
-        from mbcomp.build.flatten import flatten_instances, orient_joints
         components, derivation = self._components, self.derivation
-        if self._instances:
-            components, derivation = flatten_instances(self)
-        components = orient_joints(components, self.ground.name)
+        if self._instances:  # the build layer implements both steps (mbcomp.build.flatten)
+            components, derivation = service("flatten_instances")(self)
+        components = service("orient_joints")(components, self.ground.name)
         if components is self._components:
             return self
         flat = Model.__new__(Model)

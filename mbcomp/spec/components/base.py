@@ -1,6 +1,8 @@
 """The component contracts: what a body, joint, force element, constraint and contact provide."""
 from __future__ import annotations
 
+import inspect
+import warnings
 from typing import Any, ClassVar
 
 from mbcomp.core.errors import ModelError, describe
@@ -20,6 +22,24 @@ def kinds_in(section: str) -> dict[str, type]:
     """``{kind: class}`` of the classes with a file form (``file_keys``) in model file
     section ``section`` ("joints", ...), in registration order."""
     return {k: c for k, c in KINDS.items() if c.section == section and c.file_keys}
+
+
+#: Extension points that had private names until version 0.1: ``{old: new}``.  A subclass
+#: that still defines the old name gets it as the new one, with a ``DeprecationWarning``
+#: (the old names stop working in the next release).
+RENAMED_HOOKS = {"_loads": "loads", "_potential": "potential", "_equations": "equations",
+                 "_gap_equation": "gap_equation", "_screws": "screws", "_segments": "segments"}
+
+
+def reference_role(argument: str) -> str:
+    """The role a derived file form gives a constructor argument that is a reference:
+    ``"body"`` for ``body``, ``parent``, ``child`` and ``body_*``, ``"joint"`` for ``joint``
+    and ``joint_*``, else ``"component"`` (a body or a joint, by name)."""
+    if argument in ("body", "parent", "child") or argument.startswith("body_"):
+        return "body"
+    if argument == "joint" or argument.startswith("joint_"):
+        return "joint"
+    return "component"
 
 
 def one_dof_joint_problems(component: Any, joint: Any) -> list[str]:
@@ -58,14 +78,20 @@ class Component:
       (read as the spec says: number, 3-vector, axis, inertia, time input) or an option
       (``file_options``);
     - ``file_required``: the keys a file must give;
-    - ``refs``: ``{role: "body" | "joint" | "attachment"}``; an attachment is a body
-      name or ``{body = "...", point = [...]}`` and its point is the parameter
-      ``point_<role>``;
+    - ``refs``: ``{role: "body" | "joint" | "attachment" | "component"}``; an attachment
+      is a body name or ``{body = "...", point = [...]}`` and its point is the parameter
+      ``point_<role>``; a component is the name of a body or a joint;
     - ``file_options``: ``{key: "names" | "string" | "time" | "rotation"}`` for values
       that are not parameters (coordinate names, an Euler sequence, an expression of t,
       a frame rotation);
     - ``from_file(name, values)``: builds the component from the values read (by
       default ``cls(name, **values)``).
+
+    A class that sets ``kind`` and ``section`` but no ``file_keys`` gets its file form
+    from its constructor: each argument after ``name`` is a file key, a declared
+    parameter when a ``ParameterSpec`` has its name and a reference otherwise (role from
+    ``refs``, else ``reference_role``); the arguments without a default are required.  So a
+    user's force element is saved and loaded with no file code (docs/architecture.md).
     """
 
     kind: ClassVar[str] = ""
@@ -83,8 +109,35 @@ class Component:
         cls._specs = {spec.name: spec for spec in cls.params}
         if "params" in cls.__dict__ and "parameters" not in cls.__dict__:
             cls.parameters = tuple(spec.name for spec in cls.params if not spec.structural)
+        for old, new in RENAMED_HOOKS.items():
+            if old in cls.__dict__ and new not in cls.__dict__:
+                warnings.warn(f"{cls.__qualname__}.{old} is deprecated: name the method {new} (the public "
+                              "extension point); the old name stops working in the next release",
+                              DeprecationWarning, stacklevel=2)
+                setattr(cls, new, cls.__dict__[old])
         if cls.__dict__.get("kind"):
+            if cls.section and not cls.file_keys:
+                cls._derive_file_form()
             KINDS[cls.kind] = cls
+
+    @classmethod
+    def _derive_file_form(cls) -> None:
+        """``file_keys``, ``file_required`` and ``refs`` from the constructor's arguments
+        (see the class docstring); nothing when it takes ``*args``."""
+        try:
+            arguments = list(inspect.signature(cls.__init__).parameters.values())[2:]  # self, name
+        except (TypeError, ValueError):
+            return
+        if any(a.kind is inspect.Parameter.VAR_POSITIONAL for a in arguments):
+            return
+        named = [a for a in arguments if a.kind is not inspect.Parameter.VAR_KEYWORD]
+        refs = dict(cls.refs)
+        for a in named:
+            if a.name not in cls._specs and a.name not in refs:
+                refs[a.name] = reference_role(a.name)
+        cls.refs = refs
+        cls.file_keys = tuple(a.name for a in named)
+        cls.file_required = tuple(a.name for a in named if a.default is inspect.Parameter.empty)
 
     def __new__(cls, *args: Any, **kwargs: Any):
         # Arguments holding sub-model parameter expressions are kept, so that a run-time
@@ -129,6 +182,8 @@ class Component:
         """The value the writer stores under file key ``key`` (an attachment: ``(body, point)``)."""
         if self.refs.get(key) == "attachment":
             return getattr(self, f"body_{key}"), getattr(self, f"point_{key}")
+        if key in self.refs and key not in self.__dict__:
+            return self.references().get(key)
         return getattr(self, key, None)
 
     def freeze(self) -> None:
@@ -143,6 +198,11 @@ class Component:
     def references(self) -> dict[str, Any]:
         """The other components this one refers to, by role (``{"parent": ..., "child": ...}``)."""
         return {}
+
+    def check(self, resolved: dict[str, Any]) -> list[str]:
+        """Problems against the resolved references (``{role: component}``), e.g. a motor on a
+        joint with more than one coordinate; sets nothing.  None by default."""
+        return []
 
     def parameter_values(self) -> dict[str, Any]:
         """Current numeric values of ``parameters`` (floats or tuples), by attribute; a value
@@ -176,19 +236,34 @@ class ForceElement(Component):
     """A force element contributes loads (world-frame point forces, body torques or
     generalised forces) and, if conservative, a potential energy.
 
-    Hooks (``kin`` is the symbolic kinematics accessor the compiler hands over):
-    - ``_loads(kin) -> list`` of ``("point", body, point_world_expr, force_world_expr)``,
+    Extension points (``kin`` is the symbolic kinematics accessor the compiler hands over,
+    docs/architecture.md):
+    - ``loads(kin) -> list`` of ``("point", body, point_world_expr, force_world_expr)``,
       ``("torque", body, torque_world_expr)`` or ``("generalized", joint, values)``;
-    - ``_potential(kin) -> expr`` (0 when not conservative).
+    - ``potential(kin) -> expr`` (0 when not conservative).
     """
 
-    def _loads(self, kin) -> list:
-        raise NotImplementedError
+    section = "forces"
+
+    def loads(self, kin) -> list:
+        """The element's loads (N, N m; world frame) as symbolic expressions of ``kin``."""
+        raise NotImplementedError(f"{type(self).__name__} defines no loads(kin)")
 
     def is_conservative(self) -> bool:
         return False
 
-    def _potential(self, kin):
+    def line_ends(self) -> tuple | None:
+        """``((body_a, key_a), (body_b, key_b))`` (the parameter keys of two body points, m)
+        when the element acts along the line between them, which is undefined where they
+        meet (``Kernel.check_finite`` names the element then); None otherwise."""
+        return None
+
+    def input_size(self, joint: Any = None) -> int:
+        """Number of run-time input values (a callable force or torque) this element reads; 0 by default."""
+        return 0
+
+    def potential(self, kin):
+        """The element's potential energy (J) as an expression of ``kin``; 0 when not conservative."""
         return 0
 
 
@@ -199,6 +274,12 @@ class Constraint(Component):
     """
 
     n_equations: ClassVar[int] = 0
+    section = "constraints"
+
+    def equations(self, ground) -> list:
+        """The constraint's equations as primitives (``mbcomp.spec.components.primitives``:
+        ``PointEquation``, ``DotEquation``, ``CoordinateEquation``); ``ground`` is the model's ground body."""
+        raise NotImplementedError(f"{type(self).__name__} defines no equations(ground)")
 
     def reaction_unit(self, resolve) -> str:
         """Unit of this constraint's reaction (``resolve(ref)`` gives referenced components)."""

@@ -3,16 +3,12 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-import numpy as np
-
 from mbcomp.core.errors import ModelError, describe
 from mbcomp.core.params import ParameterSpec, unit_vector
-from mbcomp.core.rotations import AXIS_NAMES, normals
+from mbcomp.core.rotations import normals
 from mbcomp.spec.components.base import Constraint
-from mbcomp.spec.components.primitives import CoordinateEquation, DotEquation, PointEquation
+from mbcomp.spec.components.primitives import CoordinateEquation, PointEquation
 from mbcomp.spec.components.frame import split_frame
-
-WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
 class Slider(Constraint):
@@ -48,7 +44,7 @@ class Slider(Constraint):
     def structure(self):
         return (self.axis,)
 
-    def _equations(self, ground):
+    def equations(self, ground):
         """Offsets of the point from the line along two world normals (m)."""
         return [PointEquation(ground, n, ground, f"{self.name}.origin", self.body, f"{self.name}.point", f"n{i + 1}")
                 for i, n in enumerate(normals(self.axis))]
@@ -110,16 +106,18 @@ class Motor(Constraint):
     def structure(self):
         return ("position" if self.position is not None else "speed",)
 
-    def _equations(self, ground):
+    def equations(self, ground):
         return [CoordinateEquation(self.joint, self.position, self.speed, "torque")]
 
 
 class LoopClosure(Constraint):
     """The constraint equations of a loop-closing (cut) joint, made by the compiler.
 
-    Point coincidence of the joint's two points along world axes (multipliers: the
-    force on the child, N, world frame) plus the orientation conditions the joint
-    type imposes (multipliers: torques, N m).  Reactions carry the joint's name.
+    The joint says what holds (``Joint.closure_equations``, derived from its segments, so
+    a joint class written from segments closes loops too): point coincidence of its two
+    points along the directions it does not slide in (multipliers: the force on the child,
+    N) plus the orientation conditions its rotations leave (multipliers: torques, N m).
+    Reactions carry the joint's name.
     """
 
     def __init__(self, joint):
@@ -130,50 +128,6 @@ class LoopClosure(Constraint):
     def references(self):
         return {"joint": self.joint}
 
-    def _equations(self, ground):
-        from mbcomp.spec.components.joints import Ball, Cylindrical, Fixed, Free, Planar, Prismatic, Revolute, Spherical, Universal
-        j = self.joint
-        if isinstance(j, Free):
-            raise ModelError(j, "a Free joint constrains nothing, so it cannot close a loop")
-        a, b, pa, pb = j.parent, j.child, f"{j.name}.parent_point", f"{j.name}.child_point"
-        # Directions of the joint frames in their body frames (rotated frames: R_pf, R_cf).
-        Rp, Rc = j.parent_frame_rotation, j.child_frame_rotation
-        in_a = (lambda v: v) if j.parent_rotation is None else (lambda v: _rotated(Rp, v))
-        in_b = (lambda v: v) if j.child_rotation is None else (lambda v: _rotated(Rc, v))
-        if isinstance(j, Prismatic):
-            eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
-            return eqs + _orientation_lock(a, b, in_a, in_b)
-        if isinstance(j, Cylindrical):  # on the axis line, the axis kept parallel
-            eqs = [PointEquation(a, in_a(n), a, pa, b, pb, f"f{i + 1}") for i, n in enumerate(normals(j.axis))]
-            return eqs + [DotEquation(a, in_a(j.axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(j.axis))]
-        if isinstance(j, Planar):  # in the plane, the normal kept parallel
-            eqs = [PointEquation(a, in_a(j.normal), a, pa, b, pb, "f")]
-            return eqs + [DotEquation(a, in_a(j.normal), b, in_b(n), f"t{i + 1}") for i, n in enumerate(j.plane_axes)]
-        eqs = [PointEquation(ground, n, a, pa, b, pb, "fxyz"[i + 1]) for i, n in enumerate(WORLD_AXES)]
-        if isinstance(j, Fixed):
-            return eqs + _orientation_lock(a, b, in_a, in_b)
-        if isinstance(j, Revolute) or isinstance(j, Spherical) and len(j.sequence) == 1:
-            axis = j.axis if isinstance(j, Revolute) else AXIS_NAMES[j.sequence]
-            return eqs + [DotEquation(a, in_a(axis), b, in_b(n), f"t{i + 1}") for i, n in enumerate(normals(axis))]
-        if isinstance(j, Spherical) and len(j.sequence) == 2:
-            return eqs + [DotEquation(a, in_a(AXIS_NAMES[j.sequence[0]]), b, in_b(AXIS_NAMES[j.sequence[1]]), "t")]
-        if isinstance(j, (Spherical, Ball)):
-            return eqs
-        if isinstance(j, Universal):
-            if abs(float(np.dot(j.axes[0], j.axes[1]))) > 1e-12:
-                raise ModelError(j, "a universal joint closes a loop only with perpendicular axes")
-            return eqs + [DotEquation(a, in_a(j.axes[0]), b, in_b(j.axes[1]), "t")]
-        raise ModelError(j, "this joint type cannot close a loop")
-
-
-def _rotated(R, v):
-    """``R @ v`` as a tuple of floats (a joint-frame direction in its body frame)."""
-    return tuple(float(x) for x in np.asarray(R) @ np.asarray(v, dtype=float))
-
-
-def _orientation_lock(a, b, in_a=lambda v: v, in_b=lambda v: v):
-    """Three conditions keeping frame b's axes parallel to frame a's (``in_a``/``in_b`` map
-    joint-frame directions into the body frames)."""
-    x, y, z = WORLD_AXES
-    return [DotEquation(a, in_a(x), b, in_b(y), "tz"), DotEquation(a, in_a(y), b, in_b(z), "tx"),
-            DotEquation(a, in_a(z), b, in_b(x), "ty")]
+    def equations(self, ground):
+        """The cut joint's own closure conditions (``Joint.closure_equations``, from its segments)."""
+        return self.joint.closure_equations(ground)

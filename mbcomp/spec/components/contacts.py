@@ -44,7 +44,7 @@ class Contact(Component):
     def structure(self):
         return (self.normal,)
 
-    def _gap_equation(self, ground):
+    def gap_equation(self, ground):
         """The gap as a point equation: ``normal . (p - origin)`` (m), world-fixed normal."""
         from mbcomp.spec.components.primitives import PointEquation
         return PointEquation(ground, self.normal, ground, f"{self.name}.origin", self.body, f"{self.name}.point", "gap")

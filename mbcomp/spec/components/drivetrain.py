@@ -37,7 +37,7 @@ class _OnJoint(ForceElement):
         """Problems against the resolved references: only 1-DOF joints."""
         return one_dof_joint_problems(self, resolved["joint"])
 
-    def _loads(self, kin):
+    def loads(self, kin):
         return []
 
     def _set_input(self, attr: str, value: Any) -> None:
@@ -213,7 +213,7 @@ class JointFriction(_OnJoint):
         self.viscous = viscous
         self.speed_scale = speed_scale
 
-    def _loads(self, kin):
+    def loads(self, kin):
         (qd,) = kin.qd(self.joint)
         c, v, s = (kin.param(self, n) for n in ("coulomb", "viscous", "speed_scale"))
         import sympy as sp  # only where the equations are built
@@ -272,7 +272,7 @@ class LimitSide:
         self.restitution_key = f"{limit.name}.restitution"
         self.joint = limit.joint
 
-    def _gap_equation(self, ground):
+    def gap_equation(self, ground):
         from mbcomp.spec.components.primitives import CoordinateGap
         return CoordinateGap(self.joint, f"{self.limit.name}.{self.side}", 1 if self.side == "lower" else -1, "gap")
 

@@ -59,6 +59,11 @@ class _TwoPointElement(ForceElement):
     def references(self):
         return {"a": self.body_a, "b": self.body_b}
 
+    def line_ends(self) -> tuple:
+        """Both ends, as ``(body, parameter key of the point)``: the force's line is undefined
+        where they meet."""
+        return (self.body_a, f"{self.name}.point_a"), (self.body_b, f"{self.name}.point_b")
+
     def _line(self, kin):
         """World positions, separation ``d = p_b - p_a``, its rate, and the length."""
         pa = kin.position(self.body_a, kin.param(self, "point_a"))
@@ -104,7 +109,7 @@ class Spring(_TwoPointElement):
     def is_conservative(self) -> bool:
         return self.damping == 0
 
-    def _loads(self, kin):
+    def loads(self, kin):
         pa, pb, d, dd, length = self._line(kin)
         k, l0, c = (kin.param(self, n) for n in ("stiffness", "rest_length", "damping"))
         inv = kin.let(1 / length)
@@ -112,7 +117,7 @@ class Spring(_TwoPointElement):
         tension = kin.let(k * (length - l0) + c * rate)
         return self._pair(pa, pb, [kin.let(-tension * x * inv) for x in d])
 
-    def _potential(self, kin):
+    def potential(self, kin):
         _, _, d, _, length = self._line(kin)
         k, l0 = kin.param(self, "stiffness"), kin.param(self, "rest_length")
         return k * (length - l0) ** 2 / 2
@@ -130,7 +135,7 @@ class Damper(_TwoPointElement):
         super().__init__(name, a, b)
         self.damping = damping
 
-    def _loads(self, kin):
+    def loads(self, kin):
         pa, pb, d, dd, length = self._line(kin)
         c = kin.param(self, "damping")
         inv2 = kin.let(1 / (length * length))
@@ -179,7 +184,7 @@ class Force(ForceElement):
         """The callable's value, checked to be a finite 3-vector."""
         return checked_output(self, self.force(t, q, qd), 3)
 
-    def _loads(self, kin):
+    def loads(self, kin):
         point = kin.position(self.body, kin.param(self, "point"))
         force = kin.input(self) if self.is_callable else kin.param(self, "force")
         return [("point", self.body, point, list(force))]
@@ -290,7 +295,7 @@ class JointTorque(SignalOwner, ForceElement):
             size = self.size or int(np.size(self.value(t, q, qd)))
         return checked_output(self, self.value(t, q, qd), size)
 
-    def _loads(self, kin):
+    def loads(self, kin):
         if self.signal is not None:
             return []
         values = kin.input(self) if self.is_callable else kin.param(self, "value")
@@ -330,12 +335,12 @@ class TorsionSpring(ForceElement):
     def is_conservative(self) -> bool:
         return self.damping == 0
 
-    def _loads(self, kin):
+    def loads(self, kin):
         (q,), (qd,) = kin.q(self.joint), kin.qd(self.joint)
         k, rest, c = (kin.param(self, n) for n in ("stiffness", "rest", "damping"))
         return [("generalized", self.joint, [-k * (q - rest) - c * qd])]
 
-    def _potential(self, kin):
+    def potential(self, kin):
         (q,) = kin.q(self.joint)
         k, rest = kin.param(self, "stiffness"), kin.param(self, "rest")
         return k * (q - rest) ** 2 / 2

@@ -3,7 +3,7 @@ Cylindrical, Planar and Fixed.
 
 The joint contract: a joint has ``nq`` coordinates (``coords``) and ``nv`` speeds
 (``speeds``), with ``q' = G(q) v``.  It is a sequence of elementary motions
-(``_segments()``), each resolved in the frame left by the previous ones:
+(``segments()``), each resolved in the frame left by the previous ones:
 
 - ``("R", axis)``: a rotation about a unit axis; 1 coordinate (the angle), 1 speed (its rate);
 - ``("P", axis)``: a translation along a unit axis; 1 coordinate, 1 speed (its rate);
@@ -23,18 +23,23 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from mbcomp.core.errors import ModelError
+from mbcomp.core.errors import ModelError, describe
 from mbcomp.core.params import ParameterSpec, axis_name, unit_vector
 from mbcomp.core.rotations import (normals, AXIS_NAMES, axis_angle, parse_sequence, quat_exp, quat_log, quat_matrix, quat_multiply,
                          quat_normalize, quat_rate, unit_axis)
 from mbcomp.spec.components.base import Component
 from mbcomp.spec.components.frame import Frame, split_frame
+from mbcomp.spec.components.primitives import DotEquation, PointEquation
 
 AXIS = ParameterSpec("axis", (3,), "", unit_vector, structural=True,
                      doc="'x', 'y', 'z' (optionally signed) or a 3-vector in the parent frame; stored as a unit vector")
 
 #: (coordinates, speeds) of each segment kind.
 SEGMENT_SIZES = {"R": (1, 1), "P": (1, 1), "B": (4, 3)}
+#: Two unit axes count as parallel (or as perpendicular) when the sine (the cosine) of the
+#: angle between them is below this.
+AXIS_TOLERANCE = 1e-9
+WORLD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
 class Joint(Component):
@@ -55,8 +60,8 @@ class Joint(Component):
         segment have speeds that are not coordinate rates; a screw coordinate's speed
         always shares its name)
 
-    Subclasses provide ``n_coords``, ``coord_suffixes`` and ``_screws()`` (or, for
-    joints with a ball segment, ``_segments()`` and ``speed_suffixes``).
+    Subclasses provide ``n_coords``, ``coord_suffixes`` and ``screws()`` (or, for
+    joints with a ball segment, ``segments()`` and ``speed_suffixes``).
     """
 
     n_coords: ClassVar[int] = 0
@@ -129,7 +134,7 @@ class Joint(Component):
     #: Suffixes of the default names of the speeds of ball segments.
     speed_suffixes: ClassVar[tuple[str, ...]] = ("wx", "wy", "wz")
 
-    def _screws(self) -> list[tuple[str, tuple[float, float, float]]]:
+    def screws(self) -> list[tuple[str, tuple[float, float, float]]]:
         """Elementary motions ``("R" | "P", unit axis)``, each axis in the frame after the
         previous ones; coordinate i drives screw i."""
         raise NotImplementedError
@@ -137,6 +142,77 @@ class Joint(Component):
     def reaction_unit(self, resolve) -> str:
         """Unit of the reactions of this joint when it closes a loop (forces, then torques)."""
         return "N, N m"
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint | None":
+        """The same joint seen from its child: ``parent`` and ``child`` are this joint's child
+        and parent frames; same name and coordinates, with the sign the motion needs.  None
+        when the type has no such form (the joint then stays as given)."""
+        return None
+
+    def singularity(self, q: np.ndarray) -> str | None:
+        """Why the mass matrix may be singular at this joint's coordinates ``q`` (a
+        parametrisation's singular point), or None; ``Kernel.diagnose`` reports it."""
+        return None
+
+    def closure_equations(self, ground: Any) -> list:
+        """The equations that hold when this joint closes a loop (it is cut from the tree and
+        its coordinates are gone), derived from its segments.
+
+        Translation: with no ``P`` segment, ``parent_point`` and ``child_point`` coincide
+        along world x, y, z (labels ``x``, ``y``, ``z``; multipliers: the force on the child,
+        N); with ``P`` segments whose axes stay fixed in the parent (or all in the child)
+        frame, the points coincide along the normals of the axes' span in that frame
+        (``f1``, ``f2``, or ``f``).  Rotation: no ``R`` segment keeps the frames parallel
+        (``tz``, ``tx``, ``ty``); rotations about one axis keep it parallel (``t1``, ``t2``);
+        two perpendicular axes keep the parent's first perpendicular to the child's last
+        (``t``); three or more axes or a ``B`` segment leave the rotation free.  Normals are
+        the joint's own axes where they fit (a planar joint's in-plane axes), else
+        ``rotations.normals``.  Multipliers of the orientation conditions are torques (N m).
+        """
+        segments = [(kind, _unit(self, kind, axis)) for kind, axis in self.segments()]
+        a, b, pa, pb = self.parent, self.child, f"{self.name}.parent_point", f"{self.name}.child_point"
+        Rp, Rc = self.parent_frame_rotation, self.child_frame_rotation
+        in_a = (lambda v: v) if self.parent_rotation is None else (lambda v: _rotated(Rp, v))
+        in_b = (lambda v: v) if self.child_rotation is None else (lambda v: _rotated(Rc, v))
+        own = [axis for kind, axis in segments if kind != "B"]
+        eqs: list = []
+        # Translations: the axes of the P segments, each fixed in the parent or child frame
+        # when every rotation before (after) it turns about it.
+        slides = [(axis, all(k == "P" or k == "R" and _parallel(ax, axis) for k, ax in segments[:i]),
+                   all(k == "P" or k == "R" and _parallel(ax, axis) for k, ax in segments[i + 1:]))
+                  for i, (kind, axis) in enumerate(segments) if kind == "P"]
+        if not slides:
+            eqs += [PointEquation(ground, n, a, pa, b, pb, "xyz"[i]) for i, n in enumerate(WORLD_AXES)]
+        else:
+            if all(in_parent for _, in_parent, _ in slides):
+                body, to_body = a, in_a
+            elif all(in_child for _, _, in_child in slides):
+                body, to_body = b, in_b
+            else:
+                raise ModelError(self, "cannot close a loop: a translation axis turns with its rotations "
+                                       "(fixed neither in the parent nor in the child frame)")
+            normals_ = _complement(self, [axis for axis, _, _ in slides], own)
+            labels = ["f"] if len(normals_) == 1 else [f"f{i + 1}" for i in range(len(normals_))]
+            eqs += [PointEquation(body, to_body(n), a, pa, b, pb, label) for n, label in zip(normals_, labels)]
+        # Rotations: the R axes, successive parallel ones merged.
+        turns: list[tuple] = []
+        for kind, axis in segments:
+            if kind == "R" and not (turns and _parallel(turns[-1], axis)):
+                turns.append(axis)
+        if not turns and not any(kind == "B" for kind, _ in segments):
+            eqs += _orientation_lock(a, b, in_a, in_b)
+        elif len(turns) == 1 and not any(kind == "B" for kind, _ in segments):
+            (u,) = turns
+            eqs += [DotEquation(a, in_a(u), b, in_b(n), f"t{i + 1}") for i, n in enumerate(_complement(self, [u], own))]
+        elif len(turns) == 2 and not any(kind == "B" for kind, _ in segments):
+            first, last = turns
+            if abs(float(np.dot(first, last))) > AXIS_TOLERANCE:
+                raise ModelError(self, "closes a loop only with perpendicular rotation axes (its two axes are "
+                                       f"{first} and {last})")
+            eqs.append(DotEquation(a, in_a(first), b, in_b(last), "t"))
+        if not eqs:
+            raise ModelError(self, "constrains nothing, so it cannot close a loop")
+        return eqs
 
     def summary(self) -> str:
         detail = getattr(self, "axis", None)
@@ -152,7 +228,7 @@ class Joint(Component):
     def coord_units(self) -> tuple[str, ...]:
         """Unit of each coordinate (``"rad"``, ``"m"``, or ``""`` for a quaternion), for plots and tables."""
         units: list[str] = []
-        for kind, _ in self._segments():
+        for kind, _ in self.segments():
             units.extend(("",) * 4 if kind == "B" else ("m",) if kind == "P" else ("rad",))
         return tuple(units)
 
@@ -160,13 +236,13 @@ class Joint(Component):
     def speed_units(self) -> tuple[str, ...]:
         """Unit of each speed (``"rad/s"`` or ``"m/s"``)."""
         units: list[str] = []
-        for kind, _ in self._segments():
+        for kind, _ in self.segments():
             units.extend(("rad/s",) * 3 if kind == "B" else ("m/s",) if kind == "P" else ("rad/s",))
         return tuple(units)
 
-    def _segments(self) -> list[tuple[str, Any]]:
+    def segments(self) -> list[tuple[str, Any]]:
         """The joint's motion as segments (see the module docstring); screws by default."""
-        return self._screws()
+        return self.screws()
 
     @property
     def nq(self) -> int:
@@ -176,18 +252,18 @@ class Joint(Component):
     @property
     def nv(self) -> int:
         """Number of speeds (degrees of freedom of the joint)."""
-        return sum(SEGMENT_SIZES[kind][1] for kind, _ in self._segments())
+        return sum(SEGMENT_SIZES[kind][1] for kind, _ in self.segments())
 
     @property
     def is_screw(self) -> bool:
         """True when every speed is its coordinate's rate (``G = I``)."""
-        return all(kind in ("R", "P") for kind, _ in self._segments())
+        return all(kind in ("R", "P") for kind, _ in self.segments())
 
     @property
     def neutral(self) -> tuple[float, ...]:
         """Coordinates of the zero position (zeros; the identity quaternion for a ball)."""
         out: list[float] = []
-        for kind, _ in self._segments():
+        for kind, _ in self.segments():
             out.extend((1.0, 0.0, 0.0, 0.0) if kind == "B" else (0.0,))
         return tuple(out)
 
@@ -196,7 +272,7 @@ class Joint(Component):
         return {"parent": self.parent, "child": self.child}
 
     def structure(self) -> tuple:
-        screws = tuple(self._segments())
+        screws = tuple(self.segments())
         if self.parent_rotation is None and self.child_rotation is None:
             return screws
         return screws + (("frames", self.parent_rotation, self.child_rotation),)
@@ -214,7 +290,7 @@ class Joint(Component):
     def walk(self):
         """``(kind, axis, q slice, v slice)`` of each segment (see the module docstring), local to the joint."""
         iq = iv = 0
-        for kind, axis in self._segments():
+        for kind, axis in self.segments():
             nq, nv = SEGMENT_SIZES[kind]
             yield kind, axis, slice(iq, iq + nq), slice(iv, iv + nv)
             iq, iv = iq + nq, iv + nv
@@ -377,8 +453,13 @@ class Revolute(Joint):
         super().__init__(name, parent, child, **options)
         self.axis = axis
 
-    def _screws(self):
+    def screws(self):
         return [("R", self.axis)]
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """About ``-axis`` seen from the child (the axis has the same components in both
+        joint frames, which differ by a rotation about it); the same coordinate."""
+        return type(self)(self.name, parent, child, axis=tuple(-float(a) + 0.0 for a in self.axis), coords=self.coords)
 
 
 class Prismatic(Joint):
@@ -395,8 +476,12 @@ class Prismatic(Joint):
         super().__init__(name, parent, child, **options)
         self.axis = axis
 
-    def _screws(self):
+    def screws(self):
         return [("P", self.axis)]
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """Along ``-axis`` seen from the child; the same coordinate."""
+        return type(self)(self.name, parent, child, axis=tuple(-float(a) + 0.0 for a in self.axis), coords=self.coords)
 
 
 class Spherical(Joint):
@@ -426,8 +511,19 @@ class Spherical(Joint):
             return letters
         return tuple(f"{ch}{i + 1}" for i, ch in enumerate(letters))
 
-    def _screws(self):
+    def screws(self):
         return [("R", AXIS_NAMES[ch]) for ch in self.sequence]
+
+    def singularity(self, q: np.ndarray) -> str | None:
+        """The gimbal lock of a 3-axis sequence: first and last axes aligned."""
+        if len(self.sequence) != 3:
+            return None
+        middle = float(q[1])
+        value = np.sin(middle) if self.sequence[0] == self.sequence[2] else np.cos(middle)
+        if abs(value) < 1e-6:
+            return (f"{describe(self)} is at its Euler-angle singularity "
+                    f"({self.coords[1]} = {middle:.6g} rad: first and last axes align)")
+        return None
 
 
 class Fixed(Joint):
@@ -437,8 +533,12 @@ class Fixed(Joint):
     n_coords = 0
     file_keys = tuple(k for k in Joint.file_keys if k != "coords")
 
-    def _screws(self):
+    def screws(self):
         return []
+
+    def reversed(self, parent: Frame, child: Frame) -> "Joint":
+        """The frames swapped."""
+        return type(self)(self.name, parent, child)
 
 
 class Ball(Joint):
@@ -455,7 +555,7 @@ class Ball(Joint):
     file_keys = Joint.file_keys + ("speeds",)
     file_options = {**Joint.file_options, "speeds": "names"}
 
-    def _segments(self):
+    def segments(self):
         return [("B", None)]
 
 
@@ -472,8 +572,63 @@ class Free(Joint):
     file_keys = Joint.file_keys + ("speeds",)
     file_options = {**Joint.file_options, "speeds": "names"}
 
-    def _segments(self):
+    def segments(self):
         return [("P", AXIS_NAMES["x"]), ("P", AXIS_NAMES["y"]), ("P", AXIS_NAMES["z"]), ("B", None)]
+
+
+def _unit(joint: Joint, kind: str, axis: Any) -> Any:
+    """A segment's axis as a unit 3-tuple of floats (unchanged when it is one already); None for a ball."""
+    if kind not in SEGMENT_SIZES:
+        raise ModelError(joint, f"unknown segment kind {kind!r} (R, P or B)")
+    if kind == "B":
+        return None
+    try:
+        values = np.asarray(axis, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        raise ModelError(joint, f"segment axis must be a 3-vector, got {axis!r}") from None
+    norm = float(np.linalg.norm(values))
+    if not np.isfinite(norm) or norm < 1e-12:
+        raise ModelError(joint, f"segment axis {axis!r} has no direction")
+    return tuple(float(x) for x in (values if abs(norm - 1.0) < 1e-15 else values / norm))
+
+
+def _parallel(u: Any, v: Any) -> bool:
+    """True when the unit axes ``u`` and ``v`` are parallel (either sense)."""
+    return float(np.linalg.norm(np.cross(u, v))) < AXIS_TOLERANCE
+
+
+def _complement(joint: Joint, directions: list, own: list) -> list:
+    """Unit vectors spanning the directions perpendicular to ``directions``: the joint's
+    own axes (``own``) when enough of them are perpendicular to those and to each other,
+    else ``rotations.normals`` (one direction) or the normalised cross product (two)."""
+    rank = int(np.linalg.matrix_rank(np.array(directions, dtype=float), tol=AXIS_TOLERANCE))
+    need = 3 - rank
+    if need == 0:
+        return []
+    picked: list = []
+    for axis in own:
+        if len(picked) < need and all(abs(float(np.dot(axis, d))) < AXIS_TOLERANCE for d in directions + picked):
+            picked.append(axis)
+    if len(picked) == need:
+        return picked
+    if need == 2:
+        return list(normals(directions[0]))
+    basis = [d for d in directions if not _parallel(d, directions[0])]
+    n = np.cross(directions[0], basis[0])
+    return [tuple(float(x) for x in n / np.linalg.norm(n))]
+
+
+def _rotated(R: Any, v: Any) -> tuple:
+    """``R @ v`` as a tuple of floats (a joint-frame direction in its body frame)."""
+    return tuple(float(x) for x in np.asarray(R) @ np.asarray(v, dtype=float))
+
+
+def _orientation_lock(a: Any, b: Any, in_a=lambda v: v, in_b=lambda v: v) -> list:
+    """Three conditions keeping frame b's axes parallel to frame a's (``in_a``/``in_b`` map
+    joint-frame directions into the body frames)."""
+    x, y, z = WORLD_AXES
+    return [DotEquation(a, in_a(x), b, in_b(y), "tz"), DotEquation(a, in_a(y), b, in_b(z), "tx"),
+            DotEquation(a, in_a(z), b, in_b(x), "ty")]
 
 
 def _axis_letter(spec: Any) -> str | None:
@@ -533,7 +688,7 @@ class Universal(Joint):
     def coord_suffixes(self) -> tuple[str, ...]:
         return self._suffixes
 
-    def _screws(self):
+    def screws(self):
         return [("R", self.axes[0]), ("R", self.axes[1])]
 
 
@@ -551,7 +706,7 @@ class Cylindrical(Joint):
         super().__init__(name, parent, child, **options)
         self.axis = axis
 
-    def _screws(self):
+    def screws(self):
         return [("R", self.axis), ("P", self.axis)]
 
 
@@ -589,5 +744,5 @@ class Planar(Joint):
         name = axis_name(self.normal)
         return f"{self.kind} normal {name if isinstance(name, str) else tuple(name)}"
 
-    def _screws(self):
+    def screws(self):
         return [("P", self.plane_axes[0]), ("P", self.plane_axes[1]), ("R", self.normal)]
