@@ -147,14 +147,7 @@ def initial_state(model, system) -> tuple[list[float], list[float], list[str]]:
     return q0, qd0, warnings
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.6g}"
-
-
-def _table(rows: list[list[str]], indent: str = "  ") -> str:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join(indent + "  ".join(cell.rjust(w) if i else cell.ljust(w) for i, (cell, w)
-                                        in enumerate(zip(row, widths))).rstrip() for row in rows)
+from mbcomp.face.cli_analyse import fmt as _fmt, table as _table  # noqa: E402 - one table printer for all commands
 
 
 # ----------------------------------------------------------------------------------------------
