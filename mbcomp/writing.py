@@ -17,12 +17,12 @@ def _failed(what: str, path: Any, exc: OSError) -> WriteError:
     return WriteError(what, f"cannot write {str(path)!r}: {exc.strerror or exc}")
 
 
-def write_file(path: str | os.PathLike, data: str | bytes, what: str) -> Path:
-    """Write ``data`` (text as UTF-8) to ``path``, creating its folder; a failed open, write,
-    flush or close raises ``WriteError`` (``what``: the writer, e.g. ``"to_csv"``)."""
+def write_file(path: str | os.PathLike, data: str | bytes, what: str, *, folders: bool = False) -> Path:
+    """Write ``data`` (text as UTF-8) to ``path`` (``folders``: creating its folder); a failed
+    open, write, flush or close raises ``WriteError`` (``what``: the writer, e.g. ``"to_csv"``)."""
     path = Path(path)
     try:
-        if not path.parent.exists():
+        if folders and not path.parent.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "wb") as fh:
             fh.write(data.encode("utf-8") if isinstance(data, str) else data)
@@ -35,7 +35,7 @@ def write_file(path: str | os.PathLike, data: str | bytes, what: str) -> Path:
 def staged(path: str | os.PathLike, what: str) -> Iterator[Path]:
     """A temporary file with ``path``'s suffix for a writer that wants a file name
     (matplotlib, Pillow, ffmpeg) and may not report every failed write; on a clean exit its
-    bytes go to ``path`` through ``write_file``."""
+    bytes go to ``path`` through ``write_file`` (creating its folder, as the plots always have)."""
     path = Path(path)
     try:
         folder = tempfile.mkdtemp(prefix="mbcomp-out-")
@@ -44,10 +44,12 @@ def staged(path: str | os.PathLike, what: str) -> Iterator[Path]:
     try:
         scratch = Path(folder) / f"output{path.suffix}"
         yield scratch
+        if not scratch.exists():  # the writer wrote nothing (a test's stand-in encoder): nothing to copy
+            return
         try:
             data = scratch.read_bytes()
         except OSError as exc:
             raise _failed(what, path, exc) from None
-        write_file(path, data, what)
+        write_file(path, data, what, folders=True)
     finally:
         shutil.rmtree(folder, ignore_errors=True)

@@ -25,7 +25,7 @@ class Viewer:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the page to ``path`` (any suffix; ``.html`` is customary) and return it."""
         from mbcomp.writing import write_file
-        return write_file(path, self.html, "view")
+        return write_file(path, self.html, "view", folders=True)
 
     def _repr_html_(self) -> str:
         # An iframe keeps the page's script, style and policy apart from the notebook's.
