@@ -142,7 +142,7 @@ def main(argv=None):
         writer.writerows(rows)
     print(f"\nwrote {path}")
     try:
-        from mbcomp.plotting import work_precision_plot
+        from mbcomp.face.plotting import work_precision_plot
     except ImportError:
         work_precision_plot = None
     for model_name in MODELS:

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 import mbcomp as mb
-from mbcomp import codegen
-from mbcomp.backend import FUNCTIONS
+from mbcomp.codegen import printer as codegen
+from mbcomp.codegen.backend import FUNCTIONS
 
 LIBRARY = Path(__file__).resolve().parent.parent / "library"
 STATES = 3

@@ -7,7 +7,7 @@ repeats), the state a float64 ndarray:
   reactions          System.reactions(q, qd)            (a tree: no constraint forces)
   body_state         System.body_state("link{N-1}", q, qd)   (pose and velocity; the
                      acceleration is solved only when read)
-  ctypes path        the same accelerations through mbcomp.fastcall.CtypesCalls (what runs
+  ctypes path        the same accelerations through mbcomp.codegen.fastcall.CtypesCalls (what runs
                      where Python's headers are missing: no extension)
   ctypes floor       the compiled function called through ctypes with pre-bound pointer
                      arguments (no checks, no output array: the floor of any ctypes call)
@@ -49,7 +49,7 @@ def per_call_us(fn, target: float = 0.02, repeat: int = 5) -> tuple[float, float
 
 def setup(n: int) -> dict:
     """``{name: fn}``: one call each, all at the same random state (checked to agree)."""
-    from mbcomp import fastcall
+    from mbcomp.codegen import fastcall
     rng = np.random.default_rng(1)
     q, qd = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
     system = pendulum_chain(n).compile()

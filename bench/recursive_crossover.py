@@ -1,5 +1,5 @@
 """Where the recursive (articulated-body) tree dynamics beats the dense one: the crossover
-behind ``compile(dynamics="auto")`` (``mbcomp.recursive.CROSSOVER_NV``).
+behind ``compile(dynamics="auto")`` (``mbcomp.build.recursive.CROSSOVER_NV``).
 
 For the N-link 3D pendulum chain (``models.pendulum_chain``) and N in ``--sizes``, both
 programs are compiled and the cost of one call of the compiled ``accelerations`` (q, qd ->

@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 os.environ["MBCOMP_CACHE_DIR"] = tempfile.mkdtemp(prefix="state-copy-")  # each process its own
 
 import mbcomp as mb  # noqa: E402
-from mbcomp import codegen  # noqa: E402
+from mbcomp.codegen import printer as codegen  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from models import pendulum_chain as chain  # noqa: E402

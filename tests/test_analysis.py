@@ -166,7 +166,7 @@ def test_four_bar_frequency_from_energy_along_the_manifold(fourbars):
 
 
 def test_linearize_agrees_with_sympy_linearizer_on_a_four_bar(fourbars):
-    me = pytest.importorskip("sympy.physics.mechanics")
+    me = pytest.importorskip("sympy.physics.mechanics", exc_type=ImportError)
     L1, L2, L3, d = 0.3, 0.8, 0.6, 0.7
     q1, q2, q3 = me.dynamicsymbols("q1:4")
     u1, u2, u3 = me.dynamicsymbols("u1:4")
@@ -376,7 +376,7 @@ def test_inverse_dynamics_rejects_bad_shapes():
 # -- command line ----------------------------------------------------------------------------------
 def test_cli_analyse_prints_equilibrium_modes_and_stability(capsys, monkeypatch):
     from pathlib import Path
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
     assert main(["analyse", "library/double_pendulum.toml", "--at", "phi1=0.4,theta2=-0.2"]) == 0
     out = capsys.readouterr().out

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("matplotlib")
+pytest.importorskip("matplotlib", exc_type=ImportError)
 from PIL import Image  # noqa: E402
 
 import mbcomp as mb  # noqa: E402
-from mbcomp import plotting  # noqa: E402
+from mbcomp.face import plotting  # noqa: E402
 
 
 def full_redraw(fig, drawing, points, times, dpi):

@@ -57,7 +57,7 @@ class TestPickling:
 
 
 def test_dask_cluster_on_loopback_matches_serial(chain):
-    distributed = pytest.importorskip("distributed")
+    distributed = pytest.importorskip("distributed", exc_type=ImportError)
     cases = _cases()[:4]
     serial = _serial(chain, cases)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",

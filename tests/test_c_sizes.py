@@ -7,9 +7,9 @@ import pytest
 import mbcomp as mb
 
 from conftest import bar, fourbar, pendulum_chain, xy_pairs
-from mbcomp.c_sizes import CSizes
-from mbcomp.layout import OutputLayout
-from mbcomp.statemap import StateMap
+from mbcomp.build.c_sizes import CSizes
+from mbcomp.build.layout import OutputLayout
+from mbcomp.core.statemap import StateMap
 
 
 def _templates(model, **options):
@@ -103,7 +103,7 @@ def test_a_preprocessor_test_of_a_size_is_refused():
 
 def test_a_compile_whose_templates_test_a_size_fails_and_keeps_nothing(tmp_path, monkeypatch):
     """The check runs while the templates compile: the build is cancelled, nothing cached."""
-    from mbcomp import compiler
+    from mbcomp.compiled import compiler
     if compiler.c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import cache, codegen
-from mbcomp.backend import c_compiler, compile_c
+from mbcomp.codegen import cache, printer as codegen
+from mbcomp.codegen.backend import c_compiler, compile_c
 from conftest import arm_model, assert_close
 
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
@@ -191,9 +191,10 @@ class TestDirectory:
         elif problem == "a-file":
             cache_dir.rmdir()
             cache_dir.write_text("not a directory")
-        else:
+        else:  # a symlink to a directory that is not private (one to a private directory is used)
             target = tmp_path / "elsewhere"
             target.mkdir(mode=0o700)
+            os.chmod(target, 0o770)
             cache_dir.rmdir()
             cache_dir.symlink_to(target)
         monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
@@ -273,7 +274,8 @@ class TestKey:
 
     @needs_cc
     def test_changed_flags_give_a_new_entry(self, cache_dir, monkeypatch):
-        from mbcomp import backend, compiler
+        from mbcomp.codegen import backend
+        from mbcomp.compiled import compiler
         first = _compile_arm()
         flags = backend.C_FLAGS + ("-DMBCOMP_TEST_FLAG",)
         monkeypatch.setattr(backend, "C_FLAGS", flags)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import cache
+from mbcomp.codegen import cache
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="the build lock is an flock (POSIX)")
 
@@ -58,7 +58,7 @@ class TestBuilding:
         assert len(events) == 1 and events[0][1] and events[0][2] >= released
 
     def test_the_lock_of_a_killed_process_is_free(self, cache_dir):
-        code = ("import sys, time; from mbcomp import cache\n"
+        code = ("import sys, time; from mbcomp.codegen import cache\n"
                 "with cache.building('held') as ok:\n    print(ok, flush=True); time.sleep(60)\n")
         env = {**os.environ, "MBCOMP_CACHE_DIR": str(cache_dir), "PYTHONPATH": str(ROOT)}
         holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
@@ -129,7 +129,7 @@ def test_threads_compiling_models_of_one_kind_compile_the_templates_once(cache_d
     """Three chains of 2 links, axes in other orders (three models of one kind and state
     length), compiled at once share the templates' build lock: one compiles them, the
     others link its object."""
-    from mbcomp import backend
+    from mbcomp.codegen import backend
     calls, real = [], backend.subprocess.Popen
 
     def popen(cmd, *args, **kwargs):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import backend, codegen
-from mbcomp.backend import C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CBuild, c_compiler, c_functions, c_library
+from mbcomp.codegen import backend, printer as codegen
+from mbcomp.codegen.backend import C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, FUNCTIONS, CBuild, c_compiler, c_functions, c_library
 from conftest import pendulum_chain, xy_pairs
 
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
@@ -129,7 +129,7 @@ class TestBuild:
 
 @needs_cc
 def test_the_cache_entry_records_both_flag_sets_and_cold_flags_change_the_key(tmp_path, monkeypatch):
-    from mbcomp import compiler
+    from mbcomp.compiled import compiler
     monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
     first = pendulum_chain(2).compile(backend="c")._compiled
     manifest = json.loads((tmp_path / f"{first.key}.so.json").read_text())
@@ -245,7 +245,7 @@ class TestStreamedUnits:
     ``codegen.UnitStream``): the same functions, each defined once, as the whole-program units."""
 
     def test_ready_outputs_are_final_when_announced(self):
-        from mbcomp.equations import build_program
+        from mbcomp.build.equations import build_program
         compiled = pendulum_chain(3).compile(backend="python", cache=False)._compiled
         seen = []
 

@@ -1,5 +1,5 @@
-"""The ``mbcomp`` command: end to end as a subprocess (``python -m mbcomp.cli``), and the
-many small variations in process through ``mbcomp.cli.main`` (same code, no start-up cost)."""
+"""The ``mbcomp`` command: end to end as a subprocess (``python -m mbcomp.face.cli``), and the
+many small variations in process through ``mbcomp.face.cli.main`` (same code, no start-up cost)."""
 from __future__ import annotations
 
 import csv
@@ -37,7 +37,7 @@ t_end = 0.5
 n_samples = 26
 """
 
-HAS_PLOTTING = importlib.util.find_spec("mbcomp.plotting") is not None
+HAS_PLOTTING = importlib.util.find_spec("mbcomp.face.plotting") is not None
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def pendulum(tmp_path):
 
 
 def mbcomp(env, *args, cwd=None, timeout=120):
-    return subprocess.run([sys.executable, "-m", "mbcomp.cli", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "mbcomp.face.cli", *map(str, args)], capture_output=True,
                           text=True, env=env, cwd=cwd, timeout=timeout)
 
 
@@ -72,8 +72,8 @@ class Completed:
 
 @pytest.fixture
 def main(env, capsys, monkeypatch):
-    """Run ``mbcomp.cli.main`` in this process with the test environment."""
-    from mbcomp.cli import main as cli_main
+    """Run ``mbcomp.face.cli.main`` in this process with the test environment."""
+    from mbcomp.face.cli import main as cli_main
     monkeypatch.setenv("MBCOMP_CACHE_DIR", env["MBCOMP_CACHE_DIR"])
     monkeypatch.delenv("MBCOMP_LIBRARY", raising=False)
 
@@ -222,7 +222,7 @@ def test_unwritable_output_is_a_message(main, pendulum, tmp_path):
     assert "cannot write" in proc.stderr
 
 
-@pytest.mark.skipif(not HAS_PLOTTING, reason="mbcomp.plotting is not available")
+@pytest.mark.skipif(not HAS_PLOTTING, reason="mbcomp.face.plotting is not available")
 def test_plot_and_animation(env, pendulum, tmp_path):
     import matplotlib.image
     png, gif = tmp_path / "plot.png", tmp_path / "anim.gif"

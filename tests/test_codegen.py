@@ -10,8 +10,8 @@ import pytest
 import sympy as sp
 
 import mbcomp as mb
-from mbcomp import codegen
-from mbcomp.backend import FUNCTIONS, PythonFunctions, c_compiler, c_functions
+from mbcomp.codegen import printer as codegen
+from mbcomp.codegen.backend import FUNCTIONS, PythonFunctions, c_compiler, c_functions
 from conftest import arm_model, assert_close
 
 x, y, z, w = SYMBOLS = sp.symbols("x y z w")
@@ -103,7 +103,7 @@ class TestPrinter:
         every = [EXPRESSIONS["nested"], EXPRESSIONS["three-halves"], sp.tanh(x) * y, sp.Min(x, y) + sp.Max(z, w),
                  x ** sp.Rational(-1, 2), x ** sp.Float(1.5)]
         body = "".join(f"double f{i}(const double *v) {{ return {printer(e)}; }}\n" for i, e in enumerate(every))
-        from mbcomp.backend import C_FLAGS, COLD_FLAGS
+        from mbcomp.codegen.backend import C_FLAGS, COLD_FLAGS
         objects = []
         for header in (codegen.C_MATH, "#include <math.h>\n"):
             folder = tmp_path / str(len(objects))
@@ -121,7 +121,7 @@ class TestPrinter:
         """``C_TEMPLATE_LIBC`` stands for <stdlib.h>, <string.h> and <math.h> in the
         hand-written C: code that uses every name it declares compiles to the same object as
         with the headers, and a call it does not declare is an error under ``C_FLAGS``."""
-        from mbcomp.backend import C_FLAGS
+        from mbcomp.codegen.backend import C_FLAGS
         compiler = c_compiler()
         if compiler is None:
             pytest.skip("no C compiler")
@@ -295,7 +295,7 @@ class TestGeneratedPrograms:
 
 
 def test_with_unit_text_joins_the_last_cold_unit_or_makes_its_own():
-    from mbcomp.codegen import CUnit, with_unit_text
+    from mbcomp.codegen.printer import CUnit, with_unit_text
     hot, cold = CUnit("functions0", "int h;\n", True, 40), CUnit("functions1", "int c;\n", False, 3)
     joined = with_unit_text([hot, cold], "sizes", "int s;\n")
     assert [u.name for u in joined] == ["functions0", "functions1"]

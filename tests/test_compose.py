@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.components.expr import Expr
+from mbcomp.spec.components.expr import Expr
 from tests.conftest import G, assert_close
 
 

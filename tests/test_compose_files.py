@@ -197,14 +197,17 @@ def test_save_writes_nested_models_that_load_reads_back(tmp_path):
 
 
 def test_info_prints_the_instance_tree(files, capsys):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     assert main(["info", str(files / "double_pendulum.toml"), "--no-equations"]) == 0
     out = capsys.readouterr().out
     assert "instances\n  upper (link)  length=0.3, mass=1\n" in out
     assert "  lower (link)  length=0.2, mass=0.5\n" in out
 
 
-def test_time_expressions_in_parts_use_the_built_value(tmp_path):
+def test_part_parameters_in_a_motor_position_are_refused(tmp_path):
+    """A motor position is evaluated outside the parameter vector: a part parameter in it
+    would keep its build-time value while sys.parameters lists it, so the file is refused
+    (naming the parameter); a literal expression of t still works."""
     (tmp_path / "part.toml").write_text('''[parameters]
 amp = 0.5
 [ports]
@@ -225,5 +228,9 @@ joint = "j"
 position = "amp*sin(t)"
 ''')
     (tmp_path / "top.toml").write_text('[submodels.p]\nuse = "part.toml"\nbase = "ground"\namp = 0.3\n')
+    with pytest.raises(mb.ModelError, match=r"\[constraints.drive\] position: the part's parameter\(s\) 'amp'"):
+        mb.load(tmp_path / "top.toml")
+    part = (tmp_path / "part.toml").read_text().replace('"amp*sin(t)"', '"0.3*sin(t)"')
+    (tmp_path / "part.toml").write_text(part)
     res = mb.load(tmp_path / "top.toml").compile().simulate(1.0, [0.0], [0.3], t_eval=[0.5, 1.0])
     assert_close(res["p.a"], 0.3 * np.sin([0.5, 1.0]), atol=1e-8, name="motor position")

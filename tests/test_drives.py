@@ -387,7 +387,7 @@ def test_drives_in_model_files(tmp_path):
 
 
 def test_cli_info_lists_the_extra_states(capsys):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     from pathlib import Path
     library = Path(__file__).resolve().parents[1] / "library" / "servo_arm.toml"
     assert main(["info", str(library)]) == 0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.backend import c_compiler
+from mbcomp.codegen.backend import c_compiler
 from conftest import arm_model
 
 BACKENDS = ["python"] + (["c"] if c_compiler() else [])

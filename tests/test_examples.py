@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from mbcomp.components.base import KINDS
+from mbcomp.spec.components.base import KINDS
 
 try:                                    # tests/ on sys.path (pytest's default rootdir-less import)
     from script_server import ScriptServer

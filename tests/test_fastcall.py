@@ -1,4 +1,4 @@
-"""The fast path of the public evaluation calls (mbcomp.fastcall): the same numbers as the
+"""The fast path of the public evaluation calls (mbcomp.codegen.fastcall): the same numbers as the
 checked path, bad input still a clear ModelError, failures still explained, thread-safe."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import fastcall
+from mbcomp.codegen import fastcall
 from conftest import assert_close, pendulum_chain
 
 N = 4

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
+hypothesis = pytest.importorskip("hypothesis", exc_type=ImportError)
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
 try:
@@ -25,7 +25,7 @@ except ModuleNotFoundError:  # pragma: no cover
     import tomli as tomllib
 
 import mbcomp as mb  # noqa: E402
-from mbcomp.io import load  # noqa: E402
+from mbcomp.files.toml_model import load  # noqa: E402
 
 LIBRARY = Path(__file__).resolve().parent.parent / "library"
 FILES = sorted(LIBRARY.glob("*.toml"))
@@ -168,9 +168,118 @@ def test_known_malformed_files(tmp_path, text, expected):
 
 
 def test_cli_prints_one_line_and_exits_2(tmp_path, capsys):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     path = tmp_path / "bad.toml"
     path.write_text('[joints.j]\ntype = ["revolute"]\nparent = "ground"\nchild = "ground"\n', encoding="utf-8")
     assert main(["run", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "[joints.j] type: must be a string" in err
+
+
+# -- limits: random `use` graphs, escapes and special files (issue "Limits") ----------------------------
+from unittest import mock  # noqa: E402
+
+PART = '[ports]\nbase = "external"\n[bodies.b]\nmass = 1.0\n[joints.j]\ntype = "revolute"\nparent = "base"\n' \
+       'child = "b"\naxis = "z"\n'
+GRAPHS = st.lists(st.lists(st.tuples(st.integers(0, 5), st.integers(1, 3)), max_size=3), min_size=1, max_size=6)
+SECRET = "sk_live_9fKq2LmNp4RsTuVwXyZa0b1C"
+
+
+def expected_use(graph: list, top: list, deepest: int) -> tuple[str, int]:
+    """("cycle" | "deep" | "ok", instances) of a use graph, counted independently by expanding it."""
+    def expand(i: int, chain: tuple) -> tuple[int, int]:
+        if i in chain:
+            raise LookupError("cycle")
+        count, depth = 0, 0
+        for j, times in graph[i]:
+            below, d = expand(j, chain + (i,))
+            count += times * (1 + below)
+            depth = max(depth, 1 + d)
+        return count, depth
+    try:
+        parts = [expand(j, ()) for j, _ in top]
+    except LookupError:
+        return "cycle", 0
+    total = sum(times * (1 + count) for (count, _), (_, times) in zip(parts, top))
+    depth = max((1 + d for _, d in parts), default=0)
+    return ("deep" if depth > deepest else "ok"), total
+
+
+@settings(FUZZ, max_examples=max(1, EXAMPLES // 4))
+@given(graph=GRAPHS, top=st.lists(st.tuples(st.integers(0, 5), st.integers(1, 3)), min_size=1, max_size=3),
+       loop=st.integers(0, 4))
+def test_random_use_graphs_load_or_name_the_limit(graph, top, loop):
+    """Files using each other with multiplicities: a model with exactly the instances an
+    independent expansion counts, or the limit (instances, nesting) or the cycle named.
+    File i uses files after it (``loop == 0``: the last also uses the first, a cycle)."""
+    n = len(graph)
+    graph = [[(i + 1 + j, times) for j, times in entries if i + 1 + j < n] for i, entries in enumerate(graph)]
+    if loop == 0:
+        graph[-1].append((0, 1))
+    top = [(j % n, times) for j, times in top]
+    folder = Path(tempfile.mkdtemp(dir=WORK))
+    for i, entries in enumerate(graph):
+        uses = "".join(f'[submodels.u{k}_{m}]\nuse = "f{j}.toml"\nbase = "base"\n'
+                       for k, (j, times) in enumerate(entries) for m in range(times))
+        (folder / f"f{i}.toml").write_text(PART + uses)
+    path = folder / "top.toml"
+    path.write_text("".join(f'[submodels.t{k}_{m}]\nuse = "f{j}.toml"\nbase = "ground"\n'
+                            for k, (j, times) in enumerate(top) for m in range(times)))
+    verdict, total = expected_use(graph, top, 3)
+    with mock.patch.dict(os.environ, {"MBCOMP_MAX_INSTANCES": "40", "MBCOMP_MAX_NESTING": "3"}):
+        try:
+            model = load(path)
+        except mb.ModelError as exc:
+            message = str(exc)
+            if verdict == "deep":
+                assert "nest more than 3 deep" in message, message
+            elif verdict == "ok":
+                assert total > 40 and f"would build {total} sub-model instances" in message, message
+            else:
+                assert "cycle" in message or "nest more than 3 deep" in message or "would build" in message
+            return
+    assert verdict == "ok" and total <= 40 and model.registry.instances == total
+    assert len(model.bodies) == total
+
+
+ESCAPES = st.sampled_from(["library:{abs}", "library:{up}{rel}", "library:parts/../../{up}{rel}", "{abs}.toml",
+                           "../{name}.toml", "library:./{name}", "library:\\\\x", "library:c:{abs}", "{up}{rel}.toml",
+                           "library:{name}/../../{name}", "sub/../../{name}.toml", "library:~/{name}"])
+
+
+@settings(FUZZ, max_examples=max(1, EXAMPLES // 8))
+@given(ESCAPES, st.sampled_from(["submodels", "top"]))
+def test_use_never_reads_outside_and_never_tells(escape, where):
+    """A file of secrets beside the model's folder (not below it): every way of naming it is
+    refused before it is read, and no message shows its values."""
+    folder = Path(tempfile.mkdtemp(dir=WORK))
+    (folder / "model").mkdir()
+    secret = folder / "credentials.toml"
+    secret.write_text(f'api_key = "{SECRET}"\n[parameters]\ntoken = "{SECRET}"\n[bodies.b]\nmass = "{SECRET}"\n')
+    stem = str(secret.with_suffix(""))
+    up = "../" * (len(secret.parts) + 3)
+    use = escape.format(abs=stem, up=up, rel=stem.lstrip("/"), name="credentials")
+    if where == "top" and not use.startswith("library:"):
+        return   # a path given to mb.load itself is the caller's choice
+    path = folder / "model" / "m.toml"
+    path.write_text(f'[submodels.s]\nuse = {json.dumps(use)}\n')
+    spec = path if where == "submodels" else use
+    try:
+        load(spec) if where == "submodels" else mb.load(spec)
+    except mb.ModelError as exc:
+        assert SECRET[:16] not in str(exc), str(exc)
+        return
+    raise AssertionError(f"{use!r} was read")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+def test_special_files_in_use_are_refused(tmp_path):
+    os.mkfifo(tmp_path / "pipe.toml")
+    (tmp_path / "dir.toml").mkdir()
+    (tmp_path / "zero.toml").symlink_to("/dev/zero")
+    for name, says in (("pipe", "pipe.toml: is a FIFO"), ("dir", "dir.toml: is a directory"),
+                       ("zero", "'zero.toml' leaves the directory")):   # (a symlink is followed first)
+        path = tmp_path / f"use_{name}.toml"
+        path.write_text(f'[submodels.s]\nuse = "{name}.toml"\n')
+        with pytest.raises(mb.ModelError, match=says):
+            load(path)

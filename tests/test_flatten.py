@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.flatten import flatten
+from mbcomp.build.flatten import flatten
 
 
 def pendulum_with_torque():

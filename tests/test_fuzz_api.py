@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
+hypothesis = pytest.importorskip("hypothesis", exc_type=ImportError)
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
 import mbcomp as mb  # noqa: E402
@@ -114,6 +114,97 @@ def test_with_parameters_arguments(chain, values):
     assert _finite(changed.accelerations([0.3, 0.2], [0.0, 0.0]))
 
 
+# -- limits: sub-model trees, load specs and URDF joint graphs (issue "Limits") -----------------------
+import importlib.util  # noqa: E402
+import os  # noqa: E402
+from pathlib import Path  # noqa: E402
+from unittest import mock  # noqa: E402
+
+
+def tree_class(fanouts: list[int]) -> type:
+    """A Submodel whose instances add ``fanouts[0]`` instances of the next level, and so on."""
+    class Level(mb.Submodel):
+        def build(self, parent):
+            if not fanouts:
+                self.add(mb.Body("b", mass=1.0))
+                return
+            inner = tree_class(fanouts[1:])
+            for k in range(fanouts[0]):
+                self.add(inner(f"n{k}", parent=parent))
+    return Level
+
+
+@FUZZ
+@given(fanouts=st.lists(st.integers(0, 6), max_size=7))
+def test_submodel_trees_hold_their_instances_or_name_the_limit(fanouts):
+    """1 + f0 + f0 f1 + ... instances nested len(fanouts) + 1 deep: built exactly, or refused
+    with the limit named (instances checked as they are added, nesting first)."""
+    expected, level = 1, 1
+    for f in fanouts:
+        level *= f
+        expected += level
+    depth = 1 + len([f for f in np.cumprod(fanouts) if f > 0]) if fanouts else 1
+    model = mb.Model("tree")
+    with mock.patch.dict(os.environ, {"MBCOMP_MAX_INSTANCES": "300", "MBCOMP_MAX_NESTING": "5"}):
+        try:
+            model.add(tree_class(list(fanouts))("top", parent=model.ground.frame()))
+        except mb.ModelError as exc:
+            assert ("nest more than 5 deep" in str(exc) and depth > 5) or \
+                   ("more than 300 sub-model instances" in str(exc) and expected > 300), (str(exc), expected, depth)
+            return
+    assert expected <= 300 and depth <= 5 and model.registry.instances == expected
+
+
+load_specs = st.one_of(
+    st.text(max_size=12), st.sampled_from(["/dev/zero", "/dev/null", "/", ".", "/dev/stdin", "/proc/self/mem"]),
+    st.builds(lambda parts: "library:" + "/".join(parts),
+              st.lists(st.sampled_from(["..", ".", "", "/", "etc", "passwd", "parts", "link", "~", "\\", "c:"]),
+                       max_size=5)))
+
+
+@FUZZ
+@given(spec=load_specs)
+def test_load_specs_end_in_a_model_or_a_model_error(spec):
+    """Whatever names a model: a ModelError or a model; a ``library:`` spec only ever gives a
+    file inside a library folder."""
+    try:
+        model = mb.load(spec)
+    except mb.ModelError:
+        return
+    if spec.startswith("library:"):
+        folders = [d.resolve() for d in mb.library.library_dirs()]
+        assert any(Path(model.path).resolve().is_relative_to(d) for d in folders), model.path
+
+
+INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>'
+
+
+@pytest.mark.skipif(importlib.util.find_spec("yourdfpy") is None, reason="yourdfpy reads URDF")
+@settings(FUZZ, max_examples=60)
+@given(edges=st.lists(st.tuples(st.integers(0, 4), st.integers(0, 4), st.booleans()), max_size=6))
+def test_urdf_joint_graphs_load_exactly_when_they_are_trees(tmp_path_factory, edges):
+    """Random joints among 5 links: the model loads iff the joints form one tree (networkx's
+    arborescence test), with one body per moving joint; otherwise a ModelError, never a crash."""
+    import warnings
+    import networkx as nx
+    graph = nx.MultiDiGraph()
+    graph.add_nodes_from(range(5))
+    graph.add_edges_from((a, b) for a, b, _ in edges)
+    text = ['<?xml version="1.0"?>\n<robot name="r">'] + [f'<link name="l{k}">{INERTIAL}</link>' for k in range(5)]
+    text += [f'<joint name="j{k}" type="{"fixed" if fixed else "continuous"}"><parent link="l{a}"/>'
+             f'<child link="l{b}"/><axis xyz="0 0 1"/></joint>' for k, (a, b, fixed) in enumerate(edges)]
+    path = tmp_path_factory.mktemp("urdf") / "r.urdf"
+    path.write_text("".join(text) + "</robot>")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            model = mb.load(path)
+        except mb.ModelError:
+            assert not nx.is_arborescence(graph)
+            return
+    assert nx.is_arborescence(graph)
+    assert len(model.bodies) == sum(not fixed for _, _, fixed in edges)
+
 # -- limits: what a run keeps ----------------------------------------------------------------------------
 @FUZZ
 @given(max_samples=bad_or(st.integers(min_value=2, max_value=60)), t_end=st.floats(min_value=0.01, max_value=0.5))
@@ -126,7 +217,7 @@ def test_max_samples_bounds_what_a_run_keeps(chain, max_samples, t_end):
     except mb.ModelError as exc:
         assert "max_samples" in str(exc)
         return
-    limit = mb.checks.MAX_SAMPLES if max_samples is None else max_samples
+    limit = mb.core.checks.MAX_SAMPLES if max_samples is None else max_samples
     assert 2 <= len(res.t) <= limit and res.t[-1] == t_end and _finite(res.q, res.qd)
 
 
@@ -175,7 +266,7 @@ def test_coordinate_names_never_mix_columns_or_symbols(tmp_path, c1, c2):
 @FUZZ
 @given(text=st.text(max_size=12))
 def test_spreadsheet_cells_never_start_a_formula(text):
-    from mbcomp.result import spreadsheet_safe
+    from mbcomp.core.result import spreadsheet_safe
     safe = spreadsheet_safe(text)
     assert not safe.startswith(("=", "+", "-", "@", "\t", "\r"))
     assert safe == text or (safe == "'" + text)
@@ -186,7 +277,7 @@ def test_spreadsheet_cells_never_start_a_formula(text):
 def test_scene_json_holds_any_name(names):
     import json
     import re
-    from mbcomp.viewer.page import scene_json
+    from mbcomp.face.viewer.page import scene_json
     scene = {"title": names[0], "bodies": [{"name": n} for n in names]}
     data = scene_json(scene)
     assert not re.search("[<>&\u2028\u2029]", data)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.backend import c_compiler
+from mbcomp.codegen.backend import c_compiler
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("sympy", "scipy.integrate", "scipy.optimize", "scipy.linalg", "scipy.interpolate", "networkx", "matplotlib")
@@ -63,16 +63,16 @@ def test_a_cached_model_loads_and_runs_without_the_symbolic_and_scipy_layers(tmp
 
 
 def test_lazy_names_are_the_real_objects():
-    from mbcomp.batch import sweep
-    import mbcomp.io
-    assert mb.sweep is sweep and mb.io is mbcomp.io
+    from mbcomp.run.batch import sweep
+    import mbcomp.files.toml_model
+    assert mb.sweep is sweep and mb.io is mbcomp.files.toml_model
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         mb.no_such_name  # noqa: B018
 
 
 def test_dop853_coefficients_read_from_scipys_file_are_scipys():
     from scipy.integrate._ivp import dop853_coefficients as dop
-    from mbcomp.integrators import _dop853_from_file
+    from mbcomp.codegen.integrators import _dop853_from_file
     read = _dop853_from_file()
     assert read is not None and read is not dop
     for name in ("A", "B", "C", "E3", "E5", "D"):

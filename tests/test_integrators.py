@@ -99,7 +99,7 @@ class TestWhenCompiledLoopsApply:
 
 
 def test_compiled_jacobian_matches_finite_differences_of_the_accelerations(chain):
-    from mbcomp.integrators import compiled_jacobian
+    from mbcomp.codegen.integrators import compiled_jacobian
     jac = compiled_jacobian(chain.kernel, None)
     q, qd = np.array([0.3, -0.2, 0.5, 0.1]), np.array([1.0, 0.0, -2.0, 0.5])
     y = np.concatenate((q, qd))

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import integrators
-from mbcomp.backend import c_compiler
+from mbcomp.codegen import integrators
+from mbcomp.codegen.backend import c_compiler
 from conftest import pendulum_chain, time_limit
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.io import (Expression, TimeVector, dumps, library_models, load, parse_expression, save)
-from mbcomp.io import ExpressionError, evaluate
+from mbcomp.files.toml_model import (Expression, TimeVector, dumps, library_models, load, parse_expression, save)
+from mbcomp.files.toml_model import ExpressionError, evaluate
 
 MODELS = library_models()
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.kernel import Kernel
+from mbcomp.compiled.kernel import Kernel
 
 G, L, MASS = 9.81, 0.8, 2.0
 

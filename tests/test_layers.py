@@ -10,68 +10,36 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent / "mbcomp"
-#: Layer of each module or package prefix (the longest matching prefix wins).
+#: Layer of each folder of the package (docs/architecture.md): a module imports only from the
+#: folders of lower layers, and freely from its own folder.  The root holds only ``__init__``.
 LAYERS = {
-    # 0 foundation
-    "errors": 0, "services": 0,
-    # 1 core: plain data and helpers without model knowledge
-    "rotations": 1, "expressions": 1, "result": 1, "checks": 1, "library": 1, "params": 1, "shapes": 1, "progress": 1, "writing": 1, "names": 1,
-    "statemap": 1, "small_linalg": 1, "expressions_c": 1, "events_c": 1, "symbolic": 1, "normal_form": 1,
-    "components.primitives": 1, "components.expr": 1, "components._values": 1,
-    # 2 spec: components and the model builder
-    "components": 2, "model": 2, "compose": 2, "servo": 2,
-    # 3 build: flattening, topology, symbolic program, layouts; files <-> models
-    "flatten": 3, "topology": 3, "constraint_set": 3, "equations": 3, "layout": 3, "io": 3,
-    "fileform": 3, "c_sizes": 3,
-    "urdf": 3, "drive_equations": 3, "param_layout": 3, "recursive": 3,
-    # 4 generated code: printers, C templates, compilers, cache
-    "codegen": 4, "backend": 4, "cache": 4, "integrators": 4, "formulations.dae_c": 4,
-    "formulations.lagrange_c": 4, "fastcall": 4, "expressions_c": 4,
-    # 5 the compiled model and its numeric kernel
-    "compiler": 5, "kernel": 5,
-    # 6 formulations: how constraints and contacts enter
-    "formulations": 6, "impact": 6,
-    # 7 running: time stepping, events, sweeps, derived series, analyses
-    "simulate": 7, "drive_runtime": 7, "events": 7, "batch": 7, "post": 7, "analysis": 7,
-    # 8 the public facade
-    "system": 8,
-    # 9 user-facing output
-    "cli": 9, "cli_analyse": 9, "plotting": 9, "viewer": 9,
-    # 10 the package: re-exports everything and registers the services
-    "__init__": 10,
+    "core": 0,          # plain data and helpers without model knowledge: errors, rotations, params, Result
+    "spec": 1,          # what users write: components, the model builder, sub-models, shapes
+    "build": 2,         # spec -> flat model -> topology -> symbolic program; layouts
+    "files": 3,         # model files (TOML, URDF) <-> models; the library
+    "codegen": 4,       # printers, C templates, compilers, the cache
+    "compiled": 5,      # the compiled model and its numeric kernel
+    "formulations": 6,  # how constraints and contacts enter (lagrange, dae, impacts)
+    "run": 7,           # time stepping, events, sweeps, derived series
+    "analysis": 8,      # equilibrium, linearisation, modes, Jacobians, inverse dynamics
+    "api": 9,           # the public System facade
+    "face": 10,         # user-facing output: command line, plots, the 3D viewer
+    "__init__": 11,     # the package: re-exports everything and registers the services
 }
-#: Same-layer imports that are allowed (a package's own modules may always import each other).
-SAME_LAYER = {("kernel", "compiler"), ("backend", "codegen"), ("cache", "codegen"), ("backend", "cache"),
-              ("fastcall", "backend"), ("fastcall", "cache"),
-              ("formulations.base", "impact"), ("simulate", "events"), ("model", "components"),
-              ("compose", "components"), ("compose", "model"), ("model", "compose"), ("io", "topology"), ("io", "fileform"),
-              ("equations", "drive_equations"), ("equations", "param_layout"), ("equations", "recursive"),
-              ("simulate", "drive_runtime"),
-              ("servo", "components"), ("servo", "compose"), ("components._values", "params"), ("statemap", "rotations"), ("statemap", "small_linalg"),
-              ("cli", "cli_analyse"), ("result", "writing"),
-              ("formulations.lagrange_c", "integrators"), ("formulations.lagrange_c", "expressions_c"),
-              ("formulations.dae_c", "expressions_c")}
 #: Private names of a third-party library that a module reads on purpose: ``(file, name)``.
 #: Not a layering matter (the rule is about mbcomp's own modules); each is pinned by tests.
 THIRD_PARTY: dict[tuple[str, str], str] = {
-    ("mbcomp/symbolic.py", "_from_args"): "sympy's constructor from canonical arguments "
+    ("mbcomp/core/symbolic.py", "_from_args"): "sympy's constructor from canonical arguments "
     "(sympy.core.operations.AssocOp._from_args, which sympy's own code uses for this); "
     "tests/test_symbolic_build.py compares every such construction with sympy's result",
 }
 #: Known breaches being removed: ``(file, problem)``.  Do not add to this list.
 KNOWN: set[tuple[str, str]] = {
-    ('mbcomp/compiler.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/constraint_set.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/constraint_set.py', 'reads ._equations, a private name of another module'),
-    ('mbcomp/equations.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/equations.py', 'reads ._gap_equation, a private name of another module'),
-    ('mbcomp/equations.py', 'reads ._loads, a private name of another module'),
-    ('mbcomp/equations.py', 'reads ._potential, a private name of another module'),
-    ('mbcomp/flatten.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/model.py', 'imports mbcomp.flatten (layer 3) from layer 2'),
-    ('mbcomp/model.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/system.py', 'imports the private module mbcomp.components._values'),
-    ('mbcomp/topology.py', 'imports the private module mbcomp.components._values'),
+    ('mbcomp/build/constraint_set.py', 'reads ._equations, a private name of another module'),
+    ('mbcomp/build/equations.py', 'reads ._gap_equation, a private name of another module'),
+    ('mbcomp/build/equations.py', 'reads ._loads, a private name of another module'),
+    ('mbcomp/build/equations.py', 'reads ._potential, a private name of another module'),
+    ('mbcomp/spec/model.py', 'imports mbcomp.build.flatten (layer 2) from layer 1'),
 }
 
 
@@ -86,10 +54,12 @@ def modules() -> dict[str, Path]:
 
 
 def layer(name: str) -> int:
-    for prefix in sorted(LAYERS, key=len, reverse=True):
-        if name == prefix or name.startswith(prefix + "."):
-            return LAYERS[prefix]
-    raise AssertionError(f"module mbcomp.{name} has no layer: add it to LAYERS in tests/test_layers.py")
+    """The layer of module ``name`` (below mbcomp): the layer of its top folder."""
+    folder = "__init__" if name == "__main__" else name.split(".")[0]
+    if folder not in LAYERS or (folder != "__init__" and "." not in name and not (ROOT / folder).is_dir()):
+        raise AssertionError(f"module mbcomp.{name} is in no layer folder: move it into one of {sorted(LAYERS)} "
+                             "(tests/test_layers.py)")
+    return LAYERS[folder]
 
 
 @lru_cache(maxsize=None)
@@ -114,7 +84,7 @@ def imports(name: str, path: Path, known) -> list[tuple[str, list[str], int]]:
             else:
                 continue
             names = [a.name for a in node.names]
-            for n in names:  # "from . import codegen" imports the module mbcomp.codegen
+            for n in names:  # "from . import codegen" imports the module mbcomp.codegen.printer
                 sub = f"{target}.{n}" if target else n
                 if sub in known:
                     found.append((sub, [], node.lineno))
@@ -154,9 +124,7 @@ def violations() -> list[tuple[str, int, str]]:
         tree = syntax_tree(path)
         for target, names, line in imports(name, path, known):
             mine, theirs = layer(name), layer(target)
-            same_package = target.rpartition(".")[0] == name.rpartition(".")[0] != "" or target.startswith(name + ".")
-            listed = any(name == a and (target == b or target.startswith(b + ".")) for a, b in SAME_LAYER)
-            if theirs > mine or (theirs == mine and not same_package and not listed):
+            if theirs > mine:
                 problems.append((where, line, f"imports mbcomp.{target} (layer {theirs}) from layer {mine}"))
             outside = not target.startswith(name.rpartition(".")[0] + ".") or "." not in name
             if any(private(part) for part in target.split(".")) and outside:
@@ -185,16 +153,52 @@ def test_no_upward_import_and_no_private_access():
 
 
 @pytest.mark.parametrize("source, expected", [
-    ("from .system import System", "imports mbcomp.system (layer 8) from layer 1"),
+    ("from ..api.system import System", "imports mbcomp.api.system (layer 9) from layer 0"),
     ("from .errors import _hidden", "private name _hidden"),
     ("def f(x):\n    return x._secret", "reads ._secret"),
 ])
 def test_the_checker_catches(tmp_path, monkeypatch, source, expected):
     """The checker itself: a planted upward import, private import and private read are found."""
     package = tmp_path / "mbcomp"
-    package.mkdir()
-    (package / "errors.py").write_text("x = 1\n")
-    (package / "system.py").write_text("y = 2\n")
-    (package / "rotations.py").write_text(source + "\n")
+    for folder in ("core", "api"):
+        (package / folder).mkdir(parents=True)
+        (package / folder / "__init__.py").write_text("")
+    (package / "core" / "errors.py").write_text("x = 1\n")
+    (package / "api" / "system.py").write_text("y = 2\n")
+    (package / "core" / "rotations.py").write_text(source + "\n")
     monkeypatch.setitem(globals(), "ROOT", package)
     assert any(expected in what for _, _, what in violations())
+
+
+def test_a_module_outside_the_layer_folders_is_refused(tmp_path, monkeypatch):
+    """A new module at the package root has no layer: the root holds only ``__init__``."""
+    package = tmp_path / "mbcomp"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "helpers.py").write_text("")
+    monkeypatch.setitem(globals(), "ROOT", package)
+    with pytest.raises(AssertionError, match="mbcomp.helpers is in no layer folder"):
+        for name in modules():
+            layer(name)
+
+
+def test_the_root_holds_at_most_a_dozen_modules():
+    root_modules = [p.name for p in ROOT.glob("*.py")]
+    assert len(root_modules) <= 12, root_modules
+
+
+def test_the_contributor_page_shows_the_layer_map():
+    """docs/architecture.md's table lists every folder with its layer and every module in it."""
+    page = (ROOT.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    rows = {}
+    for line in page.splitlines():
+        if line.startswith("| ") and "`" in line and line.split("|")[1].strip().isdigit():
+            cells = [c.strip() for c in line.split("|")[1:-1]]
+            folder = cells[1].strip("`/") if cells[1].startswith("`") else "__init__"
+            rows[folder] = (int(cells[0]), cells[2])
+    assert {folder: number for folder, (number, _) in rows.items()} == LAYERS
+    for name in modules():
+        folder, _, rest = name.partition(".")
+        if folder != "__init__" and rest:
+            leaf = rest.split(".")[-1]
+            assert f"`{leaf}`" in rows[folder][1], f"docs/architecture.md: mbcomp.{name} is missing from {folder}/'s row"

@@ -6,7 +6,7 @@ import pytest
 
 import mbcomp as mb
 from conftest import fourbar, pendulum_chain
-from mbcomp.layout import BODY_ROW, Block, OutputLayout, body_fields
+from mbcomp.build.layout import BODY_ROW, Block, OutputLayout, body_fields
 
 
 def test_blocks_follow_each_other():

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mbcomp.backend import c_compiler
+from mbcomp.codegen.backend import c_compiler
 from conftest import pendulum_chain, primed_cache, run_in_new_process, templates_cache
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),

@@ -15,7 +15,7 @@ import pytest
 from scipy.integrate import trapezoid
 
 import mbcomp as mb
-from mbcomp.io import library_models, load
+from mbcomp.files.toml_model import library_models, load
 
 MODELS = library_models()
 ENERGY_RTOL = 1e-6
@@ -25,7 +25,7 @@ ENERGY_RTOL = 1e-6
 # Helpers
 # ----------------------------------------------------------------------------------------------
 def needs_constraints(model) -> bool:
-    from mbcomp.components import Constraint, Contact
+    from mbcomp.spec.components import Constraint, Contact
     return any(isinstance(c, (Constraint, Contact)) for c in model.components.values())
 
 
@@ -41,7 +41,7 @@ def compile_or_skip(model, **options):
             if "not yet supported" in text or "loop-closing joint must not carry coordinates" in text:
                 pytest.skip(f"{model.name}: {text}")
         raise
-    from mbcomp.components import Contact
+    from mbcomp.spec.components import Contact
     if any(isinstance(c, Contact) for c in model.components.values()) and not hasattr(system, "impact"):
         pytest.skip(f"{model.name}: contacts are not yet supported (System.impact missing)")
     return system
@@ -309,6 +309,20 @@ def check_servo_arm(model, system):
     assert abs(res["shoulder.angle"][-1] - 0.6) < 2e-3 and abs(res["elbow.angle"][-1] + 0.4) < 2e-3
     moved = system.simulate(6.0, [0.0, 0.0], t_eval=[6.0], parameters={"shoulder.target": 0.3})
     assert abs(moved["shoulder.angle"][-1] - 0.3) < 2e-3
+
+
+def check_pid_arm(model, system):
+    # Two `actuated_joint` parts: hanging straight down the arm is at rest, so nothing moves
+    # before the first step; then each PID's integral action holds its joint on its target.
+    # The step times are run-time parameters: moved later, the arm still rests at t = 0.45 s.
+    assert system.integration_path() == "compiled"
+    res = system.simulate(6.0, [0.0, 0.0], t_eval=[0.19, 0.45, 6.0])
+    assert abs(res["shoulder.angle"][0]) < 1e-9 and abs(res["shoulder.angle"][1]) > 0.1
+    assert abs(res["shoulder.angle"][-1] - 0.6) < 2e-3 and abs(res["elbow.angle"][-1] + 0.4) < 2e-3
+    later = system.simulate(6.0, [0.0, 0.0], t_eval=[0.45, 6.0],
+                            parameters={"shoulder.step_time": 0.5, "shoulder.target": 0.3})
+    assert abs(later["shoulder.angle"][0]) < 1e-9 and abs(later["elbow.angle"][0]) < 1e-9
+    assert abs(later["shoulder.angle"][-1] - 0.3) < 2e-3
 
 
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import backend, cache, checks
-from mbcomp.backend import c_compiler
+from mbcomp.codegen import backend, cache
+from mbcomp.core import checks
+from mbcomp.codegen.backend import c_compiler
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -115,12 +116,12 @@ class TestOutputSize:
         assert len(soft.simulate(1.0, [1e-3], [0.0], t_eval=np.linspace(0, 1, 1000)).t) == 1000
 
     def test_the_message_says_how_to_raise_the_limit(self):
-        with pytest.raises(mb.ModelError, match=r"3\.73e\+03 GiB.*limit of 2 GiB \(mbcomp\.checks\.MAX_OUTPUT_BYTES\)"):
+        with pytest.raises(mb.ModelError, match=r"3\.73e\+03 GiB.*limit of 2 GiB \(mbcomp\.core\.checks\.MAX_OUTPUT_BYTES\)"):
             checks.output_size(1e11, 5, "--samples 100000000000")
 
 
 def _cli(*args, cwd, env=None):
-    return subprocess.run([sys.executable, "-m", "mbcomp.cli", *args], cwd=cwd, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "mbcomp.face.cli", *args], cwd=cwd, capture_output=True, text=True,
                           timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})})
 
 
@@ -195,7 +196,7 @@ class TestCacheWithoutHome:
                 "m = mb.Model('p'); b = m.add(mb.Body('b', mass=1.0, com=(0, 0, -1)))\n"
                 "m.add(mb.Revolute('j', m.ground, b, axis='x'))\n"
                 "s = m.compile(backend='python')\n"
-                "from mbcomp import cache\n"
+                "from mbcomp.codegen import cache\n"
                 "print(json.dumps({'dir': str(cache.cache_dir()), 'q': float(s.simulate(0.1, [0.1]).q[-1, 0])}))\n")
         env = {"PATH": os.environ.get("PATH", ""), "PYTHONPATH": str(ROOT), "TMPDIR": str(tmp)}
         try:
@@ -256,6 +257,6 @@ class TestFullDisk:
                         "echo 'fatal error: error writing to /tmp/ccX.s: No space left on device' >&2\nexit 1\n")
         fake.chmod(0o755)
         monkeypatch.setattr(backend, "c_compiler", lambda: str(fake))
-        monkeypatch.setattr("mbcomp.compiler.c_compiler", lambda: str(fake))
+        monkeypatch.setattr("mbcomp.compiled.compiler.c_compiler", lambda: str(fake))
         with pytest.raises(mb.CompileError, match=r"the disk is full: cannot write \S*mbcomp-build-"):
             stiff_spring(5.0).compile(cache=False, backend="c")

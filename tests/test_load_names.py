@@ -4,8 +4,8 @@ from pathlib import Path
 import pytest
 
 import mbcomp as mb
-from mbcomp.io import dumps, library_models
-from mbcomp.library import resolve_model_path
+from mbcomp.files.toml_model import dumps, library_models
+from mbcomp.files.library import resolve_model_path
 
 
 def test_load_by_name_reads_the_library_file():
@@ -42,8 +42,8 @@ def test_extra_library_folder_from_environment(tmp_path, monkeypatch):
 
 
 def test_library_lists_models_parts_and_robots(capsys):
-    from mbcomp.cli import main
-    from mbcomp.library import library_parts, library_robots, read_description
+    from mbcomp.face.cli import main
+    from mbcomp.files.library import library_parts, library_robots, read_description
     assert main(["library"]) == 0
     out = capsys.readouterr().out
     parts = library_parts()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.backend import c_compiler
+from mbcomp.codegen.backend import c_compiler
 
 PATHS = [("scipy", "DOP853"), ("scipy", "RK45")] + ([("compiled", "DOP853"), ("compiled", "RK4")]
                                                    if c_compiler() else [])

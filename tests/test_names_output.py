@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.result import spreadsheet_safe
-from mbcomp.viewer.page import render_page, scene_json
+from mbcomp.core.result import spreadsheet_safe
+from mbcomp.face.viewer.page import render_page, scene_json
 
 ROOT = Path(__file__).resolve().parents[1]
 FULL = Path("/dev/full")
@@ -128,14 +128,14 @@ class TestFailedWrites:
 
     def test_plot(self, result, tmp_path):
         pytest.importorskip("matplotlib")
-        from mbcomp.plotting import work_precision_plot
+        from mbcomp.face.plotting import work_precision_plot
         rows = [{"label": "DOP853", "error": 1e-5, "time": 0.1}, {"label": "DOP853", "error": 1e-7, "time": 0.2}]
         with pytest.raises(mb.ModelError, match=r"savefig: cannot write '/dev/full': No space left on device"):
             work_precision_plot(rows, FULL)
 
     def test_animation(self, result, monkeypatch):
         pytest.importorskip("PIL")
-        from mbcomp import writing
+        from mbcomp.core import writing
         real = writing.write_file
 
         def to_full(path, data, what, **options):  # a .gif suffix, the bytes to a full disk
@@ -150,7 +150,7 @@ class TestFailedWrites:
 
     def test_a_close_error_is_reported(self, tmp_path, monkeypatch):
         # A write that only fails when the file is closed (a full disk, a network file system).
-        from mbcomp import writing
+        from mbcomp.core import writing
         real_open = open
 
         class FailsOnClose:
@@ -173,7 +173,7 @@ class TestFailedWrites:
     @pytest.mark.parametrize("option", ["--plot", "--out", "--html"])
     def test_the_command_line_fails_and_does_not_say_wrote(self, option, tmp_path):
         pytest.importorskip("matplotlib")
-        proc = subprocess.run([sys.executable, "-m", "mbcomp.cli", "run", "double_pendulum", "--t-end", "0.05",
+        proc = subprocess.run([sys.executable, "-m", "mbcomp.face.cli", "run", "double_pendulum", "--t-end", "0.05",
                                "--samples", "3", option, str(FULL)], cwd=tmp_path, capture_output=True, text=True,
                               timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
         assert proc.returncode == 1, proc.stdout + proc.stderr

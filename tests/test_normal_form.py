@@ -7,7 +7,7 @@ import random
 import pytest
 import sympy as sp
 
-from mbcomp.normal_form import _expanded, _reduced, canonical
+from mbcomp.face.normal_form import _expanded, _reduced, canonical
 
 a, b, x, y, z, w, u = sp.symbols("a b x y z w u", real=True)
 

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mbcomp import backend, compiler
-from mbcomp.backend import OUTPUT_FUNCTIONS, c_compiler
+from mbcomp.codegen import backend
+from mbcomp.compiled import compiler
+from mbcomp.codegen.backend import OUTPUT_FUNCTIONS, c_compiler
 from conftest import pendulum_chain, primed_cache, run_in_new_process, templates_cache
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.params import ParameterSpec, in_range, nonnegative, positive, spd_inertia, unit_vector, validate
+from mbcomp.core.params import ParameterSpec, in_range, nonnegative, positive, spd_inertia, unit_vector, validate
 
 
 class TestValidate:

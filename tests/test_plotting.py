@@ -14,8 +14,8 @@ import matplotlib.image as mpimg  # noqa: E402
 from PIL import Image  # noqa: E402
 
 import mbcomp as mb  # noqa: E402
-from mbcomp import plotting  # noqa: E402
-from mbcomp.plotting import animate_result, plot_result, render_frame, work_precision_plot  # noqa: E402
+from mbcomp.face import plotting  # noqa: E402
+from mbcomp.face.plotting import animate_result, plot_result, render_frame, work_precision_plot  # noqa: E402
 
 
 # ----------------------------------------------------------------------------------

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import simulate as simulate_module
-from mbcomp.progress import ProgressBar
+from mbcomp.run import simulate as simulate_module
+from mbcomp.core.progress import ProgressBar
 
 
 @pytest.fixture

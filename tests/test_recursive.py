@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp import recursive
-from mbcomp.io import library_models
+from mbcomp.build import recursive
+from mbcomp.files.toml_model import library_models
 
 from conftest import pendulum_chain
 
@@ -192,8 +192,8 @@ def test_pendulum_matches_the_closed_form():
 
 def structure(model):
     """The compiled structure (topology) of a model, without generating code."""
-    from mbcomp.flatten import flatten
-    from mbcomp.topology import build_topology
+    from mbcomp.build.flatten import flatten
+    from mbcomp.build.topology import build_topology
     return build_topology(flatten(model.flat()))
 
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.cli import describe_components
-from mbcomp.components.base import KINDS, ForceElement, component_class, kinds_in
-from mbcomp.io import dumps, load
-from mbcomp.params import ParameterSpec, nonnegative
+from mbcomp.face.cli import describe_components
+from mbcomp.spec.components.base import KINDS, ForceElement, component_class, kinds_in
+from mbcomp.files.toml_model import dumps, load
+from mbcomp.core.params import ParameterSpec, nonnegative
 
 
 @pytest.fixture

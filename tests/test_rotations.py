@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mbcomp.rotations import cross
-from mbcomp.statemap import StateMap
+from mbcomp.core.rotations import cross
+from mbcomp.core.statemap import StateMap
 
 
 def test_cross_gives_the_numbers_of_numpy_cross():

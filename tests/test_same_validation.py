@@ -13,9 +13,9 @@ except ModuleNotFoundError:  # pragma: no cover
     import tomli as tomllib
 
 import mbcomp as mb
-from mbcomp.components.base import KINDS
-from mbcomp.io import dumps, load
-from mbcomp.params import ParameterError, in_range, nonnegative, positive, spd_inertia
+from mbcomp.spec.components.base import KINDS
+from mbcomp.files.toml_model import dumps, load
+from mbcomp.core.params import ParameterError, in_range, nonnegative, positive, spd_inertia
 
 NAN = float("nan")
 

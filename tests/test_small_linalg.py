@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from mbcomp.small_linalg import orthonormal_basis, pivoted_qr, solve
+from mbcomp.core.small_linalg import orthonormal_basis, pivoted_qr, solve
 
 
 def matrices():

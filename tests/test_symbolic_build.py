@@ -5,8 +5,8 @@ from __future__ import annotations
 import sympy as sp
 import pytest
 
-from mbcomp.equations import cross
-from mbcomp.symbolic import dot, product, total
+from mbcomp.build.equations import cross
+from mbcomp.core.symbolic import dot, product, total
 
 t1, t2, t10, q0, u3 = sp.symbols("t1 t2 t10 q0 u3")
 
@@ -78,7 +78,7 @@ def _rodrigues(axis, c, s):
 def test_rotation_about_an_axis_is_rodrigues_formula(axis):
     """Written down directly about a coordinate axis, by the formula otherwise: the same
     expressions either way (so the same program and generated code)."""
-    from mbcomp.equations import exact, rotation_about
+    from mbcomp.build.equations import exact, rotation_about
     c, s = sp.symbols("c3 s3")
     exact_axis = [exact(a) for a in axis]
     for row, expected in zip(rotation_about(exact_axis, c, s), _rodrigues(exact_axis, c, s)):

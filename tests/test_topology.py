@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.topology import build_topology
+from mbcomp.build.topology import build_topology
 
 
 def body(name):
@@ -181,12 +181,12 @@ def _networkx_spanning_tree(model):
     """The body order and cut joints by networkx (the graph algorithms topology.py used to
     call): an independent computation of the same spanning tree."""
     import networkx as nx
-    from mbcomp.flatten import flatten
+    from mbcomp.build.flatten import flatten
     flat = flatten(model)
     tree, cut, parent_of = nx.DiGraph(), [], {}
     tree.add_node(flat.ground.name)
     for joint in (c for c in flat.components.values() if isinstance(c, mb.components.Joint)):
-        parent, child = mb.components._values.name_of(joint.parent), mb.components._values.name_of(joint.child)
+        parent, child = mb.components.values.name_of(joint.parent), mb.components.values.name_of(joint.child)
         joined = parent in tree and child in tree and nx.has_path(tree.to_undirected(as_view=True), parent, child)
         if child == flat.ground.name or child in parent_of or joined:
             cut.append(joint.name)
@@ -215,7 +215,7 @@ def _loop_model():
 @pytest.mark.parametrize("name", ["branched", "loops", "library"])
 def test_body_order_and_cut_joints_are_networkxs(name):
     from pathlib import Path
-    from mbcomp.flatten import flatten
+    from mbcomp.build.flatten import flatten
     if name == "library":
         models = [mb.load(p) for p in sorted((Path(__file__).resolve().parent.parent / "library").glob("*.toml"))]
     else:

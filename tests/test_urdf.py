@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.library import library_robots
+from mbcomp.files.library import library_robots
 
 # Checked without importing them (about 1 s): a test worker that runs none of these tests
 # does not pay for Pinocchio and yourdfpy at collection.
@@ -169,7 +169,7 @@ def test_visuals_become_shapes(small):
 
 
 def test_cli_runs_a_urdf_file(small, tmp_path):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     path = small[0]
     out = tmp_path / "small.html"
     with warnings.catch_warnings():
@@ -208,7 +208,7 @@ def test_limits_can_be_enforced(small):
     stops = {c.name: (c.lower, c.upper) for c in system.topology.components.values()
              if isinstance(c, mb.JointLimit)}
     assert stops == {"shoulder_limit": (-1.5, 1.5), "rail_limit": (-0.2, 0.2)}
-    from mbcomp.viewer import build_scene
+    from mbcomp.face.viewer import build_scene
     assert build_scene(system.simulate(0.05, [0.0, 0.0, 0.0]))["contacts"] == []   # stops are no spatial marks
     # Thrown against its upper stop, the shoulder stays within it (inelastic stop).
     res = system.simulate(0.5, [1.4, 0.0, 0.0], [3.0, 0.0, 0.0])

@@ -9,9 +9,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import mbcomp as mb
-from mbcomp.viewer import Viewer, build_scene, render_page
-from mbcomp.viewer.page import CSP, three_script
-from mbcomp.viewer.scene import frame_times, resample
+from mbcomp.face.viewer import Viewer, build_scene, render_page
+from mbcomp.face.viewer.page import CSP, three_script
+from mbcomp.face.viewer.scene import frame_times, resample
 
 
 def decode(scene, key="poses"):
@@ -188,7 +188,7 @@ def test_bad_view_arguments(pendulum):
 
 
 def test_cli_writes_the_page(tmp_path):
-    from mbcomp.cli import main
+    from mbcomp.face.cli import main
     out = tmp_path / "bb.html"
     assert main(["run", "bouncing_ball", "--t-end", "0.5", "--html", str(out)]) == 0
     assert out.stat().st_size > 500_000 and "bouncing_ball" in out.read_text()[:2000]
@@ -205,7 +205,7 @@ def test_unreadable_mesh_falls_back_to_the_stick_figure(tmp_path):
 
 
 def test_mesh_shape_from_a_file(tmp_path):
-    trimesh = pytest.importorskip("trimesh")
+    trimesh = pytest.importorskip("trimesh", exc_type=ImportError)
     path = tmp_path / "tetra.stl"
     trimesh.Trimesh(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
                     faces=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]).export(path)

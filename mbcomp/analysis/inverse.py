@@ -5,8 +5,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import ModelError, SimulationError, format_state
-from .space import joint_speed_indices, model_forces, speed_names
+from mbcomp.core.errors import ModelError, SimulationError, format_state
+from mbcomp.analysis.space import joint_speed_indices, model_forces, speed_names
 
 
 class GeneralisedForces(np.ndarray):

@@ -5,8 +5,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ModelError
-from .space import speed_names
+from mbcomp.core.errors import ModelError
+from mbcomp.analysis.space import speed_names
 
 
 def _resolve(system, frame: Any, point: Any):

@@ -6,8 +6,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import SimulationError, format_state
-from .space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
+from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.analysis.space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
+from mbcomp.analysis.space import drive_state_vector
 
 #: Relative step of the central differences (fourth order: truncation ~ h^4, rounding ~ eps/h).
 STEP = 1e-3
@@ -21,7 +22,8 @@ class Linearization:
     other than ``Ball`` these are the coordinates themselves) then their speeds, named
     ``"<speed>_dot"``, then the states of drive elements (``"component.state"``).  ``inputs``: the speeds whose generalised forces are inputs (N or N m).
     ``basis`` (n, k) maps independent speed (or position) deviations to all speeds, so a
-    deviation of all coordinates is ``basis @ z[:k]``.  ``q``, ``qd``, ``t``: the operating point.
+    deviation of all coordinates is ``basis @ z[:k]``.  ``q``, ``qd``, ``t``: the operating point;
+    ``operating_states``: the drive states there (``system.extra_states`` order).
     """
 
     A: np.ndarray
@@ -34,6 +36,7 @@ class Linearization:
     qd: np.ndarray
     t: float = 0.0
     state_derivative: np.ndarray = field(default=None, repr=False)
+    operating_states: np.ndarray = field(default=None, repr=False)
 
     @property
     def C(self) -> np.ndarray:
@@ -46,14 +49,39 @@ class Linearization:
 
     def to_control(self):
         """A ``control.StateSpace`` (python-control, optional) with the state and input names;
-        outputs are the states.  Same as ``control.ss(lin.A, lin.B, lin.C, lin.D)``."""
+        outputs are the states.  Same as ``control.ss(lin.A, lin.B, lin.C, lin.D)``.
+
+        python-control refuses ``'.'`` in signal names, so the hierarchical names of
+        sub-models (``"shoulder.angle"``) are given to it as ``control_names()`` maps them
+        (``"shoulder_angle"``); the returned object carries both directions of that map:
+        ``sys_c.mbcomp_names`` (control name -> mbcomp name) and ``sys_c.control_names``
+        (mbcomp name -> control name)."""
         try:
             import control
         except ImportError:
             raise ImportError("to_control() needs python-control (pip install control); without it use "
                               "lin.A, lin.B, lin.C, lin.D directly") from None
-        return control.ss(self.A, self.B, self.C, self.D, states=list(self.states),
-                          inputs=list(self.inputs), outputs=list(self.states))
+        names = self.control_names()
+        out = control.ss(self.A, self.B, self.C, self.D, states=[names[s] for s in self.states],
+                         inputs=[names[u] for u in self.inputs], outputs=[names[s] for s in self.states])
+        out.control_names = dict(names)
+        out.mbcomp_names = {c: m for m, c in names.items()}
+        return out
+
+    def control_names(self) -> dict[str, str]:
+        """``{mbcomp name: python-control name}`` for the states and inputs: every ``'.'``
+        becomes ``'_'``; a name that would then clash with another gets ``_2``, ``_3``, ..."""
+        mapping: dict[str, str] = {}
+        used: set[str] = set()
+        for name in dict.fromkeys(tuple(self.states) + tuple(self.inputs)):
+            base = name.replace(".", "_")
+            candidate, k = base, 1
+            while candidate in used:
+                k += 1
+                candidate = f"{base}_{k}"
+            used.add(candidate)
+            mapping[name] = candidate
+        return mapping
 
 
 def _central(fun, z0: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -85,8 +113,11 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     forces).  ``inputs``: joints (all their speeds) or speeds whose generalised forces are inputs.
 
     States of drive elements (motor currents, PID integrals; ``system.extra_states``) follow
-    the mechanical ones in the state vector, at the values ``states`` (``{name: value}``,
-    default 0).
+    the mechanical ones in the state vector (rows and columns of ``A``), at the values
+    ``states`` (``{name: value}`` or an array in ``extra_states`` order); when not given, the
+    values at which they rest at ``(q, qd)`` (``mbcomp.analysis.rest_states``: exact at an
+    equilibrium, so a PID-held pose needs no integral computed by hand).  ``.operating_states``
+    holds the values used.
     """
     q = system.state_vector(q)
     n = len(speed_names(system))
@@ -102,7 +133,13 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     input_idx = [] if inputs is None else joint_speed_indices(system, inputs, "inputs")
 
     extra_names = tuple(getattr(system, "extra_states", ()))
-    w0 = system.extra_state_vector(states) if extra_names else np.zeros(0)
+    if not extra_names:
+        w0 = np.zeros(0)
+    elif states is None:
+        from mbcomp.analysis.equilibrium import rest_states
+        w0 = rest_states(system, q, v0, t, tau)
+    else:
+        w0 = drive_state_vector(system, states)
 
     def derivative(z: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
         qz, x = chart.position(z[:k])
@@ -135,4 +172,5 @@ def linearize(system, q: Any, qd: Any = None, t: float = 0.0, inputs: Sequence[s
     ind_names = tuple(names[i] for i in ind)
     return Linearization(A=A, B=B, states=ind_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
                          inputs=tuple(names[i] for i in input_idx), independent=ind_names,
-                         basis=chart.basis(q), q=q, qd=v0, t=float(t), state_derivative=f0)
+                         basis=chart.basis(q), q=q, qd=v0, t=float(t), state_derivative=f0,
+                         operating_states=w0)

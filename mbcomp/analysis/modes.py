@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from ..errors import SimulationError, format_state
-from .linear import Linearization, linearize
+from mbcomp.core.errors import SimulationError, format_state
+from mbcomp.analysis.linear import Linearization, linearize
 
 #: An eigenvalue counts as growing when its real part exceeds this fraction of the largest
 #: eigenvalue magnitude (or of 1/s): the derivatives carry ~1e-10 relative error.
@@ -58,17 +58,27 @@ class Modes:
 def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -> Modes:
     """Modes of the motion about the equilibrium ``q`` (``tau``: generalised forces held constant,
     e.g. ``system.holding_forces(q)`` to study a pose held by constant torques; ``states``: values
-    of drive-element states, whose eigenvalues join the mechanical ones).
-    ``SimulationError`` when ``q`` is not an equilibrium (find one with ``equilibrium``)."""
+    of drive-element states, default those at rest there (``rest_states``); their eigenvalues
+    join the mechanical ones, so a model with drive states has more modes than degrees of
+    freedom).  ``SimulationError`` when ``q`` is not an equilibrium (find one with ``equilibrium``)."""
     lin = linearize(system, q, None, t=t, tau=tau, states=states)
     k = len(lin.independent)
     A = lin.A
-    stiffness = max(1.0, float(np.linalg.norm(A[k:, :k]))) if k else 1.0
-    accel = lin.state_derivative[k:]
-    if np.max(np.abs(accel), initial=0.0) > EQUILIBRIUM_TOLERANCE * stiffness:
-        raise SimulationError(f"q = {format_state(lin.q)} is not an equilibrium (accelerations "
-                              f"{format_state(accel)}): find one with equilibrium(), or hold the pose with "
-                              f"tau=holding_forces(q)")
+    stiffness = max(1.0, float(np.linalg.norm(A[k:2 * k, :k]))) if k else 1.0
+    accel = lin.state_derivative[k:2 * k]
+    rates = lin.state_derivative[2 * k:]
+    # a drive state nothing depends on (a PID integral with ki = 0: its column of A is zero)
+    # drifts without effect; the others must rest too
+    size = max(1.0, float(np.max(np.abs(A), initial=0.0)))
+    acting = np.any(np.abs(A[:, 2 * k:]) > 1e-12 * size, axis=0) if rates.size else np.zeros(0, dtype=bool)
+    rate_scale = max(1.0, float(np.linalg.norm(A[2 * k:]))) if rates.size else 1.0
+    if (np.max(np.abs(accel), initial=0.0) > EQUILIBRIUM_TOLERANCE * stiffness
+            or np.max(np.abs(rates[acting]), initial=0.0) > EQUILIBRIUM_TOLERANCE * rate_scale):
+        moving = f"accelerations {format_state(accel)}"
+        if rates.size:
+            moving += f", drive state rates {format_state(rates)}"
+        raise SimulationError(f"q = {format_state(lin.q)} is not an equilibrium ({moving}): find one with "
+                              f"equilibrium(), or hold the pose with tau=holding_forces(q)")
     values, vectors = scipy.linalg.eig(A) if k else (np.zeros(0, complex), np.zeros((0, 0), complex))
     scale = max(1.0, float(np.max(np.abs(values), initial=0.0)))
     groups = _pair(values, vectors[:k] if k else vectors, scale)
@@ -89,7 +99,7 @@ def modes(system, q: Any, t: float = 0.0, tau: Any = None, states: Any = None) -
     damping = np.where(magnitude > 1e-12 * scale, -reps.real / np.where(magnitude > 0, magnitude, 1.0), 0.0)
     damping = np.where(np.abs(damping) < 1e-9, 0.0, damping)  # finite-difference noise on undamped modes
     stable = bool(np.all(values.real <= STABILITY_TOLERANCE * scale))
-    from .space import speed_names
+    from mbcomp.analysis.space import speed_names
     return Modes(frequencies=magnitude / (2 * np.pi), damping_ratios=damping, eigenvalues=reps,
                  shapes=shape_matrix, stable=stable, all_eigenvalues=values,
                  speeds=speed_names(system), linearization=lin)

@@ -13,13 +13,14 @@ speeds from ``J v + g_t = 0``.  ``Chart`` holds that split.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import ModelError, SimulationError, format_state
-from ..formulations.base import independent_rows
-from ..formulations.lagrange import partition
+from mbcomp.core.errors import ModelError, SimulationError, format_state
+from mbcomp.formulations.base import independent_rows
+from mbcomp.formulations.lagrange import partition
 
 #: Newton tolerance for the dependent tangent coordinates (m or rad).
 CHART_TOLERANCE = 1e-13
@@ -107,13 +108,30 @@ def force_vector(system, tau: Any, t: float, q: np.ndarray, v: np.ndarray) -> np
     return arr
 
 
-def model_forces(system, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def model_forces(system, q: np.ndarray, v: np.ndarray, t: float = 0.0, states: Any = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """``(M, f)``: the tree's mass matrix and generalised forces, with the forces of drive
-    elements (constant drive torques, friction, motor currents at zero) included in ``f``."""
+    elements (constant drive torques, friction, motors and PIDs at the drive states ``states``,
+    default 0) included in ``f``."""
     M, f = system.tree_dynamics(q, v, t)
     if getattr(system, "has_drives", False):
-        f = f + system.drive_outputs(t, q, v, np.zeros(len(system.extra_states)))[0]
+        f = f + system.drive_outputs(t, q, v, drive_state_vector(system, states))[0]
     return M, f
+
+
+def drive_state_vector(system, states: Any) -> np.ndarray:
+    """Drive states (None: 0; ``{name: value}``; or an array in ``system.extra_states`` order)
+    as a checked float array."""
+    names = tuple(getattr(system, "extra_states", ()))
+    if states is None or isinstance(states, Mapping):
+        return system.extra_state_vector(states) if names else np.zeros(0)
+    try:
+        z = np.asarray(states, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ModelError("states", f"must be {len(names)} numbers {list(names)} or a dict, got {states!r}") from None
+    if z.shape != (len(names),) or not np.all(np.isfinite(z)):
+        raise ModelError("states", f"must be {len(names)} finite numbers {list(names)}, got {states!r}")
+    return z
 
 
 class Chart:

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import ModelError
-from .base import Formulation
-from .dae import DaeFormulation
-from .lagrange import LagrangeFormulation
+from mbcomp.core.errors import ModelError
+from mbcomp.formulations.base import Formulation
+from mbcomp.formulations.dae import DaeFormulation
+from mbcomp.formulations.lagrange import LagrangeFormulation
 
 FORMULATIONS = {"lagrange": LagrangeFormulation, "dae": DaeFormulation}
 

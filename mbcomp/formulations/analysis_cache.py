@@ -19,8 +19,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .. import cache, constraint_set
-from .base import FormulationInfo, analyse
+from mbcomp.codegen import cache
+from mbcomp.build import constraint_set
+from mbcomp.formulations.base import FormulationInfo, analyse
 
 #: The cached entry's file suffix.
 SUFFIX = ".analysis.json"

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from ..constraint_set import ConstraintValues
-from ..errors import format_state, ModelError, SimulationError
-from ..small_linalg import orthonormal_basis, pivoted_qr
+from mbcomp.build.constraint_set import ConstraintValues
+from mbcomp.core.errors import format_state, ModelError, SimulationError
+from mbcomp.core.small_linalg import orthonormal_basis, pivoted_qr
 
 #: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
 #: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of

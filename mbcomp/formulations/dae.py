@@ -6,10 +6,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..errors import ModelError, SimulationError
-from .base import Formulation, Workspace
-from .dae_c import c_dae_accelerations
-from .dae_compiled import DaeRows, DaeRun, motor_programs
+from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.formulations.base import Formulation, Workspace
+from mbcomp.formulations.dae_c import c_dae_accelerations
+from mbcomp.formulations.dae_compiled import DaeRows, DaeRun, motor_programs
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).

@@ -10,7 +10,7 @@ contact watch reads the held contacts' normal forces from them.
 """
 from __future__ import annotations
 
-from ..c_sizes import DAE_SPEC_LONGS
+from mbcomp.build.c_sizes import DAE_SPEC_LONGS
 
 #: Row kinds of the configured KKT rows (the first entry of each row's spec).
 ROW_GEOMETRIC, ROW_MOTOR, ROW_CONTACT = 0, 1, 2
@@ -30,8 +30,8 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     is ``dae_time`` (set by the integrators before each call).  Offsets into the packed
     outputs come from the ``OutputLayout`` defines.
     """
-    from ..events_c import C_BRENTQ, MAX_ITERATIONS
-    from ..expressions_c import C_PROGRAM
+    from mbcomp.codegen.events_c import C_BRENTQ, MAX_ITERATIONS
+    from mbcomp.codegen.expressions_c import C_PROGRAM
     return f"""
 #ifdef DAE_LOOP
 #define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)

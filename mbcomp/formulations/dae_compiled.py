@@ -17,10 +17,10 @@ import ctypes
 
 import numpy as np
 
-from ..errors import ModelError, SimulationError
-from ..expressions_c import compile_position
-from .compiled_watch import ContactWatching, EventStepFunctions, pointer
-from .dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
+from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.codegen.expressions_c import compile_position
+from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
+from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
 
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 

@@ -3,11 +3,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SimulationError, TrialStateError, format_state
-from ..small_linalg import pivoted_qr, solve
-from ..statemap import Chart
-from .base import ASSEMBLY_TOLERANCE, Formulation, Workspace
-from .lagrange_c import c_lagrange
+from mbcomp.core.errors import SimulationError, TrialStateError, format_state
+from mbcomp.core.small_linalg import pivoted_qr, solve
+from mbcomp.core.statemap import Chart
+from mbcomp.formulations.base import ASSEMBLY_TOLERANCE, Formulation, Workspace
+from mbcomp.formulations.lagrange_c import c_lagrange
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
 CHART_LIMIT = 1.0
@@ -195,8 +195,8 @@ class LagrangeFormulation(Formulation):
             return "the lagrange formulation steps constrained models with ball or free joints in Python"
         if self.compiled.drives.nz and topology.contacts:
             return "the lagrange formulation steps models with drive states and contacts in Python"
-        from ..expressions_c import NotCompilable
-        from .lagrange_compiled import motor_programs
+        from mbcomp.codegen.expressions_c import NotCompilable
+        from mbcomp.formulations.lagrange_compiled import motor_programs
         try:
             motor_programs(self.constraints)  # positions given as expressions of t run in C
         except NotCompilable as exc:
@@ -211,7 +211,7 @@ class LagrangeFormulation(Formulation):
         """The Python side of the compiled reduced loop (None without constraints)."""
         if self.constraints is None:
             return None
-        from .lagrange_compiled import ReducedRun
+        from mbcomp.formulations.lagrange_compiled import ReducedRun
         return ReducedRun(self, kernel, lib, q0, qd0, tau)
 
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=(), partition_hint=None, multipliers=True):

@@ -33,8 +33,8 @@ from __future__ import annotations
 # failed or the dependent block is singular; like ``TrialStateError``, the step is retried
 # from the last accepted state); PAUSED, after an accepted step for Python to look at the
 # partition.
-from ..expressions_c import C_PROGRAM
-from ..integrators import EVENT, PAUSED, TRIAL_FAILED
+from mbcomp.codegen.expressions_c import C_PROGRAM
+from mbcomp.codegen.integrators import EVENT, PAUSED, TRIAL_FAILED
 
 
 def c_lagrange(nv: int, ng: int) -> str:

@@ -25,10 +25,10 @@ import ctypes
 
 import numpy as np
 
-from ..errors import SimulationError
-from ..expressions_c import NotCompilable, programs as compile_programs
-from ..integrators import PAUSED, TRIAL_FAILED
-from .compiled_watch import ContactWatching, EventStepFunctions, pointer
+from mbcomp.core.errors import SimulationError
+from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
+from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED
+from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
 MAX_RETRIES = 10

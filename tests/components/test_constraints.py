@@ -12,7 +12,7 @@ import scipy.optimize
 
 import mbcomp as mb
 from conftest import assert_close, bar, fourbar
-from mbcomp.components.constraints import normals
+from mbcomp.spec.components.constraints import normals
 
 FORMULATIONS = ("lagrange", "dae")
 G = 9.81

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.rotations import axis_angle
+from mbcomp.core.rotations import axis_angle
 from tests.conftest import G, assert_close, bar
 
 

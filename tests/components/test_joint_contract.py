@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.components import Joint
+from mbcomp.spec.components import Joint
 from conftest import assert_close
 
 

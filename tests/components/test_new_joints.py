@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.cli import main as cli_main
-from mbcomp.io import dumps, load
-from mbcomp.rotations import axis_angle, rot_x, rot_y, rot_z
+from mbcomp.face.cli import main as cli_main
+from mbcomp.files.toml_model import dumps, load
+from mbcomp.core.rotations import axis_angle, rot_x, rot_y, rot_z
 
 POINTS = dict(parent_point=(0.1, 0.2, 0.3), child_point=(-0.05, 0.0, 0.1))
 

@@ -171,7 +171,7 @@ def test_analyse_returns_its_findings_and_changes_nothing():
     import dataclasses
     from mbcomp.formulations import DaeFormulation
     from mbcomp.formulations.base import FormulationInfo, analyse
-    from mbcomp.kernel import Kernel
+    from mbcomp.compiled.kernel import Kernel
     system = fourbar().compile("dae")
     compiled = system.kernel.compiled
     fresh = DaeFormulation(compiled)

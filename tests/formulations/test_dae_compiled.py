@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import mbcomp as mb
-from mbcomp.expressions import Expression, parse_expression
-from mbcomp.expressions_c import STACK, compile_position, compile_program, run_program
+from mbcomp.core.expressions import Expression, parse_expression
+from mbcomp.codegen.expressions_c import STACK, compile_position, compile_program, run_program
 
 LIBRARY = Path(__file__).resolve().parents[2] / "library"
 
@@ -149,7 +149,7 @@ def test_python_callable_motor_steps_in_python():
 
 def test_a_step_hook_stops_a_compiled_contact_run():
     """Interrupts reach the compiled stretches between contact events as in other loops."""
-    from mbcomp.integrators import step_hook
+    from mbcomp.codegen.integrators import step_hook
     system = mb.load(LIBRARY / "pendulum_wall.toml").compile(formulation="dae")
     with step_hook(lambda t: t > 1.0, interval=0.0):
         with pytest.raises(mb.SimulationError, match="stopped at t = .* by a step hook"):

@@ -11,7 +11,7 @@ import pytest
 import mbcomp as mb
 from conftest import fourbar
 from mbcomp.formulations.lagrange_compiled import ReducedRun
-from mbcomp.io import load
+from mbcomp.files.toml_model import load
 
 LIBRARY = __import__("pathlib").Path(__file__).resolve().parents[2] / "library"
 

@@ -12,8 +12,8 @@ from scipy.integrate import simpson
 
 import mbcomp as mb
 from conftest import fourbar
-from mbcomp.expressions_c import STACK, NotCompilable, programs as stack_programs, run_program
-from mbcomp.expressions import Expression, differentiate, parse_expression
+from mbcomp.codegen.expressions_c import STACK, NotCompilable, programs as stack_programs, run_program
+from mbcomp.core.expressions import Expression, differentiate, parse_expression
 
 G, L, MASS = 9.81, 0.8, 2.0
 LAW = "0.4*sin(3*t) + 0.2*t**2 - 0.1"

@@ -8,8 +8,8 @@ import math
 import pytest
 
 import mbcomp as mb
-from mbcomp.expressions import parse_expression
-from mbcomp.expressions_c import NotCompilable, compile_program, programs, run_program
+from mbcomp.core.expressions import parse_expression
+from mbcomp.codegen.expressions_c import NotCompilable, compile_program, programs, run_program
 
 
 def value(text: str, t: float) -> float:

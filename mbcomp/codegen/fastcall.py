@@ -1,0 +1,498 @@
+"""Fast public evaluation calls: accelerations, mass matrix and body kinematics from Python
+at a fraction of a microsecond above the generated code itself.
+
+A call through ``ctypes`` costs about a microsecond per argument (conversions, pointer
+objects), several times the generated dynamics of a small model.  So where a C compiler and
+Python's headers (``Python.h``, and numpy's) are available, a tiny CPython extension,
+independent of any model, is built once per toolchain and kept in the code cache.  Its
+``Calls`` object holds the addresses of one compiled model's functions and one parameter
+vector, and takes the user's arrays as they are: a float64, aligned, C-contiguous,
+native-order 1-D ndarray of the right length with finite entries goes straight to the
+generated code; anything else (lists, dicts, other dtypes, wrong lengths, NaN) makes the
+call return ``None`` and the caller takes its checked path, which converts or raises a
+clear ``ModelError``.  Non-finite results and singular mass matrices also return ``None``,
+so the checked path explains them.  The extension keeps the GIL (calls take microseconds)
+and uses only its stack and fresh output arrays: concurrent calls from threads are safe.
+
+Without the headers, ``CtypesCalls`` gives the same interface through ``ctypes``.
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import math
+import importlib.machinery
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mbcomp.codegen import backend, cache
+from mbcomp.build.layout import BODY_FIELDS
+
+MODULE = "mbcomp_fastcall"
+#: Flags of the extension (part of its cache key).
+FLAGS = ("-O2", "-shared", "-fPIC")
+
+SOURCE = r"""
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+/* The generated functions: int accelerations(q, qd, p, u, tau, qdd, work) and
+   void name(q, qd, p, u, out) (dynamics, kinematics). */
+typedef int (*acc_fn)(const double *, const double *, const double *, const double *, const double *,
+                      double *, double *);
+typedef void (*out_fn)(const double *, const double *, const double *, const double *, double *);
+
+#define STACK_DOUBLES 2048
+
+typedef struct {
+    PyObject_HEAD
+    acc_fn acc;
+    out_fn dyn, kin;
+    PyObject *p_obj, *owner;
+    const double *p;
+    double *zeros;  /* nv zeros: the speeds when qd is None; also the (empty) inputs */
+    Py_ssize_t nq, nv, dyn_size, mm_off, kin_size, bodies_off, body_row, rot_off, origin_off, vel_off, n_bodies;
+} Calls;
+
+/* The data of an exact float64 ndarray of shape (n,), aligned, C-contiguous, native byte
+   order, every entry finite; NULL for anything else (the caller's checked path decides). */
+static const double *vector(PyObject *o, Py_ssize_t n) {
+    if (!PyArray_CheckExact(o)) return NULL;
+    PyArrayObject *a = (PyArrayObject *)o;
+    if (PyArray_NDIM(a) != 1 || PyArray_DIM(a, 0) != n || PyArray_TYPE(a) != NPY_DOUBLE
+        || !PyArray_ISCARRAY_RO(a) || !PyArray_ISNOTSWAPPED(a)) return NULL;
+    const double *d = (const double *)PyArray_DATA(a);
+    for (Py_ssize_t i = 0; i < n; ++i) if (!isfinite(d[i])) return NULL;
+    return d;
+}
+
+static int all_finite(const double *v, Py_ssize_t n) {
+    for (Py_ssize_t i = 0; i < n; ++i) if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static PyObject *new_vector(Py_ssize_t n) {
+    npy_intp dims[1] = {n};
+    return PyArray_SimpleNew(1, dims, NPY_DOUBLE);
+}
+
+#define DATA(o) ((double *)PyArray_DATA((PyArrayObject *)(o)))
+
+static int arity(Py_ssize_t nargs, Py_ssize_t want, const char *name) {
+    if (nargs == want) return 1;
+    PyErr_Format(PyExc_TypeError, "%s takes %zd arguments (%zd given)", name, want, nargs);
+    return 0;
+}
+
+/* accelerations(q, qd) -> qdd (nv,), or None */
+static PyObject *calls_accelerations(Calls *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (!arity(nargs, 2, "accelerations")) return NULL;
+    const double *q = vector(args[0], self->nq);
+    const double *qd = args[1] == Py_None ? self->zeros : vector(args[1], self->nv);
+    if (!q || !qd) Py_RETURN_NONE;
+    PyObject *out = new_vector(self->nv);
+    if (!out) return NULL;
+    double stack[STACK_DOUBLES], *work = stack;
+    if (self->dyn_size > STACK_DOUBLES && !(work = malloc(sizeof(double) * self->dyn_size))) {
+        Py_DECREF(out);
+        return PyErr_NoMemory();
+    }
+    const int status = self->acc(q, qd, self->p, self->zeros, NULL, DATA(out), work);
+    if (work != stack) free(work);
+    if (status || !all_finite(DATA(out), self->nv)) {
+        Py_DECREF(out);
+        Py_RETURN_NONE;
+    }
+    return out;
+}
+
+/* mass_matrix(q) -> M (nv, nv) at zero speeds, or None */
+static PyObject *calls_mass_matrix(Calls *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (!arity(nargs, 1, "mass_matrix")) return NULL;
+    const double *q = vector(args[0], self->nq);
+    if (!q) Py_RETURN_NONE;
+    const Py_ssize_t n = self->nv;
+    npy_intp dims[2] = {n, n};
+    PyObject *out = PyArray_SimpleNew(2, dims, NPY_DOUBLE);
+    if (!out) return NULL;
+    double stack[STACK_DOUBLES], *work = stack;
+    if (self->dyn_size > STACK_DOUBLES && !(work = malloc(sizeof(double) * self->dyn_size))) {
+        Py_DECREF(out);
+        return PyErr_NoMemory();
+    }
+    self->dyn(q, self->zeros, self->p, self->zeros, work);
+    const double *tri = work + self->mm_off;
+    double *M = DATA(out);
+    int finite = all_finite(tri, n * (n + 1) / 2);
+    for (Py_ssize_t i = 0, k = 0; i < n; ++i)
+        for (Py_ssize_t j = 0; j <= i; ++j, ++k) M[i * n + j] = M[j * n + i] = tri[k];
+    if (work != stack) free(work);
+    if (!finite) {
+        Py_DECREF(out);
+        Py_RETURN_NONE;
+    }
+    return out;
+}
+
+/* check(q, qd) -> True when both would take the fast path (qd may be None) */
+static PyObject *calls_check(Calls *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (!arity(nargs, 2, "check")) return NULL;
+    if (vector(args[0], self->nq) && (args[1] == Py_None || vector(args[1], self->nv))) Py_RETURN_TRUE;
+    Py_RETURN_FALSE;
+}
+
+/* body(q, qd, index, local) -> (position, velocity, rotation, angular velocity, kinematics)
+   of a body point (local: float64 (3,), body frame), all world frame; or None */
+static PyObject *calls_body(Calls *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (!arity(nargs, 4, "body")) return NULL;
+    const double *q = vector(args[0], self->nq);
+    const double *qd = args[1] == Py_None ? self->zeros : vector(args[1], self->nv);
+    const double *l = vector(args[3], 3);
+    const Py_ssize_t index = PyLong_AsSsize_t(args[2]);
+    if (index == -1 && PyErr_Occurred()) return NULL;
+    if (!q || !qd || !l || index < 0 || index >= self->n_bodies) Py_RETURN_NONE;
+    PyObject *kin = new_vector(self->kin_size), *pos = new_vector(3), *vel = new_vector(3), *w = new_vector(3);
+    npy_intp dims[2] = {3, 3};
+    PyObject *rot = PyArray_SimpleNew(2, dims, NPY_DOUBLE);
+    if (!kin || !pos || !vel || !w || !rot) {
+        Py_XDECREF(kin); Py_XDECREF(pos); Py_XDECREF(vel); Py_XDECREF(w); Py_XDECREF(rot);
+        return NULL;
+    }
+    self->kin(q, qd, self->p, self->zeros, DATA(kin));
+    const double *row = DATA(kin) + self->bodies_off + index * self->body_row;
+    const double *R = row + self->rot_off, *o = row + self->origin_off, *V = row + self->vel_off;
+    double *x = DATA(pos), *v = DATA(vel), *r = DATA(rot), *om = DATA(w);
+    for (int i = 0; i < 9; ++i) r[i] = R[i];
+    for (int i = 0; i < 3; ++i) {
+        om[i] = V[i];
+        x[i] = o[i] + (R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2]);
+    }
+    v[0] = V[3] + (om[1] * x[2] - om[2] * x[1]);
+    v[1] = V[4] + (om[2] * x[0] - om[0] * x[2]);
+    v[2] = V[5] + (om[0] * x[1] - om[1] * x[0]);
+    return Py_BuildValue("(NNNNN)", pos, vel, rot, w, kin);
+}
+
+static PyObject *calls_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    unsigned long long acc, dyn, kin;
+    PyObject *p, *owner;
+    Py_ssize_t s[11];
+    if (kwargs && PyDict_GET_SIZE(kwargs)) {
+        PyErr_SetString(PyExc_TypeError, "Calls takes positional arguments only");
+        return NULL;
+    }
+    if (!PyArg_ParseTuple(args, "KKKOOnnnnnnnnnnn", &acc, &dyn, &kin, &p, &owner, &s[0], &s[1], &s[2], &s[3],
+                          &s[4], &s[5], &s[6], &s[7], &s[8], &s[9], &s[10]))
+        return NULL;
+    if (!PyArray_CheckExact(p) || PyArray_TYPE((PyArrayObject *)p) != NPY_DOUBLE
+        || PyArray_NDIM((PyArrayObject *)p) != 1 || !PyArray_ISCARRAY_RO((PyArrayObject *)p)
+        || !PyArray_ISNOTSWAPPED((PyArrayObject *)p)) {
+        PyErr_SetString(PyExc_TypeError, "p must be a contiguous float64 vector");
+        return NULL;
+    }
+    if (!acc || !dyn || !kin) {
+        PyErr_SetString(PyExc_ValueError, "null function address");
+        return NULL;
+    }
+    for (int i = 0; i < 11; ++i) if (s[i] < 0) {
+        PyErr_SetString(PyExc_ValueError, "negative size");
+        return NULL;
+    }
+    Calls *self = (Calls *)type->tp_alloc(type, 0);
+    if (!self) return NULL;
+    self->acc = (acc_fn)(uintptr_t)acc;
+    self->dyn = (out_fn)(uintptr_t)dyn;
+    self->kin = (out_fn)(uintptr_t)kin;
+    Py_INCREF(p);
+    Py_INCREF(owner);
+    self->p_obj = p;
+    self->owner = owner;
+    self->p = (const double *)PyArray_DATA((PyArrayObject *)p);
+    self->nq = s[0]; self->nv = s[1]; self->dyn_size = s[2]; self->mm_off = s[3]; self->kin_size = s[4];
+    self->bodies_off = s[5]; self->body_row = s[6]; self->rot_off = s[7]; self->origin_off = s[8];
+    self->vel_off = s[9]; self->n_bodies = s[10];
+    self->zeros = calloc(self->nv + 1, sizeof(double));
+    if (!self->zeros) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)self;
+}
+
+static void calls_dealloc(Calls *self) {
+    Py_XDECREF(self->p_obj);
+    Py_XDECREF(self->owner);
+    free(self->zeros);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyMethodDef calls_methods[] = {
+    {"accelerations", (PyCFunction)(void (*)(void))calls_accelerations, METH_FASTCALL, "qdd or None"},
+    {"mass_matrix", (PyCFunction)(void (*)(void))calls_mass_matrix, METH_FASTCALL, "M or None"},
+    {"check", (PyCFunction)(void (*)(void))calls_check, METH_FASTCALL, "inputs on the fast path"},
+    {"body", (PyCFunction)(void (*)(void))calls_body, METH_FASTCALL, "body point kinematics or None"},
+    {NULL, NULL, 0, NULL}};
+
+static PyTypeObject CallsType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "mbcomp_fastcall.Calls",
+    .tp_basicsize = sizeof(Calls),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Direct calls of one compiled model's functions with one parameter vector.",
+    .tp_new = calls_new,
+    .tp_dealloc = (destructor)calls_dealloc,
+    .tp_methods = calls_methods,
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "mbcomp_fastcall", NULL, -1, NULL};
+
+PyMODINIT_FUNC PyInit_mbcomp_fastcall(void) {
+    import_array();
+    if (PyType_Ready(&CallsType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (!m) return NULL;
+    Py_INCREF(&CallsType);
+    if (PyModule_AddObject(m, "Calls", (PyObject *)&CallsType) < 0) {
+        Py_DECREF(&CallsType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
+"""
+
+
+def _headers() -> list[str] | None:
+    """Include directories with ``Python.h`` and numpy's headers, or None."""
+    python = sysconfig.get_paths().get("include")
+    numpy_include = np.get_include()
+    if not python or not (Path(python) / "Python.h").is_file():
+        return None
+    if not (Path(numpy_include) / "numpy" / "arrayobject.h").is_file():
+        return None
+    return [python, numpy_include]
+
+
+def _flags() -> tuple[str, ...]:
+    return FLAGS + (("-undefined", "dynamic_lookup") if sys.platform == "darwin" else ())
+
+
+def _load_module(path: Path):
+    loader = importlib.machinery.ExtensionFileLoader(MODULE, str(path))
+    spec = importlib.util.spec_from_file_location(MODULE, str(path), loader=loader)
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+def _build(compiler: str, includes: list[str]) -> bytes | None:
+    with tempfile.TemporaryDirectory(prefix="mbcomp-fastcall-") as tmp:
+        src, out = Path(tmp) / "fastcall.c", Path(tmp) / "fastcall.so"
+        src.write_text(SOURCE)
+        cmd = [compiler, *_flags(), *(f"-I{d}" for d in includes), str(src), "-o", str(out)]
+        try:
+            subprocess.run(cmd, check=True, capture_output=True, timeout=300)
+            return out.read_bytes()
+        except (OSError, subprocess.SubprocessError):
+            return None
+
+
+_lock = threading.Lock()
+
+
+@functools.lru_cache(maxsize=1)
+def _extension():
+    includes = _headers()
+    compiler = backend.c_compiler()
+    if includes is None or compiler is None:
+        return None
+    tools = cache.toolchain(compiler, _flags())
+    tools["numpy"] = np.__version__
+    key = cache.entry_key(f"fastcall extension {MODULE}", SOURCE + "|".join(includes), tools)
+    path = cache.verified(key, ".so", tools)
+    if path is not None:
+        try:
+            return _load_module(path)
+        except (ImportError, OSError):
+            cache.discard(key, ".so")
+    data = _build(compiler, includes)
+    if data is None:
+        return None
+    path = cache.store(key, ".so", data, tools)
+    if path is not None:
+        try:
+            return _load_module(path)
+        except (ImportError, OSError):
+            cache.discard(key, ".so")
+    tmp = tempfile.mkdtemp(prefix="mbcomp-fastcall-")
+    try:  # an unusable cache: load from a private copy (the mapping outlives the file)
+        private = Path(tmp) / "fastcall.so"
+        private.write_bytes(data)
+        return _load_module(private)
+    except (ImportError, OSError):
+        return None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def extension():
+    """The compiled extension module (built on first use, then from the code cache), or None
+    where there is no C compiler, no ``Python.h`` or numpy headers, or the build fails.
+    ``MBCOMP_FASTCALL=ctypes`` in the environment disables it (the ``ctypes`` path)."""
+    if os.environ.get("MBCOMP_FASTCALL", "").lower() == "ctypes":
+        return None
+    with _lock:
+        return _extension()
+
+
+def _address(lib, name: str) -> int:
+    return ctypes.cast(getattr(lib, name), ctypes.c_void_p).value
+
+
+def _offsets(layout) -> dict[str, int]:
+    starts, start = {}, 0
+    for name, width in BODY_FIELDS:
+        starts[name] = start
+        start += width
+    return {"dyn_size": layout.size("dynamics"), "mm_off": layout.block("dynamics", "mass_matrix").offset,
+            "kin_size": layout.size("kinematics"), "bodies_off": layout.block("kinematics", "bodies").offset,
+            "body_row": start, "rot_off": starts["rotation"], "origin_off": starts["origin"],
+            "vel_off": starts["velocity"], "n_bodies": layout.block("kinematics", "bodies").shape[0]}
+
+
+def _plain(a: Any, n: int) -> bool:
+    """``a`` is a float64 ndarray of shape (n,) with finite entries (what the fast path takes)."""
+    if type(a) is not np.ndarray or a.dtype != np.float64 or a.shape != (n,):
+        return False
+    total = float(a.sum())
+    return total - total == 0.0 or bool(np.all(np.isfinite(a)))
+
+
+def _finite(a: np.ndarray) -> bool:
+    """Every entry of ``a`` finite (a dot product that overflows says no: the caller's checked
+    path then decides, so this never wrongly says yes)."""
+    return math.isfinite(a.dot(a))
+
+
+class CtypesCalls:
+    """The extension's ``Calls`` interface through ``ctypes`` (where it cannot be built).
+
+    Same contract: the result, or ``None`` when the inputs or the result need the checked
+    path.  ``accelerations`` copies the state into this thread's buffers, whose pointers are
+    bound once per thread (ctypes releases the GIL during the call: threads never share
+    them); the other calls go through ``CFunctions``."""
+
+    def __init__(self, functions: Any, layout: Any, p: np.ndarray, nq: int, nv: int):
+        self.functions, self.layout, self.p = functions, layout, p
+        self.nq, self.nv = nq, nv
+        self.pointer = functions.bind_parameters(p)
+        self.zeros = np.zeros(nv)
+        self.no_inputs = np.zeros(0)
+        self.offsets = _offsets(layout)
+        self.tril = np.tril_indices(nv)
+        self.function = functions.lib.accelerations
+        self.function.restype = ctypes.c_int
+        self.local = threading.local()
+
+    def _thread_buffers(self):
+        """``(state, q, qd, out, args)`` of this thread: ``q`` and ``qd`` are views of one
+        ``state`` buffer; ``args`` the bound pointers of the compiled call."""
+        state, out = np.empty(self.nq + self.nv), np.empty(self.nv)
+        work, u = np.empty(max(self.offsets["dyn_size"], 1)), np.zeros(1)
+        q, qd = state[: self.nq], state[self.nq:]
+        pointer = ctypes.c_void_p
+        args = (pointer(q.ctypes.data), pointer(qd.ctypes.data), self.pointer, pointer(u.ctypes.data), None,
+                pointer(out.ctypes.data), pointer(work.ctypes.data))
+        buffers = self.local.buffers = (state, q, qd, out, args, work, u)  # the arrays outlive the pointers
+        return buffers
+
+    def check(self, q: Any, qd: Any) -> bool:
+        return _plain(q, self.nq) and (qd is None or _plain(qd, self.nv))
+
+    def accelerations(self, q: Any, qd: Any) -> np.ndarray | None:
+        if type(q) is not np.ndarray or q.dtype != np.float64 or q.shape != (self.nq,):
+            return None
+        if qd is None:
+            qd = self.zeros
+        elif type(qd) is not np.ndarray or qd.dtype != np.float64 or qd.shape != (self.nv,):
+            return None
+        buffers = getattr(self.local, "buffers", None) or self._thread_buffers()
+        state, bq, bqd, out, args = buffers[:5]
+        bq[:] = q
+        bqd[:] = qd
+        if not _finite(state) or self.function(*args):
+            return None
+        qdd = out.copy()
+        return qdd if _finite(qdd) else None
+
+    def mass_matrix(self, q: Any) -> np.ndarray | None:
+        if not _plain(q, self.nq):
+            return None
+        tri = self.functions("dynamics", q, self.zeros, self.p, self.no_inputs)[self.offsets["mm_off"]:]
+        tri = tri[: self.nv * (self.nv + 1) // 2]
+        if not np.all(np.isfinite(tri)):
+            return None
+        M = np.empty((self.nv, self.nv))
+        rows, cols = self.tril
+        M[rows, cols] = tri
+        M[cols, rows] = tri
+        return M
+
+    def body(self, q: Any, qd: Any, index: int, local: np.ndarray):
+        o = self.offsets
+        if not self.check(q, qd) or not _plain(local, 3) or not 0 <= index < o["n_bodies"]:
+            return None
+        kin = self.functions("kinematics", q, self.zeros if qd is None else qd, self.p, self.no_inputs)
+        row = kin[o["bodies_off"] + index * o["body_row"]:]
+        R = row[o["rot_off"]:o["rot_off"] + 9].reshape(3, 3).copy()
+        w, v0 = row[o["vel_off"]:o["vel_off"] + 3].copy(), row[o["vel_off"] + 3:o["vel_off"] + 6]
+        x = row[o["origin_off"]:o["origin_off"] + 3] + R @ local
+        v = v0 + np.array([w[1] * x[2] - w[2] * x[1], w[2] * x[0] - w[0] * x[2], w[0] * x[1] - w[1] * x[0]])
+        return x, v, R, w, kin
+
+
+class Decline:
+    """Stands in where no fast path applies: every call declines (the checked path runs)."""
+
+    def check(self, q: Any, qd: Any) -> bool:
+        return False
+
+    def accelerations(self, q: Any, qd: Any) -> None:
+        return None
+
+    def mass_matrix(self, q: Any) -> None:
+        return None
+
+    def body(self, q: Any, qd: Any, index: int, local: Any) -> None:
+        return None
+
+
+DECLINE = Decline()
+
+
+def calls(functions: Any, layout: Any, p: np.ndarray, nq: int, nv: int, *, use_extension: bool = True):
+    """Fast calls of a compiled model (``functions``: the C backend's ``CFunctions``) with the
+    parameter vector ``p``: the extension's ``Calls`` when it is available, else ``CtypesCalls``."""
+    module = extension() if use_extension else None
+    if module is None:
+        return CtypesCalls(functions, layout, p, nq, nv)
+    o = _offsets(layout)
+    lib = functions.lib
+    return module.Calls(_address(lib, "accelerations"), _address(lib, "dynamics"), _address(lib, "kinematics"),
+                        p, functions, nq, nv, o["dyn_size"], o["mm_off"], o["kin_size"], o["bodies_off"],
+                        o["body_row"], o["rot_off"], o["origin_off"], o["vel_off"], o["n_bodies"])

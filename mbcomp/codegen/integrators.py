@@ -1,0 +1,1024 @@
+"""Integration loops compiled with the model: DOP853 (adaptive, dense output) and RK4.
+
+The C source is generated next to the model's code so that the right-hand side is a
+direct C call: no Python between steps.  DOP853 follows scipy's implementation step
+for step (same tableau, error norm, step-size control and dense output; Hairer,
+Norsett & Wanner, Solving ODEs I, II.5), so results match ``solve_ivp`` to rounding.
+"""
+from __future__ import annotations
+
+import functools
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: Status codes returned by the compiled loops.
+FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
+#: The reduced (lagrange) loop's: paused after an accepted step for Python to look at the
+#: partition; a trial state without dependent coordinates (formulations/lagrange_c.py).
+PAUSED, TRIAL_FAILED = 2, -8
+#: ... and with contacts watched: a step in which a contact closes or a held one would pull.
+EVENT = 3
+#: Step-size collapse: every WINDOW accepted steps, a run gives up (COLLAPSED) when, at the
+#: pace of that window, the rest of the interval would need more than its step budget
+#: (``limits.max_steps()``, default COLLAPSE_STEPS; Python-stepped loops get a hundredth).
+COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
+
+
+def _array(name: str, values) -> str:
+    flat = ", ".join(repr(float(v)) for v in np.ravel(values))
+    shape = "".join(f"[{s}]" for s in np.shape(values))
+    return f"static const double {name}{shape} = {{{flat}}};"
+
+
+@functools.lru_cache(maxsize=1)
+def _dop853_tables() -> tuple[str, ...]:
+    """The C tables of scipy's DOP853 tableau (``scipy.integrate._ivp.dop853_coefficients``).
+
+    Read from that module's file without importing ``scipy.integrate``: the package costs
+    about half a second of imports, and a process that loads a cached model and runs it
+    in compiled code needs this text only for the cache key, never the package.  Falls
+    back to the package import when the file is not where scipy keeps it."""
+    dop = sys.modules.get("scipy.integrate._ivp.dop853_coefficients") or _dop853_from_file()
+    if dop is None:
+        from scipy.integrate._ivp import dop853_coefficients as dop
+    return (_array("DOP_A", dop.A[:16, :16]), _array("DOP_B", dop.B), _array("DOP_C", dop.C[:16]),
+            _array("DOP_E3", dop.E3), _array("DOP_E5", dop.E5), _array("DOP_D", dop.D))
+
+
+def _dop853_from_file():
+    """scipy's ``dop853_coefficients`` module executed from its file (it imports only numpy),
+    or None when it is not found there."""
+    try:
+        spec = importlib.util.find_spec("scipy")  # finds the package, does not import it
+        path = Path(spec.submodule_search_locations[0]) / "integrate" / "_ivp" / "dop853_coefficients.py"
+        file_spec = importlib.util.spec_from_file_location("_mbcomp_dop853_coefficients", path)
+        module = importlib.util.module_from_spec(file_spec)
+        file_spec.loader.exec_module(module)
+        return module
+    except (ImportError, OSError, AttributeError, TypeError, IndexError):
+        return None
+
+
+def c_integrators() -> str:
+    """C source of ``dop853_run`` and ``rk4_run`` for a tree whose coordinates, speeds and
+    quaternion and screw indices the model's sizes unit gives (``c_sizes.CSizes``: ``NCOORD``,
+    ``NV``, ``QUAT_Q``, ...): the state is ``y = [q, v, z]``, its rate ``[q'(q, v), v', z']``;
+    quaternions are normalised after every accepted step.  With ``HAS_DRIVES``, the ``NZ``
+    states of drive elements follow the mechanical ones (``drive_equations``: their forces
+    join ``tau``, their rates come from ``drives``).
+    Where ``REDUCED_LOOP`` is defined (a constrained model the lagrange formulation steps
+    in compiled code), also ``dop853_reduced_run``: the same loop on the reduced state of
+    ``formulations/lagrange_c.py``."""
+    lines = [
+        "#include <float.h>",
+        "#include <time.h>",
+        f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
+        f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
+        "static __thread double step_budget = COLLAPSE_STEPS;  /* set by Python before each run */",
+        "void set_step_budget(double steps) { step_budget = steps > 0 ? steps : COLLAPSE_STEPS; }",
+        f"#define LOOP_EVENT {EVENT}",
+        "#define NY (NMECH + NZ)",
+        "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
+        *_dop853_tables(),
+    ]
+    loops = [_instance("dop853_run", "initial_step", reduced=False),
+             "#ifdef REDUCED_LOOP", _instance("dop853_reduced_run", "reduced_initial_step", reduced=True), "#endif"]
+    return "\n".join(lines + [_C_BODY.replace("@LOOPS@", "\n".join(loops))])
+
+
+def _instance(run: str, init: str, reduced: bool) -> str:
+    """One DOP853 loop: on the tree state (``rhs``) or on the lagrange formulation's reduced
+    state (``lagrange_rhs``; full output rows)."""
+    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni + NZ)\n"
+              "#define LOOP_RHS(tt, yy, ff) lagrange_rhs(tt, yy, ff, p, tau)\n" if reduced else
+              "#define LOOP_REDUCED 0\n#define LOOP_NY NY\n#define LOOP_RHS(tt, yy, ff) rhs(tt, yy, ff, p, tau, work)\n")
+    return (macros + _LOOP.replace("@RUN@", run).replace("@INIT@", init)
+            + "#undef LOOP_REDUCED\n#undef LOOP_NY\n#undef LOOP_RHS\n")
+
+
+_LOOP = r"""
+/* scipy's select_initial_step (order 7). */
+static double @INIT@(double t0, const double *y0, const double *f0, double t_end, double max_step,
+                           double rtol, double atol, const double *p, const double *tau, double *work,
+                           double *y1, double *f1, long *nfev) {
+    double scaled[NY], d0, d1, d2, h0, h1;
+    if (LOOP_NY == 0) return INFINITY;  /* nothing to integrate (every coordinate held): as scipy */
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
+    d0 = rms(scaled, LOOP_NY);
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
+    d1 = rms(scaled, LOOP_NY);
+    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    if (h0 > t_end - t0) h0 = t_end - t0;
+    for (int i = 0; i < LOOP_NY; ++i) y1[i] = y0[i] + h0 * f0[i];
+    if (LOOP_RHS(t0 + h0, y1, f1)) mb_copy(f1, f0, sizeof(double) * LOOP_NY);  /* (a failed trial: no curvature estimate) */
+    ++*nfev;
+    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
+    d2 = rms(scaled, LOOP_NY) / h0;
+    if (d1 <= 1e-15 && d2 <= 1e-15) {
+        h1 = h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6;
+    } else {
+        h1 = pow(0.01 / (d1 > d2 ? d1 : d2), 1.0 / 8.0);
+    }
+    double h = 100 * h0 < h1 ? 100 * h0 : h1;
+    if (h > t_end - t0) h = t_end - t0;
+    return h < max_step ? h : max_step;
+}
+
+/*
+ * Adaptive DOP853 from state[0] = t to t_end.  state[1] = h (<= 0: choose one).
+ * y (LOOP_NY) and f (LOOP_NY, the derivative at y; computed when state[1] <= 0) are updated in place.
+ * Output: dense values at t_out[*i_out .. n_out) into y_out (rows of NY), or, when
+ * n_out == 0, every accepted step into t_steps / y_steps (capacity cap, count *n_steps).
+ * counts: [nfev, accepted, rejected].  Returns FINISHED (0), BUFFER_FULL (1, resume by
+ * calling again), STEP_TOO_SMALL (-1), SINGULAR (-2) or NOT_FINITE (-3); the reduced loop
+ * (state [q_i, qd_i] of the lagrange formulation, full [q, qd] output rows) also PAUSED (2:
+ * after an accepted step, for Python to choose the partition afresh; resume by calling
+ * again) and TRIAL_FAILED (-8: no dependent coordinates at a trial state).
+ */
+int @RUN@(const double *p, const double *tau, double *state, double *y, double *f, double t_end,
+               double rtol, double atol, double max_step, const double *t_out, long n_out, long *i_out,
+               double *y_out, double *t_steps, double *y_steps, long cap, long *n_steps, long *counts) {
+    double *K = malloc(sizeof(double) * 16 * NY);
+    double *work = malloc(sizeof(double) * NWORK);
+    double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
+    double *F = malloc(sizeof(double) * 7 * NY);
+    int status = 0;
+    double t = state[0], h_abs = state[1], window_t0 = state[0];
+    long window_n = 0;
+    if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
+    if (h_abs <= 0) {
+        RHS_OR_FAIL(LOOP_RHS(t, y, f));
+        counts[0] += 1;
+        h_abs = @INIT@(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
+    }
+    while (t < t_end) {
+        if (n_out == 0 && *n_steps >= cap) { status = 1; goto done; }
+        double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
+        if (h_abs > max_step) h_abs = max_step;
+        else if (h_abs < min_step) h_abs = min_step;
+        int rejected = 0;
+        double h, t_new, err;
+        for (;;) {
+            if (hook_says_stop(t)) { status = -6; goto done; }
+            if (h_abs < min_step) { status = -1; goto done; }
+            t_new = t + h_abs;
+            if (t_new > t_end) t_new = t_end;
+            h = t_new - t;
+            h_abs = fabs(h);
+            mb_copy(K, f, sizeof(double) * LOOP_NY);
+            for (int s = 1; s < 12; ++s) {
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
+            }
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double acc = 0.0;
+                for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * LOOP_NY + i];
+                y_new[i] = y[i] + h * acc;
+            }
+            RHS_OR_FAIL(LOOP_RHS(t_new, y_new, K + 12 * LOOP_NY));
+            counts[0] += 12;
+            if (!all_finite(y_new, LOOP_NY) || !all_finite(K + 12 * LOOP_NY, LOOP_NY)) { status = -3; goto done; }
+            double e5 = 0.0, e3 = 0.0;
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double scale = atol + rtol * (fabs(y[i]) > fabs(y_new[i]) ? fabs(y[i]) : fabs(y_new[i]));
+                double a5 = 0.0, a3 = 0.0;
+                for (int j = 0; j < 13; ++j) { a5 += DOP_E5[j] * K[j * LOOP_NY + i]; a3 += DOP_E3[j] * K[j * LOOP_NY + i]; }
+                a5 /= scale; a3 /= scale;
+                e5 += a5 * a5; e3 += a3 * a3;
+            }
+            err = (e5 == 0.0 && e3 == 0.0) ? 0.0 : h_abs * e5 / sqrt((e5 + 0.01 * e3) * LOOP_NY);
+            if (err < 1) {
+                double factor = err == 0.0 ? 10.0 : 0.9 * pow(err, -1.0 / 8.0);
+                if (factor > 10.0) factor = 10.0;
+                if (rejected && factor > 1.0) factor = 1.0;
+                h_abs *= factor;
+                break;
+            }
+            double factor = 0.9 * pow(err, -1.0 / 8.0);
+            h_abs *= factor > 0.2 ? factor : 0.2;
+            rejected = 1;
+            counts[2] += 1;
+        }
+        counts[1] += 1;
+#if LOOP_REDUCED
+        /* contacts watched: a step in which one closes or a held one would pull is not taken */
+        const int event = lag_nk ? lagrange_event(t_new, y_new, p, tau) : 0;
+        if (event < 0) { status = event; goto done; }
+#elif defined(DAE_LOOP)
+        /* contacts watched (dae): the multipliers of the last evaluation, at (t_new, y_new) */
+        const int event = dae_nk ? dae_event(t_new, y_new, p) : 0;
+#else
+        const int event = 0;
+#endif
+        /* dense output for the requested times within (t, t_new] (and of an event step) */
+        if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
+            for (int s = 13; s < 16; ++s) {
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double acc = 0.0;
+                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
+                    y_stage[i] = y[i] + h * acc;
+                }
+                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
+            }
+            counts[0] += 3;
+            for (int i = 0; i < LOOP_NY; ++i) {
+                double dy = y_new[i] - y[i];
+                F[0 * LOOP_NY + i] = dy;
+                F[1 * LOOP_NY + i] = h * K[i] - dy;
+                F[2 * LOOP_NY + i] = 2 * dy - h * (K[12 * LOOP_NY + i] + K[i]);
+                for (int r = 0; r < 4; ++r) {
+                    double acc = 0.0;
+                    for (int j = 0; j < 16; ++j) acc += DOP_D[r][j] * K[j * LOOP_NY + i];
+                    F[(3 + r) * LOOP_NY + i] = h * acc;
+                }
+            }
+#if LOOP_REDUCED || defined(DAE_LOOP)
+            if (event) {  /* [t_new, y_new, f_new, F] for Python; the loop stays at the step's start */
+#if LOOP_REDUCED
+                double *ev_ = lag_ev;
+#else
+                double *ev_ = dae_ev;
+#endif
+                ev_[0] = t_new;
+                mb_copy(ev_ + 1, y_new, sizeof(double) * LOOP_NY);
+                mb_copy(ev_ + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+                mb_copy(ev_ + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
+                status = LOOP_EVENT;
+                goto done;
+            }
+#endif
+            while (*i_out < n_out && t_out[*i_out] <= t_new) {
+                double x = (t_out[*i_out] - t) / h;
+                double *out = y_out + (*i_out) * NY;
+#if LOOP_REDUCED
+                double *dense = y_stage;
+#else
+                double *dense = out;
+#endif
+                for (int i = 0; i < LOOP_NY; ++i) {
+                    double v = 0.0;
+                    for (int r = 6; r >= 0; --r) {
+                        v += F[r * LOOP_NY + i];
+                        v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+                    }
+                    dense[i] = v + y[i];
+                }
+#if LOOP_REDUCED
+                if (t_out[*i_out] == t_new) dense = y_new;
+                const int os_ = lagrange_full(t_out[*i_out], dense, out, out + NCOORD, p);
+                if (os_) { status = os_; goto done; }
+                for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[2 * lag_ni + i];  /* the drive states */
+#else
+                normalize_state(out);
+                if (t_out[*i_out] == t_new) mb_copy(out, y_new, sizeof(double) * LOOP_NY);
+#endif
+                ++*i_out;
+            }
+        }
+        t = t_new;
+#if LOOP_REDUCED
+        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
+        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+        {  /* the full state becomes the accepted one (the next Newton starts there) */
+            const int as_ = lagrange_accept(t, y, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
+            if (as_ < 0) { status = as_; goto done; }
+            if (n_out == 0) t_steps[(*n_steps)++] = t;
+            if (as_ == LAG_PAUSED) { status = LAG_PAUSED; goto done; }
+        }
+#else
+        normalize_state(y_new);
+        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
+        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
+#endif
+#if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
+        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
+            RHS_OR_FAIL(LOOP_RHS(t, y, f));
+            counts[0] += 1;
+        }
+#endif
+        if (n_out == 0 && !LOOP_REDUCED) {
+            t_steps[*n_steps] = t;
+            mb_copy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
+            ++*n_steps;
+        }
+        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
+            if (t < t_end && (t_end - t) > step_budget * ((t - window_t0) / COLLAPSE_WINDOW)) {
+                status = -7;
+                goto done;
+            }
+            window_n = 0;
+            window_t0 = t;
+        }
+    }
+done:
+    state[0] = t;
+    state[1] = h_abs;
+    free(K); free(work); free(y_new); free(y_stage); free(F);
+    return status;
+}
+
+"""
+
+
+_C_BODY = r"""
+static double dummy_input[1];
+/* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank; -8: a
+   trial state without dependent coordinates). */
+#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = (rs_ == -5 || rs_ == -8) ? rs_ : -2; goto done; } } while (0)
+
+/* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
+   when this thread configured it, -5 when its constraint rows lost rank). */
+static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+    (void)t;
+    const double *v = y + NCOORD;
+    if (MB_HAS_QUAT) {
+        for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
+        for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
+            const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
+            double *r = f + QUAT_Q[k];
+            r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
+            r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
+            r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
+            r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
+        }
+    } else {
+        for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
+    }
+#ifdef DAE_LOOP
+    if (dae_nr >= 0) {
+        dae_time = t;
+        int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+        return status == 2 ? -5 : status;
+    }
+#endif
+    return accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+}
+
+/* Quaternions back to unit length (after each accepted step). */
+static void normalize_state(double *y) {
+    for (int k = 0; k < NQUAT; ++k) {
+        double *a = y + QUAT_Q[k];
+        const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+        if (n > 0) for (int i = 0; i < 4; ++i) a[i] /= n;
+    }
+}
+
+/* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
+   f[NMECH..] gets the states' rates. */
+static int drive_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
+    double u[1 + NZ], out[NV + NZ], tau_all[NV];
+    u[0] = t;
+    for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
+    drives(y, y + NCOORD, p, u, out);
+    for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
+    for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
+    return mech_rhs(t, y, f, p, tau_all, work);
+}
+
+/* The rate of the state: with the drive elements' states when the model has drive elements
+   (inlined at every call: one call per evaluation, as before HAS_DRIVES was read at run time). */
+static inline __attribute__((always_inline)) int rhs(double t, const double *y, double *f, const double *p,
+                                                     const double *tau, double *work) {
+    return HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
+}
+/* The step hook: called with the simulated time about every `hook_interval` s of processor
+   time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
+   around each run to react to Ctrl-C, to stop requests and to show progress. */
+typedef int (*step_hook_t)(double);
+static __thread step_hook_t step_hook = 0;
+static __thread double hook_interval = 0.0;
+static __thread clock_t hook_last = 0;
+static __thread long hook_tick = 0;
+
+void set_step_hook(step_hook_t hook, double interval) {
+    step_hook = hook;
+    hook_interval = interval;
+    hook_last = clock();
+    hook_tick = 0;
+}
+
+static int hook_says_stop(double t) {
+    if (!step_hook || (++hook_tick & 15)) return 0;
+    clock_t now = clock();
+    if ((double)(now - hook_last) < hook_interval * CLOCKS_PER_SEC) return 0;
+    hook_last = now;
+    return step_hook(t) != 0;
+}
+
+static int all_finite(const double *v, int n) {
+    for (int i = 0; i < n; ++i) if (!(fabs(v[i]) <= DBL_MAX)) return 0;
+    return 1;
+}
+
+static double rms(const double *v, int n) {
+    double s = 0.0;
+    for (int i = 0; i < n; ++i) s += v[i] * v[i];
+    return sqrt(s / n);
+}
+
+@LOOPS@
+/* Jacobian d f / d y (NY x NY, row-major) by forward differences, for implicit methods. */
+int rhs_jacobian(const double *p, const double *tau, double t, const double *y, double *J) {
+    double *f0 = malloc(sizeof(double) * NY), *f1 = malloc(sizeof(double) * NY);
+    double *yp = malloc(sizeof(double) * NY), *work = malloc(sizeof(double) * NWORK);
+    int status = 0;
+    if (!f0 || !f1 || !yp || !work) { status = -4; goto done; }
+    RHS_OR_FAIL(rhs(t, y, f0, p, tau, work));
+    mb_copy(yp, y, sizeof(double) * NY);
+    for (int j = 0; j < NY; ++j) {
+        const double h = sqrt(DBL_EPSILON) * (fabs(y[j]) > 1.0 ? fabs(y[j]) : 1.0);
+        yp[j] = y[j] + h;
+        RHS_OR_FAIL(rhs(t, yp, f1, p, tau, work));
+        for (int i = 0; i < NY; ++i) J[i * NY + j] = (f1[i] - f0[i]) / (yp[j] - y[j]);
+        yp[j] = y[j];
+    }
+done:
+    free(f0); free(f1); free(yp); free(work);
+    return status;
+}
+
+/* Rows of y_out for the output times t_out[*j ..] before t_b (all of them when last), by
+   cubic Hermite interpolation between the steps (t_a, ya, fa) and (t_b, yb, fb). */
+static void hermite_rows(double t_a, double t_b, const double *ya, const double *fa, const double *yb,
+                         const double *fb, const double *t_out, long n_out, long *j, int last, double *y_out) {
+    const double h = t_b - t_a;
+    for (; *j < n_out && (last || t_out[*j] < t_b); ++*j) {
+        const double s = (t_out[*j] - t_a) / h, s2 = s * s, s3 = s2 * s;
+        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
+        double *out = y_out + *j * NY;
+        for (int i = 0; i < NY; ++i) out[i] = h00 * ya[i] + h10 * h * fa[i] + h01 * yb[i] + h11 * h * fb[i];
+        normalize_state(out);
+    }
+}
+
+/* Classical RK4 with fixed step dt for n steps from t0.  y: the start state in, the state
+   reached out (on failure: the state at step counts[1]).  Output only where asked: with
+   t_out == NULL every step's state goes to y_out (n + 1 rows, y0 first); else y_out gets one
+   row per output time t_out[0 .. n_out) (increasing, within [t0, t0 + n dt]) by cubic
+   Hermite interpolation between the two steps around it, whose rates the steps compute
+   anyway (one more evaluation, not counted in nfev, for the rate at the last step). */
+int rk4_run(const double *p, const double *tau, double t0, double *y, double dt, long n,
+            const double *t_out, long n_out, double *y_out, long *counts) {
+    double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
+    double *next = malloc(sizeof(double) * NY), *f_next = malloc(sizeof(double) * NY);
+    double *work = malloc(sizeof(double) * NWORK);
+    double *const y_start = y;
+    int status = 0, have_f = 0;  /* have_f: f_next holds the rate at y (computed for output) */
+    long j = 0;  /* the next output time */
+    if (!k || !stage || !next || !f_next || !work) { status = -4; goto done; }
+    for (long s = 0; s < n; ++s) {
+        const double t = t0 + s * dt, t_new = t0 + (s + 1) * dt;
+        if (hook_says_stop(t)) { status = -6; goto done; }
+        if (have_f) mb_copy(k, f_next, sizeof(double) * NY);
+        else RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
+        have_f = 0;
+        if (!t_out) mb_copy(y_out + s * NY, y, sizeof(double) * NY);
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
+        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
+        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + 2 * NY, p, tau, work));
+        for (int i = 0; i < NY; ++i) stage[i] = y[i] + dt * k[2 * NY + i];
+        RHS_OR_FAIL(rhs(t + dt, stage, k + 3 * NY, p, tau, work));
+        for (int i = 0; i < NY; ++i)
+            next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
+        normalize_state(next);
+        counts[0] += 4;
+        counts[1] += 1;
+        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1; next: at step s */
+        if (!all_finite(y, NY)) { status = -3; goto done; }
+        const int last = s == n - 1;
+        if (t_out && j < n_out && (last || t_out[j] < t_new)) {  /* outputs between the two steps */
+            RHS_OR_FAIL(rhs(t_new, y, f_next, p, tau, work));
+            have_f = 1;
+            hermite_rows(t, t_new, next, k, y, f_next, t_out, n_out, &j, last, y_out);
+        }
+    }
+    if (!t_out) mb_copy(y_out + n * NY, y, sizeof(double) * NY);
+done:
+    if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
+        mb_copy(y_start, y, sizeof(double) * NY);
+        next = y;
+    }
+    free(k); free(stage); free(next); free(f_next); free(work);
+    return status;
+}
+""".replace("FINISHED_CODE", "0")
+
+
+# -- Python drivers ------------------------------------------------------------------------------
+import contextlib  # noqa: E402
+import ctypes  # noqa: E402
+import signal  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from typing import Callable, Iterator  # noqa: E402
+
+from mbcomp.core.errors import ModelError, SimulationError  # noqa: E402
+
+COMPILED_METHODS = ("DOP853", "RK4")
+
+
+def why_not_compiled(kernel, formulation, method, tau) -> str | None:
+    """Why the compiled loop cannot run this simulation (None when it can); the formulation
+    says whether its way of handling constraints runs in compiled code."""
+    topology = kernel.topology
+    if method not in COMPILED_METHODS:
+        return f"method {method!r} has no compiled loop (compiled: {', '.join(COMPILED_METHODS)})"
+    if kernel.backend != "c":
+        return "the model was compiled without a C compiler (backend 'python')"
+    reason = formulation.compiled_loop()
+    if reason is not None:
+        return reason
+    if method not in getattr(formulation, "compiled_methods", COMPILED_METHODS):
+        return f"the {formulation.name} formulation of this model has no compiled {method} loop"
+    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
+        return "the model has contacts"
+    if kernel.n_inputs:
+        return "the model has callable forces or torques"
+    if kernel.compiled.drives.callables:
+        return "the model's drives or signals use Python callables"
+    if callable(tau):
+        return "tau is a callable"
+    return None
+
+
+# -- the step hook: Ctrl-C, stop requests and progress inside compiled loops -------------------
+#: Processor time (s) between two calls of the hook from a compiled loop.
+HOOK_INTERVAL = 0.05
+_HOOK_TYPE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_double)
+_hooks = threading.local()  # this thread's callbacks (step_hook)
+try:  # the C functions behind ``signal.signal``/``getsignal``: the wrappers convert handlers to
+    # and from enums, which cost ~40 us per run, a tenth of a 50-link chain's loose-tolerance run
+    from _signal import SIGINT as _SIGINT, getsignal as _getsignal, signal as _setsignal
+except ImportError:  # not CPython
+    _SIGINT, _getsignal, _setsignal = signal.SIGINT, signal.getsignal, signal.signal
+try:
+    _check_signals = ctypes.pythonapi.PyErr_CheckSignals  # runs Python's handlers: Ctrl-C raises here
+    _check_signals.argtypes, _check_signals.restype = [], ctypes.c_int
+except AttributeError:  # not CPython: handlers still run when the hook's own code executes
+    _check_signals = None
+
+
+@contextlib.contextmanager
+def step_hook(callback: Callable[[float], bool], interval: float = HOOK_INTERVAL) -> Iterator[None]:
+    """Within the block, compiled loops run by this thread call ``callback(t)`` (t: the
+    simulated time reached, s) about every ``interval`` seconds of processor time; a true
+    return stops the run with a ``SimulationError``.  For progress displays and for stopping
+    runs from another thread (``sweep`` uses it to stop its workers)."""
+    stack = _hooks.__dict__.setdefault("stack", [])
+    stack.append((callback, float(interval)))
+    try:
+        yield
+    finally:
+        stack.remove((callback, float(interval)))
+
+
+def poll_step_hooks(t: float) -> None:
+    """For Python-stepped loops: call this thread's ``step_hook`` callbacks once; raise
+    ``SimulationError`` when one asks to stop."""
+    for callback, _ in getattr(_hooks, "stack", ()):
+        if callback(t):
+            raise SimulationError(f"stopped at t = {t:.6g} s by a step hook")
+
+
+class _Hook:
+    """What a compiled loop calls back: notes Ctrl-C (main thread), then asks this thread's
+    ``step_hook`` callbacks.  Python runs signal handlers when the hook's code starts, where
+    an exception could not cross the C loop: so during a run SIGINT only sets a flag, and
+    the previous handler (``KeyboardInterrupt`` by default) gets the signal once the loop has
+    returned."""
+
+    def __init__(self):
+        self.callbacks = list(getattr(_hooks, "stack", ()))
+        self.interval = min([HOOK_INTERVAL] + [interval for _, interval in self.callbacks])
+        self.main = threading.current_thread() is threading.main_thread()
+        self.previous = None      # the SIGINT handler to restore (when one was replaced)
+        self.signal = None        # (signum, frame) of a SIGINT received during the run
+        self.error: BaseException | None = None
+        self.outer: "_Hook | None" = None  # the hook of a run this one is nested in (a callback's)
+
+    def __call__(self, t: float) -> int:
+        try:
+            if self.main and _check_signals is not None:
+                _check_signals()
+            if self.signal is not None:
+                return 1
+            return int(any(callback(t) for callback, _ in self.callbacks))
+        except BaseException as exc:  # noqa: BLE001 - re-raised by stopped()
+            self.error = exc
+            return 1
+
+    def _on_sigint(self, signum, frame) -> None:
+        self.signal = (signum, frame)
+
+    def install(self, lib) -> None:
+        if self.main:
+            try:
+                previous = _getsignal(_SIGINT)
+                if callable(previous):
+                    _setsignal(_SIGINT, self._on_sigint)
+                    self.previous = previous
+            except ValueError:  # not the main interpreter
+                pass
+        self.outer = getattr(_hooks, "active", None)
+        _hooks.active = self
+        _hook_setter(lib)(_TRAMPOLINE, self.interval)
+        _set_step_budget(lib)
+
+    def remove(self, lib) -> None:
+        """Unset the hook (the outer run's again, for a nested run), restore the SIGINT
+        handler and deliver a pending Ctrl-C to it."""
+        _hooks.active = self.outer
+        if self.outer is None:
+            _hook_setter(lib)(_NO_HOOK, 0.0)
+        else:
+            _hook_setter(lib)(_TRAMPOLINE, self.outer.interval)
+        self.outer = None
+        self._deliver()
+
+    def _deliver(self, where: str = "") -> None:
+        if self.previous is not None:
+            _setsignal(_SIGINT, self.previous)
+        previous, self.previous = self.previous, None
+        pending, self.signal = self.signal, None
+        if pending is not None and previous is not None:
+            try:
+                previous(*pending)  # the default handler raises KeyboardInterrupt
+            except BaseException as exc:
+                if where and hasattr(exc, "add_note"):
+                    exc.add_note(where)
+                raise
+
+    def stopped(self, t: float, method: str):
+        """Raise for a run the hook stopped at simulated time ``t``."""
+        where = f"compiled {method} interrupted at t = {t:.6g} s"
+        self._deliver(where)
+        if self.error is not None:
+            if hasattr(self.error, "add_note"):
+                self.error.add_note(where)
+            raise self.error
+        raise SimulationError(f"compiled {method} stopped at t = {t:.6g} s by a step hook")
+
+
+def _dispatch(t: float) -> int:
+    """The one C callback of every compiled loop: this thread's active ``_Hook`` (creating a
+    ctypes callback per run cost more than the rest of a short run's set-up)."""
+    hook = getattr(_hooks, "active", None)
+    return 0 if hook is None else hook(t)
+
+
+_TRAMPOLINE = _HOOK_TYPE(_dispatch)
+_NO_HOOK = _HOOK_TYPE()
+
+
+def _set_step_budget(lib) -> None:
+    """The compiled loops' step budget for this thread: ``limits.max_steps()``."""
+    from mbcomp.core.limits import max_steps
+    setter = getattr(lib, "set_step_budget", None)
+    if setter is None:   # (a library without the integrators)
+        return
+    if setter.restype is not None:
+        setter.argtypes, setter.restype = [ctypes.c_double], None
+    setter(float(max_steps()))
+
+
+def _hook_setter(lib):
+    """``lib.set_step_hook`` with its argument types (set once per library)."""
+    setter = lib.set_step_hook
+    if setter.restype is not None:
+        setter.argtypes, setter.restype = [_HOOK_TYPE, ctypes.c_double], None
+    return setter
+
+
+@contextlib.contextmanager
+def hooked(lib) -> Iterator["_Hook"]:
+    """Within the block, compiled loops run by this thread on ``lib`` call the step hook
+    (Ctrl-C, ``step_hook`` callbacks); for drivers that run several compiled stretches."""
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        yield hook
+    finally:
+        hook.remove(lib)
+
+
+def bind_reduced(lib):
+    """``dop853_reduced_run`` (the lagrange formulation's reduced loop), same arguments as ``dop853_run``."""
+    void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
+    run = lib.dop853_reduced_run
+    run.argtypes = [void, void, void, void, void, dbl, dbl, dbl, dbl, void, lng, void, void, void, void, lng,
+                    void, void]
+    run.restype = ctypes.c_int
+    return run
+
+
+def bind_dop853(lib):
+    """``dop853_run`` (the loop on the tree state ``[q, v, z]``) with its argument types."""
+    return _bind(lib)[0]
+
+
+def _bind(lib):
+    void, lng, dbl = ctypes.c_void_p, ctypes.c_long, ctypes.c_double
+    run = lib.dop853_run
+    run.argtypes = [void, void, void, void, void, dbl, dbl, dbl, dbl, void, lng, void, void, void, void, lng,
+                    void, void]
+    run.restype = ctypes.c_int
+    rk4 = lib.rk4_run
+    rk4.argtypes = [void, void, dbl, void, dbl, lng, void, lng, void, void]
+    rk4.restype = ctypes.c_int
+    return run, rk4
+
+
+def compiled_jacobian(kernel, tau):
+    """``jac(t, y)`` for scipy's implicit methods, computed in compiled code (forward
+    differences of the compiled right-hand side: one call instead of 2 nq Python calls)."""
+    lib = kernel.compiled.functions.lib
+    fn = lib.rhs_jacobian
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
+    fn.restype = ctypes.c_int
+    n2 = kernel.nq + kernel.nv + kernel.compiled.drives.nz
+    tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
+    p = kernel.p
+
+    def jac(t, y):
+        y = np.ascontiguousarray(y, dtype=float)
+        out = np.empty((n2, n2))
+        status = fn(p.ctypes.data, tau_ptr, float(t), y.ctypes.data, out.ctypes.data)
+        if status:
+            _fail(kernel, status, t, y, "Jacobian")
+        return out
+
+    jac.tau = tau_arr  # keep the buffer alive with the closure
+    return jac
+
+
+def _diagnose(kernel, t: float, y: np.ndarray, method: str) -> None:
+    """Evaluate the tree accelerations at the state the compiled loop stopped at through the
+    checked Python path, which names the cause (a zero-length spring, a singular joint)."""
+    n = kernel.nq
+    if not np.all(np.isfinite(y)):
+        return
+    when = f"at t = {t:.6g} s" if np.isfinite(t) else "during the run"
+    q, qd = y[:n], y[n:]
+    try:
+        kernel.tree_solve(*kernel.checked_dynamics(t if np.isfinite(t) else 0.0, q, qd), q)
+    except SimulationError as exc:
+        raise SimulationError(f"compiled {method} stopped {when}: {exc}") from None
+    except ModelError:
+        pass
+
+
+def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int | None = None,
+          t_end: float | None = None):
+    n = kernel.nq
+    if status == RANK_LOST:
+        raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
+    if status == STEP_TOO_SMALL:
+        raise SimulationError(f"compiled {method} gave up at t = {t:.6g} s: required step size is less than "
+                              f"spacing between numbers")
+    if status in (SINGULAR, NOT_FINITE):
+        _diagnose(kernel, t, y, method)
+    if status == SINGULAR:
+        raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
+    if status == COLLAPSED:
+        from mbcomp.core.limits import max_steps
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds,
+                                               steps=steps, t_end=t_end, budget=max_steps()))
+    if status == NOT_FINITE:
+        raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
+    raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
+
+
+class CollapseWatch:
+    """Step-size collapse of a Python-stepped run: every ``window`` accepted steps, whether at
+    that window's pace the rest of the interval would need more than ``limit`` steps, or more
+    than ``limit / 30`` while the pace has fallen a hundredfold below the run's best (a state
+    running away, not a model that needs small steps throughout).  ``limit``: a hundredth of
+    ``limits.max_steps()`` (Python steps cost about a hundred compiled ones)."""
+
+    def __init__(self, t0: float, t_end: float, window: int = 1000, limit: float | None = None):
+        if limit is None:
+            from mbcomp.core.limits import max_steps
+            limit = max_steps() / 100
+        self.t_end, self.window, self.limit = t_end, window, limit
+        self.t0, self.n, self.best = t0, 0, 0.0
+        self.start, self.steps = t0, 0   # the whole run's, for its average pace
+        self.projected = 0.0  # steps the rest of the run would need at the last window's pace
+
+    def collapsed(self, t: float) -> bool:
+        self.n += 1
+        self.steps += 1
+        if self.n < self.window:
+            return False
+        pace, self.t0, self.n = (t - self.t0) / self.window, t, 0
+        self.best = max(self.best, pace)
+        rest = self.t_end - t
+        self.projected = rest / pace if pace > 0 else float("inf")
+        return rest > 0 and (rest > self.limit * pace or (rest > self.limit / 30 * pace and pace < 1e-2 * self.best))
+
+    def message(self, who: str, t: float, speeds, names=()) -> str:
+        """Why the run gave up at ``t`` (see ``collapse_message``)."""
+        return collapse_message(who, t, speeds, names, self.window, self.projected, steps=self.steps,
+                                t_end=self.t_end, budget=self.limit, start=self.start)
+
+
+def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPSE_WINDOW,
+                     projected: float = COLLAPSE_STEPS, *, steps: int | None = None, t_end: float | None = None,
+                     budget: float | None = None, start: float = 0.0) -> str:
+    """Why a run whose step size collapsed gave up, and the largest speed it reached.
+
+    With the run's ``steps`` so far, ``t_end`` and the step ``budget``: when even the run's
+    average pace could not reach ``t_end`` within the budget, the run is merely longer than
+    the budget allows (a bounded motion over a long time), and the message says so and how
+    to raise it; otherwise the pace collapsed (a state growing without bound)."""
+    speeds = np.abs(np.asarray(speeds, dtype=float))
+    largest = ""
+    if speeds.size:
+        i = int(speeds.argmax())
+        largest = f"; largest speed {speeds[i]:.3g} ({names[i] if len(names) == speeds.size else f'speed {i}'})"
+    if steps and t_end is not None and budget and t > start:
+        average = (t - start) / steps
+        needed = steps + (t_end - t) / average
+        if needed > budget:
+            return (f"{who}: the step budget ran out at t = {t:.6g} s: {steps} steps reached it ({average:.2g} s a "
+                    f"step), so t_end = {t_end:.6g} s would take about {needed:.2g} steps, more than the budget of "
+                    f"{budget:.2g} steps (set MBCOMP_MAX_STEPS to raise it, simulate in shorter stretches, or loosen "
+                    f"rtol/atol for longer steps){largest} (if the motion should be slower, check the initial state "
+                    f"and the forces)")
+    return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
+            f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
+            f"(check the initial state and the forces)")
+
+
+class RankLost(Exception):
+    """The compiled dae path met a singular position: the caller falls back to Python stepping."""
+
+
+def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
+                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None,
+                 budget=None):
+    """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
+    entirely in compiled code; returns ``(t, y, stats, wall)``.  ``budget``: the
+    ``checks.StepBudget`` of a run that keeps every step."""
+    lib = kernel.compiled.functions.lib
+    with formulation.compiled_setup(lib, kernel=kernel, q0=q0):  # e.g. the dae rows and gains, for this thread only
+        tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
+        session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
+        try:
+            if session is None:
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
+                            budget=budget)
+            with session:
+                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session,
+                            budget=budget)
+        except SimulationError:
+            formulation.explain_compiled_failure(lib)  # raises the cause when it knows one (a motor's law)
+            raise
+
+
+def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None,
+         budget=None):
+    hook = _Hook()
+    hook.install(lib)
+    try:
+        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
+                           session, budget)
+    finally:
+        hook.remove(lib)
+
+
+def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None,
+                session=None, budget=None):
+    """The compiled loops.  With a ``session`` (a formulation stepping its own reduced state,
+    ``Formulation.compiled_session``) the DOP853 loop is ``dop853_reduced_run``: it starts from
+    ``session.y0``, writes full ``[q, qd]`` rows, and hands PAUSED and TRIAL_FAILED returns to
+    ``session.resume``."""
+    run, rk4 = _bind(lib)
+    p = kernel.p
+    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
+    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
+    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else np.asarray(z0, dtype=float)
+    y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
+    ny = y.size  # the output rows
+    started = time.perf_counter()
+    if session is not None:
+        if method != "DOP853":
+            raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
+        if session.ni == 0 and not kernel.compiled.drives.nz:  # nothing to integrate: the motion follows from the constraints
+            if t_eval is None:
+                from mbcomp.core.checks import prescribed_times
+                t_eval = prescribed_times(t_end, max_step, budget)
+            times, values, stats = session.prescribed(t_end, t_eval, max_step)
+            return times, values, stats, time.perf_counter() - started
+        run = bind_reduced(lib)
+        full0, y = y, np.ascontiguousarray(np.concatenate((session.y0, z0)), dtype=float)  # [q_i, qd_i, z]
+        if z0.size:
+            session.drive_states(z0)  # (the accepted state's, where a retreat goes back to)
+    else:
+        full0 = y.copy()  # (the loop advances y in place)
+    if method == "RK4":
+        if dt is None:
+            raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
+        steps = int(round(t_end / dt))
+        if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
+            raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
+        counts = np.zeros(3, dtype=np.int64)
+        if t_eval is None:  # every step
+            if budget is not None:
+                budget.check_rows(steps + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
+            out = np.empty((steps + 1, ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
+                         counts.ctypes.data)
+            t = np.arange(steps + 1) * dt
+        else:  # only at the requested times (Hermite between the steps around each)
+            t = np.ascontiguousarray(t_eval, dtype=float)
+            out = np.empty((len(t), ny))
+            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, t.ctypes.data, len(t),
+                         out.ctypes.data, counts.ctypes.data)
+        if status == STOPPED:
+            hook.stopped(counts[1] * dt, method)
+        if status:
+            _fail(kernel, status, counts[1] * dt, y, method)
+        stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
+        return t, out, stats, time.perf_counter() - started
+    state = np.array([0.0, 0.0])
+    counts = np.zeros(3, dtype=np.int64)
+    if t_eval is not None:
+        t_out = np.ascontiguousarray(t_eval, dtype=float)
+        y_out = np.empty((len(t_out), ny))
+        i_out = np.zeros(1, dtype=np.int64)
+        if len(t_out) and t_out[0] == 0.0:
+            y_out[0] = full0
+            i_out[0] = 1
+        dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end, rtol, atol, max_step,
+                       tau_ptr, counts, t_out, i_out, y_out)
+        times, values = t_out, y_out
+    else:
+        _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end,
+                                                   rtol, atol, max_step, tau_ptr, counts, budget=budget, stored=1)
+        times, values = np.concatenate(([0.0], steps_t)), np.concatenate((full0[None, :], steps_y))
+    stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
+    if session is not None:
+        stats["restarts"] = session.restarts
+    return times, values, stats, time.perf_counter() - started
+
+
+def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol, atol, max_step, tau_ptr, counts,
+                   t_out=None, i_out=None, y_out=None, budget=None, stored=0):
+    """Run a compiled DOP853 loop (``run``: ``dop853_run`` or ``dop853_reduced_run``) from
+    ``state = [t, h]`` (h <= 0: a first step is chosen and ``f`` computed) and ``y`` to
+    ``t_end`` or to a step the loop stops at (EVENT).  Output rows at ``t_out`` from index
+    ``i_out[0]`` into ``y_out``, or (``t_out`` None) every accepted step.  PAUSED and
+    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``, and so
+    does keeping every step beyond ``budget.rows`` rows in all (``stored`` of them kept before):
+    the step buffers never hold more than one row past the budget.
+    Returns ``(status, step times, step rows, y, f)`` (status FINISHED or EVENT; ``y``,
+    ``f``: the state the loop stopped at, which a restart may have replaced)."""
+    p = kernel.p
+    n_steps = np.zeros(1, dtype=np.int64)
+    if i_out is None:
+        i_out = np.zeros(1, dtype=np.int64)
+    chunks_t, chunks_y = [np.zeros(0)], [np.zeros((0, kernel.nq + kernel.nv + kernel.compiled.drives.nz))]
+    cap, kept = 256, stored
+    while True:
+        if t_out is None:
+            if budget is not None:
+                if kept > budget.rows:
+                    raise budget.exceeded(float(state[0]))
+                cap = max(min(cap, budget.rows - kept + 1), 1)
+            t_steps, y_steps = np.empty(cap), np.empty((cap, chunks_y[0].shape[1]))
+            n_steps[0] = 0
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                         rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
+                         y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
+            chunks_t.append(t_steps[: n_steps[0]])
+            chunks_y.append(y_steps[: n_steps[0]])
+            kept += int(n_steps[0])
+            if budget is not None and kept > budget.rows:
+                raise budget.exceeded(float(state[0]))
+        else:
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+                         rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
+                         None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
+        if status == BUFFER_FULL:
+            cap = min(cap * 4, 1 << 20)
+            continue
+        if session is not None and status in (PAUSED, TRIAL_FAILED):
+            y, f = session.resume(status, state, y, f, counts)
+            continue
+        if status in (FINISHED, EVENT):
+            return status, np.concatenate(chunks_t), np.concatenate(chunks_y), y, f
+        if status == STOPPED:
+            hook.stopped(state[0], method)
+        full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
+        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method,
+              steps=int(counts[1]), t_end=t_end)
+

@@ -1,0 +1,798 @@
+"""Declarative TOML model files: load (validated, every problem reported at once) and save.
+
+A model file is data: it is parsed with ``tomllib`` and nothing in it is ever passed to
+``eval``, ``exec`` or ``sympify``.  Where a number goes, a file may also write a string
+holding a small arithmetic expression of ``[parameters]`` names (``"m*L**2/12"``); the
+time-varying inputs (motor ``position``, ``force``, joint torque ``value``) may also use
+the time ``t`` (``expressions.py`` parses and evaluates them).  The schema is documented
+in ``docs/files.md``.
+"""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10: the tomli backport has the same API
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from mbcomp.spec.components import Body, Joint
+from mbcomp.core.errors import ModelError
+from mbcomp.core.expressions import RESERVED, Expression, ExpressionError, TimeVector, evaluate, parse_expression  # noqa: F401 - re-exported
+from mbcomp.files.component_tables import (BAD, ZERO3, Reader, close_match, component_table, floats, is_valid_name, read_component,
+                       read_rotation, short, toml_key, toml_value, type_name)
+from mbcomp.files.library import (find_library_model, find_library_part, library_dirs, library_models, library_parts,
+                      read_description, resolve_model_path)
+from mbcomp.spec.model import Model
+from mbcomp.files.library import LIBRARY_PREFIX, library_name_problem
+from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting, read_file
+from mbcomp.spec.compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
+from mbcomp.spec.components.frame import Frame
+
+__all__ = ["load", "save", "dumps", "parse_expression", "Expression", "ExpressionError", "TimeVector",
+           "library_dirs", "library_models", "find_library_model", "read_description"]
+
+# ----------------------------------------------------------------------------------------------
+# Schema
+# ----------------------------------------------------------------------------------------------
+TOP_KEYS = ("name", "description", "gravity", "parameters", "ports", "submodels", "bodies", "joints", "forces",
+            "constraints", "contacts", "initial", "simulation")
+PART_SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts")
+SIMULATION_KEYS = ("t_end", "method", "rtol", "atol", "formulation", "n_samples")
+METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+FORMULATIONS = ("lagrange", "dae")
+MAX_SAMPLES = 10_000_000  # output samples a file may ask for (each holds q and qd)
+
+# ----------------------------------------------------------------------------------------------
+# Reading
+# ----------------------------------------------------------------------------------------------
+def _parse_toml(path: Path, label: str) -> dict:
+    """The TOML data of a model file: a regular file of at most ``max_file_bytes()`` (a FIFO
+    or a device is refused before it is read), UTF-8, valid TOML; else a ``ModelError``."""
+    raw = read_file(path, label)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise ModelError(problems=[f"{label}:{line}: the file is not UTF-8 text"]) from None
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise ModelError(problems=[f"{label}: arrays or tables are nested too deeply to read"]) from None
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        found = re.search(r"\(at line (\d+), column (\d+)\)", message)
+        message = re.sub(r"\s*\(at line \d+, column \d+\)", "", message)
+        message = re.sub(r"\s*\(at end of document\)", "", message)
+        if found:
+            where = f"{label}:{found.group(1)}:{found.group(2)}"
+        else:
+            where = f"{label}:{text.count(chr(10)) + 1}"
+        raise ModelError(problems=[f"{where}: TOML syntax error: {message}"]) from None
+    except ValueError:  # an integer too long to convert (Python reads at most 4300 digits)
+        found = re.search(r"\d{4301,}", text)
+        if found is None:
+            raise ModelError(problems=[f"{label}: a value cannot be read"]) from None
+        line_start = text.rfind("\n", 0, found.start()) + 1
+        key = text[line_start:found.start()].split("=")[0].strip()
+        line = text[: found.start()].count("\n") + 1
+        raise ModelError(problems=[f"{label}:{line} {key}: an integer of {len(found.group(0))} digits is too long "
+                                   "(at most 4300)"]) from None
+
+
+def load(path: str | os.PathLike) -> Model:
+    """Read a TOML model file into a ``Model`` (schema: docs/files.md and docs/composition.md).
+
+    ``path`` is a file, or the name of a library model (``"double_pendulum"``, also
+    ``"library:double_pendulum"``; see ``mbcomp library``); an existing file wins.
+
+    Every problem (unknown or missing key, wrong type, wrong vector length, non-finite
+    number, reference to an undeclared body or joint, disallowed expression, TOML syntax)
+    is collected and reported in one ``ModelError``, each with the file, table and key:
+    ``arm.toml [joints.elbow] axis: must be 'x', 'y', 'z' or a 3-vector, got 'w'``.
+
+    ``[submodels.NAME]`` tables instantiate other files (``use = "part.toml"``, beside or
+    below this file, or ``"library:NAME"``) with port bindings and parameter overrides.
+    A file read as a model on its own binds its ``"external"`` ports to the ground.
+
+    Only regular files within ``MBCOMP_MAX_FILE_BYTES`` are read (a FIFO or a device is
+    refused unopened), and the sub-model instances the files would build, and how deeply
+    they nest, are counted before anything is built (``mbcomp.core.limits``, docs/errors.md).
+
+    The returned model also carries the file's extras as attributes: ``description``
+    (str), ``named_parameters`` ({name: float}), ``initial`` (``{"q": {coord: value},
+    "qd": {coord: value}}``), ``simulation`` (dict of the ``[simulation]`` settings) and
+    ``path`` (the file read).
+    """
+    spec = os.fspath(path)
+    path = resolve_model_path(path)
+    label = str(path)
+    if isinstance(spec, str) and spec.startswith(LIBRARY_PREFIX) and not path.exists():
+        name = spec[len(LIBRARY_PREFIX):]
+        problem = library_name_problem(name) or "is not a library model"
+        raise ModelError(problems=[f"{short(spec)} {problem} "
+                                   f"(library: {', '.join(library_models()) or 'none found'})"])
+    if not path.exists() and "/" not in label and os.sep not in label and not label.endswith(".toml"):
+        names = ", ".join(library_models()) or "none found"
+        raise ModelError(problems=[f"{label}: cannot read the file (no such file), and no library model "
+                                   f"of that name (library: {names})"])
+    data = _parse_toml(path, label)
+    reader = Reader(label)
+    files = _Files(path, data)
+    try:
+        files.check_limits(label)   # before anything is built: milliseconds even for 2**29 instances
+        model = _read_model(reader, data, path, files)
+    except ModelError:
+        raise
+    except RecursionError:
+        raise ModelError(problems=reader.problems + [f"{label}: values or sub-models are nested too deeply to "
+                                                     f"read (sub-models nest at most {max_nesting()} deep; "
+                                                     f"{NESTING[0]} sets it)"]) from None
+    except (ArithmeticError, LookupError, TypeError, ValueError, OSError, MemoryError) as exc:
+        # A safety net: a file is data, and no file may end in a raw exception.
+        raise ModelError(problems=reader.problems + [f"{label}: cannot be read ({type(exc).__name__}: {exc})"]) from None
+    if reader.problems:
+        raise ModelError(problems=reader.problems)
+    return model
+
+
+def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
+    r.keys("", data, TOP_KEYS)
+
+    name = data.get("name", path.stem or "model")
+    if not isinstance(name, str) or not name.strip():
+        r.problem(None, "name", f"must be a non-empty string, got {short(name)}")
+        name = path.stem or "model"
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        r.problem(None, "description", f"must be a string, got {type_name(description)}")
+        description = ""
+
+    _read_parameters(r, data.get("parameters", {}))
+    gravity = (0.0, 0.0, -9.81)
+    if "gravity" in data:
+        g = r.vector("", "gravity", data["gravity"])
+        gravity = g if g is not BAD else gravity
+
+    model = Model(name.strip() if isinstance(name, str) else "model", gravity=gravity)
+    sections = _sections(r, data, ("initial", "simulation"))
+    bodies: dict[str, Any] = {"ground": model.ground}
+    external, exposed = _read_ports(r, data.get("ports", {}))
+    for port in external:   # read on its own, a part hangs from the ground
+        bodies[port] = model.ground
+        r.ports.add(port)
+    context = _FileContext(path, (path.resolve(),), {}, files)
+    coords_seen = _read_parts(r, data, model, bodies, context, exposed)
+
+    model.description = description
+    model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
+    # With a broken joint the coordinate names are incomplete: check the values only.
+    model.initial = _read_initial(r, sections["initial"], coords_seen, getattr(r, "speeds_seen", {}))
+    model.simulation = _read_simulation(r, sections["simulation"])
+    model.path = path
+    return model
+
+
+def _sections(r: Reader, data: dict, extra: tuple = ()) -> dict:
+    sections = {}
+    for section in PART_SECTIONS + ("submodels",) + extra:
+        value = data.get(section, {})
+        if not isinstance(value, dict):
+            r.problem(None, section, f"must be a table ([{section}] or [{section}.NAME]), got {type_name(value)}")
+            value = {}
+        sections[section] = value
+    return sections
+
+
+def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_FileContext",
+                exposed: dict) -> dict | None:
+    """Read bodies, sub-model instances, joints, forces, constraints and contacts into
+    ``target`` (a Model or a sub-model instance being built); returns the coordinate names
+    seen (``None`` when a joint could not be read) and sets the exposed ports on a sub-model."""
+    sections = _sections(r, data)
+    used_names: dict[str, str] = {"ground": "the ground"}
+    used_names.update({port: "a port" for port in r.ports})
+    joints: dict[str, Any] = {}
+
+    def named_tables(section: str):
+        """(name, table label, table) of a section's entries, checking names and types."""
+        for comp_name, table in sections[section].items():
+            label = f"{section}.{toml_key(comp_name)}"
+            if not isinstance(table, dict):
+                r.problem(None, f"{section}.{comp_name}",
+                          f"must be a table [{section}.{comp_name}], got {type_name(table)}")
+                continue
+            if not is_valid_name(comp_name):
+                r.problem(label, None, f"name {comp_name!r} may not contain '.', '[', ']' or edge spaces")
+                continue
+            if comp_name in used_names:
+                r.problem(label, None, f"name {comp_name!r} is already used by {used_names[comp_name]}")
+                continue
+            used_names[comp_name] = f"[{label}]"
+            yield comp_name, label, table
+
+    scope = getattr(target, "path", None) if not isinstance(target, Model) else None
+    for comp_name, label, table in named_tables("bodies"):
+        body = read_component(r, "bodies", comp_name, label, table, bodies, joints)
+        bodies[comp_name] = body if body is not None else comp_name
+        if body is not None:
+            target.add(body)
+            if scope:
+                bodies[f"{scope}.{comp_name}"] = body   # its full name, for inner parts
+
+    def expose(ports: dict) -> None:
+        for port, spec in ports.items():
+            frame = _port_frame(r, port, spec, bodies)
+            if frame is BAD:
+                continue
+            bodies[port] = frame
+            r.ports.add(port)
+            if not isinstance(target, Model):
+                setattr(target, port, frame)
+
+    # Ports on this file's own bodies first (sub-models may bind to them), the rest after.
+    own = {p: s for p, s in exposed.items() if _port_body(s) in bodies}
+    expose(own)
+    coords_seen: dict[str, str] = {}
+    speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
+    all_joints_read = True
+    for comp_name, label, table in named_tables("submodels"):
+        instance = _read_submodel(r, comp_name, label, table, bodies, context)
+        if instance is None:
+            r.failed.add(comp_name)
+            all_joints_read = False
+            continue
+        try:
+            target.add(instance)
+        except ModelError as exc:
+            r.problems.extend(p if p.startswith(r.label.split(" ")[0]) else f"{r.label} [{label}]: {p}"
+                              for p in exc.problems)
+            r.failed.add(comp_name)
+            all_joints_read = False
+            continue
+        for key, value in vars(instance).items():
+            if isinstance(value, Frame):
+                for port in {f"{comp_name}.{key}", f"{instance.path}.{key}"}:
+                    bodies[port] = value
+                    r.ports.add(port)
+        for full, member in _instance_bodies(instance, instance.path):
+            bodies[full] = member
+            r.ports.add(full)
+        for full, member in _instance_joints(instance, comp_name):
+            joints[full] = member
+        for coord in _instance_coords(instance, comp_name):
+            coords_seen[coord] = f"[{label}]"
+
+    for comp_name, label, table in named_tables("joints"):
+        joint = read_component(r, "joints", comp_name, label, table, bodies, joints)
+        joints[comp_name] = joint if joint is not None else comp_name
+        if joint is None:
+            all_joints_read = False
+            continue
+        for coord in joint.coords:
+            if coord in coords_seen:
+                r.problem(label, "coords", f"coordinate {coord!r} is already a coordinate of {coords_seen[coord]}")
+            coords_seen[coord] = f"[{label}]"
+        speeds_seen.update({speed: f"[{label}]" for speed in joint.speeds if speed not in joint.coords})
+        _add_component(r, target, joint, label)
+
+    for comp_name, label, table in named_tables("forces"):
+        _add_component(r, target, read_component(r, "forces", comp_name, label, table, bodies, joints), label)
+    for comp_name, label, table in named_tables("constraints"):
+        _add_component(r, target, read_component(r, "constraints", comp_name, label, table, bodies, joints), label)
+    for comp_name, label, table in named_tables("contacts"):
+        _add_component(r, target, read_component(r, "contacts", comp_name, label, table, bodies, joints), label)
+
+    expose({p: s for p, s in exposed.items() if p not in own})
+    r.speeds_seen = speeds_seen  # a ball's speeds, which [initial.qd] may name
+    return coords_seen if all_joints_read else None
+
+
+def _instance_bodies(instance: Any, path: str) -> list:
+    """``(path, body)`` of every body inside a sub-model instance (nested ones too)."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_bodies(member, f"{path}.{local}")
+        elif isinstance(member, Body):
+            out.append((f"{path}.{local}", member))
+    return out
+
+
+def _instance_joints(instance: Any, path: str) -> list:
+    """``(path, joint)`` of every joint inside a sub-model instance (nested ones too)."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_joints(member, f"{path}.{local}")
+        elif isinstance(member, Joint):
+            out.append((f"{path}.{local}", member))
+    return out
+
+
+def _instance_coords(instance: Any, path: str) -> list[str]:
+    """The (prefixed) coordinate names of a sub-model instance, for [initial] checks."""
+    out = []
+    for local, member in instance.members().items():
+        if isinstance(member, Submodel):
+            out += _instance_coords(member, f"{path}.{local}")
+        elif isinstance(member, Joint):
+            out += [f"{path}.{c}" for c in member.coords]
+    return out
+
+
+# -- ports and sub-models ----------------------------------------------------------------------
+PORT_KEYS = ("body", "point", "rotation")
+
+
+def _read_ports(r: Reader, table: Any) -> tuple[list[str], dict]:
+    """``[ports]``: ``NAME = "external"`` (bound by the user of the file) or an exposed
+    frame ``NAME = {body = "...", point = [...], rotation = [[...]]}`` (or a body name)."""
+    if not isinstance(table, dict):
+        r.problem(None, "ports", f"must be a table [ports], got {type_name(table)}")
+        return [], {}
+    external, exposed = [], {}
+    for port, spec in table.items():
+        if not is_valid_name(port) or not port.isidentifier():
+            r.problem("ports", port, f"{port!r} is not a valid port name (letters, digits, _)")
+        elif spec == "external":
+            external.append(port)
+        elif isinstance(spec, (str, dict)):
+            exposed[port] = spec
+        else:
+            r.problem("ports", port, f'must be "external", a body name or {{body = "...", point = [x, y, z]}}, '
+                      f"got {type_name(spec)} ({short(spec)})")
+    return external, exposed
+
+
+def _port_frame(r: Reader, port: str, spec: Any, bodies: dict) -> Any:
+    """The Frame an exposed port stands for."""
+    where = f"ports.{toml_key(port)}"
+    if isinstance(spec, str):
+        body = r.reference("ports", port, spec, bodies, "body")
+        return body if body is BAD or isinstance(body, Frame) else Frame(bodies.get(body, body))
+    r.keys(where, spec, PORT_KEYS, ("body",))
+    body = r.reference(where, "body", spec["body"], bodies, "body") if "body" in spec else BAD
+    point = r.vector(where, "point", spec["point"]) if "point" in spec else ZERO3
+    rotation = read_rotation(r, where, "rotation", spec["rotation"]) if "rotation" in spec else None
+    if BAD in (body, point) or rotation is BAD:
+        return BAD
+    if isinstance(body, Frame):
+        return r.problem(where, "body", "must be a body of this file, not another port")
+    try:
+        return Frame(bodies.get(body, body), point, rotation)
+    except ModelError as exc:
+        return r.problem(where, None, str(exc))
+
+
+class _FileContext:
+    """Where a file is read from: its path, the chain of files including it (for cycles),
+    the sub-model classes made so far (one per file) and the files of this load."""
+
+    def __init__(self, path: Path, chain: tuple, classes: dict, files: "_Files"):
+        self.path, self.chain, self.classes, self.files = path, chain, classes, files
+
+
+def _port_body(spec: Any) -> str | None:
+    """The body name an exposed port names (None when it names none)."""
+    body = spec if isinstance(spec, str) else spec.get("body") if isinstance(spec, dict) else None
+    return body if isinstance(body, str) else None
+
+
+def _use_target(use: Any, path: Path, explain: bool = True) -> tuple[Path | None, str | None]:
+    """``(file, None)`` that ``use = ...`` in the file ``path`` names, or ``(None, why not)``:
+    a file beside or below ``path``, or ``library:NAME`` inside the library.  Nothing outside
+    is ever read (``explain=False``: skip composing the message)."""
+    if not isinstance(use, str) or not use.strip():
+        return None, f'must be a file name ("part.toml") or "library:NAME", got {short(use)}'
+    if use.startswith(LIBRARY_PREFIX):
+        name = use[len(LIBRARY_PREFIX):]
+        problem = library_name_problem(name)
+        if problem is not None:
+            return None, f"{short(use)} {problem}"
+        found = find_library_part(name)
+        if found is None and explain:
+            return None, (f"no library part or model {short(name)}; parts: {', '.join(library_parts())}; "
+                          f"models: {', '.join(library_models())}")
+        return found, None
+    base = path.resolve().parent
+    try:
+        target = (base / use).resolve()
+        found = target.exists()
+    except (OSError, ValueError, RuntimeError) as exc:
+        return None, f"{short(use)} is not a usable file name ({type(exc).__name__})"
+    if not target.is_relative_to(base):
+        return None, (f"{short(use)} leaves the directory of {path.name}: a file may use files beside or below "
+                      "it, or library:NAME")
+    if not found:
+        return None, f"file {short(use)} not found beside {path.name}"
+    return target, None   # (a FIFO or a device is refused when it is read)
+
+
+def _resolve_use(r: Reader, label: str, use: Any, context: _FileContext) -> Path | None:
+    target, problem = _use_target(use, context.path)
+    if problem is not None:
+        r.problem(label, "use", problem)
+    return target
+
+
+class _Files:
+    """The files one ``load`` reads, each read once (by resolved path), and the limits on the
+    sub-model instances their ``use`` graph builds, checked before anything is built."""
+
+    def __init__(self, path: Path, data: dict):
+        self.top = path
+        self.data: dict[Path, Any] = {path.resolve(): data}
+
+    def data_of(self, path: Path, label: str) -> dict:
+        """The parsed data of ``path`` (read once; a file that failed fails again)."""
+        key = path.resolve()
+        found = self.data.get(key)
+        if found is None:
+            try:
+                found = _parse_toml(path, label)
+            except ModelError as exc:
+                found = exc
+            self.data[key] = found
+        if isinstance(found, ModelError):
+            raise ModelError(problems=found.problems)
+        return found
+
+    def check_limits(self, label: str) -> None:
+        """``ModelError`` when the model would hold more than ``max_instances()`` sub-model
+        instances or nest them more than ``max_nesting()`` deep.  Counted on the ``use``
+        graph with multiplicities, each file once: milliseconds even for 2**29 instances.
+        Files that cannot be read or used count as nothing here (the reader reports them)."""
+        limit, deepest = max_instances(), max_nesting()
+        memo: dict[Path, tuple[int, int, tuple]] = {}
+
+        def too_deep(chain: tuple) -> ModelError:
+            names = [p.name if isinstance(p, Path) else p for p in chain]
+            if len(names) > 7:
+                names = names[:3] + [f"... ({len(names) - 5} more)"] + names[-2:]
+            return ModelError(problems=[f"{label}: sub-models nest more than {deepest} deep (set {NESTING[0]} to "
+                                        f"raise the limit): {' -> '.join(names)}"])
+
+        def table(data: Any, where: Path, level: int, chain: tuple) -> tuple[int, int, tuple]:
+            subs = data.get("submodels") if isinstance(data, dict) else None
+            count, depth, longest = 0, 0, ()
+            if not isinstance(subs, dict):
+                return count, depth, longest
+            for name, entry in subs.items():
+                if not isinstance(entry, dict):
+                    continue
+                below, step = (0, 0, ()), f"[submodels.{toml_key(str(name))}]"
+                if "use" in entry:
+                    target, _ = _use_target(entry["use"], where, explain=False)
+                    if target is not None and target.resolve() not in chain:
+                        below = use(target.resolve(), level + 1, chain + (target.resolve(),))
+                elif entry and all(key in PART_SECTIONS + ("submodels",) for key in entry):
+                    if level + 1 > deepest:
+                        raise too_deep(chain + (step,))
+                    below = table(entry, where, level + 1, chain + (step,))
+                count += 1 + below[0]
+                if 1 + below[1] > depth:
+                    depth, longest = 1 + below[1], below[2]
+            return count, depth, longest
+
+        def use(target: Path, level: int, chain: tuple) -> tuple[int, int, tuple]:
+            if level > deepest:
+                raise too_deep(chain)
+            if target not in memo:
+                try:
+                    data = self.data_of(target, str(target))
+                except ModelError:
+                    data = {}
+                memo[target] = table(data, target, level, chain)
+            count, depth, longest = memo[target]
+            if level + depth > deepest:
+                raise too_deep(chain + longest)
+            return count, depth, (target,) + longest
+
+        top = self.top.resolve()
+        counts = {}
+        data = self.data[top]
+        subs = data.get("submodels") if isinstance(data, dict) else None
+        if isinstance(subs, dict):
+            for name, entry in subs.items():
+                counts[name] = table({"submodels": {name: entry}}, self.top, 0, (top,))[0]
+        total = sum(counts.values())
+        if total > limit:
+            name, most = max(counts.items(), key=lambda item: item[1])
+            alone = f"; [submodels.{toml_key(str(name))}] alone builds {most}" if len(counts) > 1 else ""
+            raise ModelError(problems=[f"{label}: would build {total} sub-model instances, more than the limit of "
+                                       f"{limit} per model (set {INSTANCES[0]} to raise it){alone}"])
+
+
+def _read_submodel(r: Reader, name: str, label: str, table: dict, bodies: dict, context: _FileContext):
+    """A sub-model instance from ``[submodels.NAME]``: ``use``, port bindings, parameter
+    overrides (numbers or expressions of this file's parameters) and dicts of modifiers
+    for the part's own sub-models."""
+    if "use" not in table:
+        if table and all(key in PART_SECTIONS + ("submodels",) for key in table):
+            return _inline_class(r, label, table, bodies, context)(name)
+        r.problem(label, "use", 'missing (required): the part file ("part.toml" or "library:NAME"), or the '
+                  "part's own [bodies], [joints], ... tables")
+        return None
+    path = _resolve_use(r, label, table["use"], context)
+    if path is None:
+        return None
+    resolved = path.resolve()
+    if resolved in context.chain:
+        cycle = " -> ".join(str(p) for p in context.chain[context.chain.index(resolved):] + (resolved,))
+        r.problem(label, "use", f"files use each other in a cycle: {cycle}")
+        return None
+    cls = context.classes.get(resolved)
+    if cls is None:
+        try:
+            cls = _part_class(path, _FileContext(path, context.chain + (resolved,), context.classes, context.files))
+        except ModelError as exc:
+            r.problems.extend(exc.problems)
+            return None
+        context.classes[resolved] = cls
+    params, ports = cls.declared_parameters(), cls.port_names()
+    modifiers: dict[str, Any] = {}
+    ok = True
+    for key, value in table.items():
+        if key == "use":
+            continue
+        if key in ports:
+            bound = r.reference(label, key, value, bodies, "body")
+            if bound is BAD:
+                ok = False
+            else:
+                modifiers[key] = bodies.get(bound, bound) if isinstance(bound, str) else bound
+        elif key in params:
+            x = r.number(label, key, value)
+            ok = ok and x is not BAD
+            modifiers[key] = x
+        elif isinstance(value, dict):
+            inner = {k: r.number(f"{label}.{key}", k, v) for k, v in value.items()}
+            ok = ok and not any(v is BAD for v in inner.values())
+            modifiers[key] = inner
+        else:
+            r.problem(label, key, f"unknown key; {path.name} has parameters {sorted(params)} and ports {sorted(ports)}")
+            ok = False
+    missing = [p for p in ports if p not in table]
+    if missing:
+        r.problem(label, None, f"port(s) {missing} of {path.name} are not bound")
+        ok = False
+    if not ok:
+        return None
+    try:
+        return cls(name, **modifiers)
+    except ModelError as exc:
+        r.problem(label, None, str(exc))
+        return None
+
+
+def _part_class(path: Path, context: _FileContext) -> type:
+    """A ``Submodel`` class for a part file: its [parameters] become Parameters (a number,
+    or a table {value, unit, min, max, doc}), its external [ports] the ports of build."""
+    label = str(path)
+    data = context.files.data_of(path, label)
+    r = Reader(label)
+    r.keys("", data, TOP_KEYS)
+    params_table = data.get("parameters", {})
+    declared: dict[str, Any] = {}
+    if not isinstance(params_table, dict):
+        r.problem(None, "parameters", f"must be a table [parameters], got {type_name(params_table)}")
+        params_table = {}
+    for key, value in params_table.items():
+        if not key.isidentifier() or key in RESERVED:
+            r.problem("parameters", key, f"{key!r} is not a valid parameter name")
+            continue
+        spec = value if isinstance(value, dict) else {"value": value}
+        r.keys(f"parameters.{key}", spec, ("value", "unit", "min", "max", "doc"), ("value",))
+        default = r.number("parameters", key, spec.get("value", BAD)) if "value" in spec else BAD
+        if default is BAD:
+            continue
+        try:
+            declared[key] = Parameter(float(default), unit=spec.get("unit"), min=spec.get("min"),
+                                      max=spec.get("max"), doc=str(spec.get("doc", "")))
+        except ModelError as exc:
+            r.problem("parameters", key, str(exc))
+    external, exposed = _read_ports(r, data.get("ports", {}))
+    if r.problems:
+        raise ModelError(problems=r.problems)
+    name = data.get("name", path.stem)
+
+    def port_names(cls) -> dict:
+        return {p: _PORT_REQUIRED for p in external}
+
+    def build(self, **ports: Any) -> None:
+        reader = Reader(label)
+        reader.parameters = {key: getattr(self, key) for key in declared}
+        reader.ports = set(ports)
+        bodies: dict[str, Any] = {"ground": "ground", **ports}
+        _read_parts(reader, data, self, bodies, context, exposed)
+        if reader.problems:
+            raise ModelError(problems=reader.problems)
+
+    namespace = {**declared, "build": build, "port_names": classmethod(port_names),
+                 "__doc__": data.get("description", f"Part read from {path.name}"), "source": path}
+    return type(_class_name(name), (FileSubmodel,), namespace)
+
+
+def _inline_class(r: Reader, label: str, table: dict, bodies: dict, context: _FileContext) -> type:
+    """A ``Submodel`` class for a part written inline (as ``save`` writes Python sub-models):
+    its tables name their own components locally and anything else by its full path."""
+    outer = dict(bodies)
+    where = f"{r.label} {label}"
+
+    def build(self) -> None:
+        reader = Reader(where)
+        reader.parameters = dict(r.parameters)
+        _read_parts(reader, table, self, dict(outer), context, {})
+        if reader.problems:
+            raise ModelError(problems=reader.problems)
+
+    return type("InlinePart", (FileSubmodel,), {"build": build, "__doc__": f"Part written inline in {where}"})
+
+
+def _class_name(name: Any) -> str:
+    text = "".join(ch if ch.isalnum() else "_" for ch in str(name)) or "Part"
+    return text if text[0].isalpha() else "Part_" + text
+
+
+def _add_component(r: Reader, model: Model, component: Any, label: str) -> None:
+    if component is None:
+        return
+    try:
+        model.add(component)
+    except ModelError as exc:
+        r.problem(label, None, str(exc))
+
+
+def _read_parameters(r: Reader, table: Any) -> None:
+    if not isinstance(table, dict):
+        r.problem(None, "parameters", f"must be a table [parameters], got {type_name(table)}")
+        return
+    for key, value in table.items():
+        if not key.isidentifier() or key in RESERVED:
+            why = "is reserved" if key in RESERVED else "is not a valid name (letters, digits, _)"
+            r.problem("parameters", key, f"{key!r} {why}")
+            continue
+        if isinstance(value, dict):   # {value = ..., unit, min, max, doc} as part files declare them
+            r.keys(f"parameters.{key}", value, ("value", "unit", "min", "max", "doc"), ("value",))
+            value = value.get("value", BAD)
+            if value is BAD:
+                continue
+        x = r.number("parameters", key, value)
+        if x is not BAD:
+            r.parameters[key] = x
+
+
+def _read_initial(r: Reader, table: dict, coords: dict | None, speeds: dict | None = None) -> dict:
+    """``[initial]``: ``q`` by coordinate name, ``qd`` by coordinate (its rate) or by speed
+    name (a ball's angular velocity components)."""
+    initial: dict[str, dict[str, float]] = {"q": {}, "qd": {}}
+    r.keys("initial", table, ("q", "qd"))
+    known = coords
+    for which in ("q", "qd"):
+        coords = known if which == "q" or known is None else {**known, **(speeds or {})}
+        values = table.get(which, {})
+        label = f"initial.{which}"
+        if not isinstance(values, dict):
+            r.problem("initial", which, "must be a table of coordinate values ({ name = value, ... }), "
+                      f"got {type_name(values)}")
+            continue
+        for coord, value in values.items():
+            if coords is not None and coord not in coords:
+                hint = close_match(coord, tuple(coords))
+                r.problem(label, coord, "unknown coordinate" + (f" (did you mean {hint!r}?)" if hint else "")
+                          + f"; coordinates: {', '.join(coords) or 'none'}")
+                continue
+            x = r.number(label, coord, value)
+            if x is not BAD:
+                initial[which][coord] = x
+    return initial
+
+
+def _read_simulation(r: Reader, table: dict) -> dict:
+    r.keys("simulation", table, SIMULATION_KEYS)
+    out: dict[str, Any] = {}
+    for key, value in table.items():  # in file order
+        if key in ("t_end", "rtol", "atol"):
+            x = r.number("simulation", key, value, positive=True)
+        elif key == "method":
+            x = r.string("simulation", key, value, METHODS)
+        elif key == "formulation":
+            x = r.string("simulation", key, value, FORMULATIONS)
+        elif key == "n_samples":
+            if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= MAX_SAMPLES:
+                x = r.problem("simulation", key, f"must be an integer from 2 to {MAX_SAMPLES:.0e}, got {short(value)}")
+            else:
+                x = value
+        else:
+            continue  # reported as an unknown key
+        if x is not BAD:
+            out[key] = x
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Writing
+# ----------------------------------------------------------------------------------------------
+def dumps(model: Model) -> str:
+    """The TOML text of ``model`` (see ``save``)."""
+    lines = ["# mbcomp model file (schema: docs/files.md)"]
+    description = getattr(model, "description", "")
+    if description:
+        lines.append(f"description = {toml_value(description)}")
+    lines.append(f"name = {toml_value(model.name)}")
+    lines.append(f"gravity = {toml_value(floats(model.gravity))}")
+    parameters = getattr(model, "named_parameters", None) or {}
+    if parameters:
+        lines += ["", "[parameters]"] + [f"{toml_key(k)} = {toml_value(float(v))}" for k, v in parameters.items()]
+    if model.registry is not None:
+        lines += _part_lines(model, model.entries, "", "")
+    else:
+        lines += _section_lines([c for c in model.components.values() if c is not model.ground], "")
+    initial = getattr(model, "initial", None) or {}
+    for which in ("q", "qd"):
+        values = initial.get(which) or {}
+        if values:
+            lines += ["", f"[initial.{which}]"] + [f"{toml_key(k)} = {toml_value(float(v))}"
+                                                   for k, v in values.items()]
+    simulation = getattr(model, "simulation", None) or {}
+    if simulation:
+        lines += ["", "[simulation]"] + [f"{toml_key(k)} = {toml_value(v)}" for k, v in simulation.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _section_lines(components: list, prefix: str) -> list[str]:
+    """TOML tables of ``components`` under ``prefix`` (``""`` or ``"submodels.NAME."``)."""
+    lines = []
+    sections: dict[str, list[tuple[str, dict]]] = {}
+    for comp in components:
+        section, table = component_table(comp)
+        sections.setdefault(section, []).append((comp.name, table))
+    for section in PART_SECTIONS:
+        for name, table in sections.get(section, []):
+            lines += ["", f"[{prefix}{section}.{toml_key(name)}]"]
+            lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in table.items()]
+    return lines
+
+
+def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[str]:
+    """A model with sub-model instances, nested as ``[submodels.NAME...]`` tables: each
+    instance's components under their local names, references outside it by full path."""
+    names = model.registry.names
+    known = set(names.values())
+
+    def written(ref: Any) -> Any:
+        if isinstance(ref, str):
+            full = f"{scope}.{ref}" if scope and f"{scope}.{ref}" in known else ref
+        else:
+            full = names.get(id(ref), getattr(ref, "name", ref))
+        if scope and full.startswith(scope + ".") and "." not in full[len(scope) + 1:]:
+            return full[len(scope) + 1:]
+        return full
+
+    components = [copy_component(c, c.name, {role: written(ref) for role, ref in c.references().items()})
+                  for c in members if not isinstance(c, Submodel)]
+    lines = _section_lines(components, prefix)
+    for item in members:
+        if isinstance(item, Submodel):
+            head = f"{prefix}submodels.{toml_key(item.name)}"
+            lines += ["", f"# sub-model instance {item.path!r}, written with its values", f"[{head}]"]
+            lines += _part_lines(model, list(item.members().values()), item.path, head + ".")
+    return lines
+
+
+def save(model: Model, path: str | os.PathLike) -> None:
+    """Write ``model`` as a TOML model file that ``load`` reads back to the same model.
+
+    Numbers are written in full precision (parameter expressions of the original file are
+    written as their values); time expressions read from a file are written as their text,
+    with the file's ``[parameters]``.  The extras ``description``, ``initial`` and
+    ``simulation`` are written when the model has them.  Raises ``ModelError`` for what a
+    file cannot hold (a Python callable as a force, torque or motor position).
+    """
+    text = dumps(model)
+    from mbcomp.core.writing import write_file
+    write_file(path, text, "save")
