@@ -68,7 +68,8 @@ def _where(exc: BaseException) -> float:
 
 
 @pytest.mark.parametrize("method, extra", [("DOP853", {"t_eval": [0.0, LONG]}), ("DOP853", {}),
-                                           ("RK4", {"dt": 1e-3})], ids=["dop853-dense", "dop853-steps", "rk4"])
+                                           ("RK4", {"dt": 1e-3, "max_samples": 10 ** 7 + 1})],
+                         ids=["dop853-dense", "dop853-steps", "rk4"])
 def test_ctrl_c_stops_a_compiled_run(chain, method, extra):
     q0 = np.full(4, 0.5)
     _warm_up(chain, method)

@@ -138,7 +138,7 @@ class TestFailedWrites:
         from mbcomp.core import writing
         real = writing.write_file
 
-        def to_full(path, data, what):  # a .gif suffix, the bytes to a full disk
+        def to_full(path, data, what, **options):  # a .gif suffix, the bytes to a full disk
             return real(FULL, data, what)
         monkeypatch.setattr(writing, "write_file", to_full)
         with pytest.raises(mb.ModelError, match=r"animate: cannot write '/dev/full': No space left on device"):
