@@ -99,7 +99,7 @@ class TestNamingRule:
         assert sp.simplify(M[0, 0].subs(a_dd, 0) - (1 + 4 * m2)) == 0
 
     def test_the_dataframe_keeps_every_column(self):
-        pd = pytest.importorskip("pandas")
+        pd = pytest.importorskip("pandas", exc_type=ImportError)
         system = two_links("a", "a_dd").compile(backend="python", cache=False)
         frame = system.simulate(0.1, [0.3, -0.2], t_eval=[0.0, 0.1]).to_dataframe()
         assert list(frame.columns) == ["a", "a_dd", "a_d", "a_dd_d"] and isinstance(frame, pd.DataFrame)
@@ -127,14 +127,14 @@ class TestFailedWrites:
             two_links().save(FULL)
 
     def test_plot(self, result, tmp_path):
-        pytest.importorskip("matplotlib")
+        pytest.importorskip("matplotlib", exc_type=ImportError)
         from mbcomp.face.plotting import work_precision_plot
         rows = [{"label": "DOP853", "error": 1e-5, "time": 0.1}, {"label": "DOP853", "error": 1e-7, "time": 0.2}]
         with pytest.raises(mb.ModelError, match=r"savefig: cannot write '/dev/full': No space left on device"):
             work_precision_plot(rows, FULL)
 
     def test_animation(self, result, monkeypatch):
-        pytest.importorskip("PIL")
+        pytest.importorskip("PIL", exc_type=ImportError)
         from mbcomp.core import writing
         real = writing.write_file
 
@@ -172,7 +172,7 @@ class TestFailedWrites:
 
     @pytest.mark.parametrize("option", ["--plot", "--out", "--html"])
     def test_the_command_line_fails_and_does_not_say_wrote(self, option, tmp_path):
-        pytest.importorskip("matplotlib")
+        pytest.importorskip("matplotlib", exc_type=ImportError)
         proc = subprocess.run([sys.executable, "-m", "mbcomp.face.cli", "run", "double_pendulum", "--t-end", "0.05",
                                "--samples", "3", option, str(FULL)], cwd=tmp_path, capture_output=True, text=True,
                               timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})

@@ -294,7 +294,7 @@ def test_a_failed_part_reports_its_own_error_only(tmp_path):
 
 # -- to_control with hierarchical names ------------------------------------------------------------
 def test_to_control_maps_dotted_names(arm_system):
-    control = pytest.importorskip("control")
+    control = pytest.importorskip("control", exc_type=ImportError)
     lin = arm_system.linearize([0.0, 0.0], inputs=["shoulder.joint"])
     names = lin.control_names()
     assert names["shoulder.angle"] == "shoulder_angle" and names["elbow.pid.integral"] == "elbow_pid_integral"
