@@ -170,6 +170,8 @@ class LagrangeFormulation(Formulation):
     workspace_class = LagrangeWorkspace
     #: condition number of the dependent block above which the independent coordinates are chosen anew
     repartition_condition = REPARTITION_CONDITION
+    #: largest rotation vector (rad) of a ball's chart before it is re-centred
+    chart_limit = CHART_LIMIT
 
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:
@@ -191,8 +193,6 @@ class LagrangeFormulation(Formulation):
         if self.constraints is None:
             return None
         topology = self.compiled.topology
-        if not topology.state_map.identity:
-            return "the lagrange formulation steps constrained models with ball or free joints in Python"
         if self.compiled.drives.nz and topology.contacts:
             return "the lagrange formulation steps models with drive states and contacts in Python"
         from ..expressions_c import NotCompilable

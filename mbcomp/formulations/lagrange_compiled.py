@@ -25,7 +25,8 @@ import ctypes
 
 import numpy as np
 
-from ..errors import SimulationError
+from mbcomp.errors import SimulationError
+from mbcomp.statemap import Chart
 from ..expressions_c import NotCompilable, programs as compile_programs
 from ..integrators import PAUSED, TRIAL_FAILED
 from .compiled_watch import ContactWatching, EventStepFunctions, pointer
@@ -85,6 +86,7 @@ class ReducedRun(ContactWatching):
                  contacts: tuple = (), offsets: dict | None = None):
         self.formulation, self.kernel, self.lib = formulation, kernel, lib
         self.n = kernel.nv
+        self.nq = kernel.topology.nq  #: coordinates (more than speeds with quaternions)
         constraints = formulation.constraints
         topology = kernel.topology
         self.contacts = tuple(contacts)
@@ -150,6 +152,10 @@ class ReducedRun(ContactWatching):
             float(self.formulation.jacobian_scale), float(self.formulation.repartition_condition), _ptr(self.acc), _ptr(self.info))
         if status:
             raise SimulationError("the compiled lagrange loop could not allocate its work space")
+        self.base = np.ascontiguousarray(ws.chart.base, dtype=float)  # (the C side reads it: kept alive here)
+        chart = self.lib.lagrange_chart
+        chart.argtypes, chart.restype = [_VOID, _DBL], ctypes.c_int
+        chart(_ptr(self.base), float(self.formulation.chart_limit))
         if self.gaps is not None:  # (configuring clears the contact watch)
             self.lib.lagrange_watch(len(self.gaps), _ptr(self.held), _ptr(self.gaps), self.gap_tolerance,
                                     _ptr(self.event))
@@ -184,13 +190,13 @@ class ReducedRun(ContactWatching):
 
     def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
         """``(t, q, qd)`` of the last accepted state (as the C loop left it)."""
-        n = self.n
-        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:1 + 2 * n].copy()
+        n, nq = self.n, self.nq
+        return float(self.acc[0]), self.acc[1:1 + nq].copy(), self.acc[1 + nq:1 + nq + n].copy()
 
     def drive_states(self, z: np.ndarray) -> None:
         """The drive states of the accepted state (at the start: the run's ``z0``); the loop
         writes them after every accepted step."""
-        self.acc[1 + 2 * self.n:] = z
+        self.acc[1 + self.nq + self.n:] = z
 
     def sync(self) -> None:
         """The Python workspace's accepted state becomes the loop's."""
@@ -216,10 +222,15 @@ class ReducedRun(ContactWatching):
         (``state`` is updated in place: a restart sets a new first step)."""
         ws = self.workspace
         self.sync()
-        z = self.acc[1 + 2 * self.n:].copy()  # the accepted drive states
+        z = self.acc[1 + self.nq + self.n:].copy()  # the accepted drive states
         if status == PAUSED:
             t, q, qd = self.accepted()
-            y_new = ws.repartition(t, q, qd)
+            chart = ws.chart
+            if chart.largest_rotation(chart.to_x(q)) > self.formulation.chart_limit:  # re-centre the rotations' chart (as after_step)
+                ws.chart = Chart(ws.state_map, q)
+                y_new = np.concatenate((ws.chart.to_x(q)[ws.ind], qd[ws.ind]))
+            else:
+                y_new = ws.repartition(t, q, qd)
             if y_new is None:
                 return y, f  # no clearly better choice: carry on with the same step size
             self._configure()
@@ -254,7 +265,7 @@ class ReducedRun(ContactWatching):
             count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
             t_eval = np.linspace(0.0, t_end, count + 1)
         times = np.ascontiguousarray(t_eval, dtype=float)
-        out = np.empty((len(times), 2 * self.n))
+        out = np.empty((len(times), self.nq + self.n))
         done = np.zeros(1, dtype=np.int64)
         fn = self.lib.lagrange_prescribed
         fn.argtypes = [_VOID, _LONG, _VOID, _VOID, _VOID]
