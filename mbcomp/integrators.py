@@ -284,7 +284,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         mb_copy(y, y_new, sizeof(double) * LOOP_NY);
         mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
         {  /* the full state becomes the accepted one (the next Newton starts there) */
-            const int as_ = lagrange_accept(t, y, f, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
+            const int as_ = lagrange_accept(t, y, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
             if (as_ < 0) { status = as_; goto done; }
             if (n_out == 0) t_steps[(*n_steps)++] = t;
             if (as_ == LAG_PAUSED) { status = LAG_PAUSED; goto done; }

@@ -66,10 +66,7 @@ static __thread double *lag_mem = 0;
 /* scratch (in lag_mem): constraint outputs, g, J (nc x NQ), g_t, bias, Jd LU, pivots,
    X (nr x (ni + 1)), dynamics, M B (NQ x ni), reduced matrix, vectors, eigen work */
 static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag_X, *lag_dyn, *lag_MB,
-    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd, *lag_x, *lag_rate, *lag_qdd;
-/* lag_qdd: the accelerations (NQ) of the last accepted state, when lag_have_qdd: the Newton
-   predictor is then of second order (one iteration fewer per evaluation, typically) */
-static __thread int lag_have_qdd = 0;
+    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd, *lag_x, *lag_rate;
 /* the chart of the quaternions (MB_HAS_QUAT): x (NV) is a screw coordinate itself and, for
    each quaternion, the rotation vector phi (rotated frame) with quat = base exp(phi / 2)
    (statemap.Chart); lag_base (NCOORD) is Python's chart base, lag_chart_limit the largest
@@ -247,7 +244,7 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
         + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 2L * NCOORD + 2L * n
-        + 3L * n + 8;
+        + 2L * n + 8;
     lag_mem = malloc(sizeof(double) * size);
     if (!lag_mem) return -4;
     double *w = lag_mem;
@@ -269,8 +266,6 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_qd = w; w += 2L * n;
     lag_x = w; w += n;
     lag_rate = w; w += n;
-    lag_qdd = w; w += n;
-    lag_have_qdd = 0;
     lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
     lag_nr = nr; lag_rows = rows; lag_dep = dep; lag_ni = ni; lag_ind = ind;
     lag_scale = scale; lag_limit = limit; lag_acc = acc; lag_info = info;
@@ -360,20 +355,18 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
     const int nr = lag_nr, ni = lag_ni;
     const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NCOORD;
     double *s = lag_h, *x = lag_x;
-    const double dt = t - ta, half = lag_have_qdd ? 0.5 * dt * dt : 0.0;
-    if (MB_HAS_QUAT) {  /* the predictor in the chart: q_a advanced along v_a (and a_a), then x */
-        for (int i = 0; i < NSCREW; ++i)
-            q[SCREW_Q[i]] = qa[SCREW_Q[i]] + va[SCREW_V[i]] * dt + (half ? half * lag_qdd[SCREW_V[i]] : 0.0);
+    if (MB_HAS_QUAT) {  /* the predictor in the chart: q_a advanced along v_a, then x */
+        for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] = qa[SCREW_Q[i]] + va[SCREW_V[i]] * (t - ta);
         for (int k = 0; k < NQUAT; ++k) {
             double phi[3];
-            for (int i = 0; i < 3; ++i) phi[i] = va[QUAT_V[k] + i] * dt + (half ? half * lag_qdd[QUAT_V[k] + i] : 0.0);
+            for (int i = 0; i < 3; ++i) phi[i] = va[QUAT_V[k] + i] * (t - ta);
             lag_qstep(qa + QUAT_Q[k], phi, q + QUAT_Q[k]);
         }
         lag_to_x(q, x);
         for (int k = 0; k < ni; ++k) x[lag_ind[k]] = y[k];
         lag_to_q(x, q);
     } else {
-        for (int i = 0; i < NQ; ++i) q[i] = qa[i] + va[i] * dt + (half ? half * lag_qdd[i] : 0.0);
+        for (int i = 0; i < NQ; ++i) q[i] = qa[i] + va[i] * (t - ta);
         for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
     }
     for (int i = 0; i < NQ; ++i) lag_v[i] = 0.0;
@@ -549,30 +542,13 @@ static double lag_condition(void) {
     return smallest > 0.0 ? largest / smallest : INFINITY;
 }
 
-/* After an accepted step to (t, y) with rate f: the full state becomes the accepted one
-   (written to out, NCOORD + NQ + LAG_NZ, when out is not NULL) and its accelerations the
-   next predictor's; returns LAG_PAUSED when the dependent block's condition reached the
-   limit (Python looks for a better partition) or a rotation vector the chart's limit, 0,
-   or LAG_TRIAL. */
-int lagrange_accept(double t, const double *y, const double *f, double *out, const double *p) {
+/* After an accepted step to (t, y): the full state becomes the accepted one (written to
+   out, NQ + NQ + LAG_NZ, when out is not NULL); returns LAG_PAUSED when the dependent block's
+   condition reached the limit (Python looks for a better partition), 0, or LAG_TRIAL. */
+int lagrange_accept(double t, const double *y, double *out, const double *p) {
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
-    const int ni = lag_ni, nr = lag_nr;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
-    lag_have_qdd = 0;
-    if (!lag_values(t, q, qd, p)) {  /* qdd_d = -J_d^-1 (J_i qdd_i + bias) (J_d's factors from lagrange_full) */
-        double *s = lag_h;
-        for (int a = 0; a < nr; ++a) {
-            const double *Jr = lag_J + lag_rows[a] * NQ;
-            double v = lag_bias[lag_rows[a]];
-            for (int k = 0; k < ni; ++k) v += Jr[lag_ind[k]] * f[ni + k];
-            s[a] = -v;
-        }
-        if (nr) lag_solve(s);
-        for (int k = 0; k < ni; ++k) lag_qdd[lag_ind[k]] = f[ni + k];
-        for (int a = 0; a < nr; ++a) lag_qdd[lag_dep[a]] = s[a];
-        lag_have_qdd = 1;
-    }
     lag_acc[0] = t;
     mb_copy(lag_acc + 1, q, sizeof(double) * NCOORD);
     mb_copy(lag_acc + 1 + NCOORD, qd, sizeof(double) * NQ);
