@@ -66,7 +66,14 @@ static __thread double *lag_mem = 0;
 /* scratch (in lag_mem): constraint outputs, g, J (nc x NQ), g_t, bias, Jd LU, pivots,
    X (nr x (ni + 1)), dynamics, M B (NQ x ni), reduced matrix, vectors, eigen work */
 static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag_X, *lag_dyn, *lag_MB,
-    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd, *lag_x, *lag_rate;
+    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd, *lag_x, *lag_rate, *lag_end;
+/* Output times inside a step (lag_span, between lagrange_span and lagrange_span_end): the
+   Newton predictor is the cubic Hermite interpolant of the step's two full states (the
+   accepted one and lag_end = [q, qd] at lag_t_end), not the start state advanced by its
+   speeds: near a singular position the latter can be closer to another assembly branch
+   than to the step's own (a sample of the wrong branch, energy off by joules, in A02). */
+static __thread int lag_span = 0;
+static __thread double lag_t_end;
 /* the chart of the quaternions (MB_HAS_QUAT): x (NV) is a screw coordinate itself and, for
    each quaternion, the rotation vector phi (rotated frame) with quat = base exp(phi / 2)
    (statemap.Chart); lag_base (NCOORD) is Python's chart base, lag_chart_limit the largest
@@ -244,7 +251,7 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
         + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 2L * NCOORD + 2L * n
-        + 2L * n + 8;
+        + 2L * n + NCOORD + n + 8;
     lag_mem = malloc(sizeof(double) * size);
     if (!lag_mem) return -4;
     double *w = lag_mem;
@@ -266,6 +273,8 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_qd = w; w += 2L * n;
     lag_x = w; w += n;
     lag_rate = w; w += n;
+    lag_end = w; w += NCOORD + n;
+    lag_span = 0;
     lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
     lag_nr = nr; lag_rows = rows; lag_dep = dep; lag_ni = ni; lag_ind = ind;
     lag_scale = scale; lag_limit = limit; lag_acc = acc; lag_info = info;
@@ -355,16 +364,27 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
     const int nr = lag_nr, ni = lag_ni;
     const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NCOORD;
     double *s = lag_h, *x = lag_x;
-    if (MB_HAS_QUAT) {  /* the predictor in the chart: q_a advanced along v_a, then x */
-        for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] = qa[SCREW_Q[i]] + va[SCREW_V[i]] * (t - ta);
+    const int span = lag_span && lag_t_end > ta;
+    const double h = lag_t_end - ta, u = span ? (t - ta) / h : 0.0, u2 = u * u, u3 = u2 * u;
+    const double h00 = 2 * u3 - 3 * u2 + 1, h10 = (u3 - 2 * u2 + u) * h, h01 = -2 * u3 + 3 * u2, h11 = (u3 - u2) * h;
+    const double *qe = lag_end, *ve = lag_end + NCOORD;
+    if (MB_HAS_QUAT) {  /* the predictor in the chart: q_a advanced along v_a (or the nearer end of an output's step), then x */
+        const int from_end = span && u > 0.5;
+        const double *q0 = from_end ? qe : qa, *v0 = from_end ? ve : va, dt = t - (from_end ? lag_t_end : ta);
+        for (int i = 0; i < NSCREW; ++i)
+            q[SCREW_Q[i]] = span ? h00 * qa[SCREW_Q[i]] + h10 * va[SCREW_V[i]] + h01 * qe[SCREW_Q[i]] + h11 * ve[SCREW_V[i]]
+                                 : qa[SCREW_Q[i]] + va[SCREW_V[i]] * (t - ta);
         for (int k = 0; k < NQUAT; ++k) {
             double phi[3];
-            for (int i = 0; i < 3; ++i) phi[i] = va[QUAT_V[k] + i] * (t - ta);
-            lag_qstep(qa + QUAT_Q[k], phi, q + QUAT_Q[k]);
+            for (int i = 0; i < 3; ++i) phi[i] = v0[QUAT_V[k] + i] * dt;
+            lag_qstep(q0 + QUAT_Q[k], phi, q + QUAT_Q[k]);
         }
         lag_to_x(q, x);
         for (int k = 0; k < ni; ++k) x[lag_ind[k]] = y[k];
         lag_to_q(x, q);
+    } else if (span) {
+        for (int i = 0; i < NQ; ++i) q[i] = h00 * qa[i] + h10 * va[i] + h01 * qe[i] + h11 * ve[i];
+        for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
     } else {
         for (int i = 0; i < NQ; ++i) q[i] = qa[i] + va[i] * (t - ta);
         for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
@@ -411,6 +431,23 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
         for (int a = 0; a < nr; ++a) qd[lag_dep[a]] = s[a];
     }
     return 0;
+}
+
+/* Before the output times of a step to (t_end, y_end): its end state (by the usual predictor
+   from the accepted state, as the step's own evaluation there) becomes the other end of
+   the outputs' Hermite predictor.  Returns 0 or LAG_TRIAL. */
+int lagrange_span(double t_end, const double *y_end, const double *p) {
+    lag_span = 0;
+    const int status = lagrange_full(t_end, y_end, lag_end, lag_end + NCOORD, p);
+    if (status) return status;
+    lag_t_end = t_end;
+    lag_span = 1;
+    return 0;
+}
+
+/* After the output times of a step: the predictor is the accepted state's again. */
+void lagrange_span_end(void) {
+    lag_span = 0;
 }
 
 /* f = [qd_i, qdd_i] at (t, y): returns 0, 1 (reduced mass matrix not positive definite)
