@@ -968,5 +968,12 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
         if status == STOPPED:
             hook.stopped(state[0], method)
         full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
-        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method)
+        try:
+            _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method)
+        except SimulationError as exc:
+            hint = getattr(session, "failure_hint", None)
+            extra = hint(status) if hint is not None else None
+            if extra:
+                raise SimulationError(f"{exc}; {extra}") from None
+            raise
 

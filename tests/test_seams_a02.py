@@ -41,3 +41,13 @@ def test_a02_passes_eight_singular_positions_at_the_default_tolerances(a02, form
     np.testing.assert_allclose(res.qd, reference.qd, atol=2e-3)
     # B0's x coordinate: sin of the crank angle (1 m crank turning from vertical)
     np.testing.assert_allclose(-np.sin(res["A0"]), -np.sin(reference["A0"]), atol=1e-3)
+
+
+def test_a02_in_lagrange_at_a_tight_tolerance_says_why_it_stops(a02):
+    """At rtol 1e-10 the steps shrink onto the singular position at t = 3.381 s, where the
+    dependent solve amplifies rounding: the error names the singular position and the loop
+    closures, and points to the dae formulation."""
+    import mbcomp as mb
+    systems, q0, qd0, _ = a02
+    with pytest.raises(mb.SimulationError, match=r"t = 3\.38.*nearly singular.*C0.*C1.*dae formulation"):
+        systems["lagrange"].simulate(10.0, q0, qd0, rtol=1e-10, atol=1e-12)

@@ -168,6 +168,23 @@ class ReducedRun(ContactWatching):
             return
         self.formulation.constraints.explain_position_failure(np.flatnonzero(self.programs[0] >= 0), t)
 
+    def failure_hint(self, status: int) -> str | None:
+        """What to add to a step-size failure: near a singular position of the constraints (the
+        dependent block ill-conditioned at the last accepted state) the dependent solve
+        amplifies rounding, and dae passes such positions."""
+        from mbcomp.integrators import STEP_TOO_SMALL, COLLAPSED
+        if status not in (STEP_TOO_SMALL, COLLAPSED) or not len(self.workspace.dep):
+            return None
+        ws = self.workspace
+        t, q, _ = self.accepted()
+        cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.n), ws.offsets, self.contacts)
+        condition = ws.condition(cv.J, ws.rows, ws.dep)
+        if condition < 10 * self.formulation.repartition_condition:
+            return None
+        return (f"the dependent coordinates are nearly singular there (condition {condition:.3g}: a singular "
+                f"position of the constraints {self.formulation.row_names(ws.rows)}); a looser tolerance steps "
+                f"over it, and the dae formulation passes such positions in motion")
+
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
         self.lib.lagrange_drives(0)
