@@ -299,6 +299,19 @@ def check_wheel_pendulum(model, system):
     np.testing.assert_allclose(result.qd[:, index(system, "wheel.angle")], 5.0, rtol=1e-8)
 
 
+def check_stewart_platform(model, system):
+    # Six UPS leg parts, loops closed through ball joints: energy is conserved (no damping),
+    # the loops stay closed, and the geometry's three-fold and mirror symmetry keeps the six
+    # leg extensions equal in the vertical bounce from rest.
+    assert system.ndof == 6 and system.nq == 22 and system.nv == 21
+    result = simulate(model, system, 1.0)
+    assert_energy_conserved(result)
+    assert np.max(result.constraint_violation()) < 1e-8
+    ext = np.column_stack([result[f"leg{i}.extension"] for i in range(6)])
+    assert np.ptp(ext[:, 0]) > 0.05  # it moves
+    np.testing.assert_allclose(ext, ext[:, :1] * np.ones((1, 6)), atol=1e-5)  # (rtol 1e-8: 6e-7 apart)
+
+
 def check_servo_arm(model, system):
     # Two `servo` parts (DC motor + gear + PID per joint): the PIDs' integral action holds
     # each joint at its target against gravity, in the compiled integrator.

@@ -219,6 +219,12 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
 #endif
         /* dense output for the requested times within (t, t_new] (and of an event step) */
         if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
+#if LOOP_REDUCED
+            {  /* the Newton predictor of the dense-output stages and the outputs spans the accepted step */
+                const int ss_ = lagrange_span(t_new, y_new, p);
+                if (ss_) { status = ss_; goto done; }
+            }
+#endif
             for (int s = 13; s < 16; ++s) {
                 for (int i = 0; i < LOOP_NY; ++i) {
                     double acc = 0.0;
@@ -281,6 +287,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
 #endif
                 ++*i_out;
             }
+#if LOOP_REDUCED
+            lagrange_span_end();
+#endif
         }
         t = t_new;
 #if LOOP_REDUCED
@@ -318,6 +327,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         }
     }
 done:
+#if LOOP_REDUCED
+    lagrange_span_end();  /* (an event step or a failure leaves the loop inside a step's outputs) */
+#endif
     state[0] = t;
     state[1] = h_abs;
     free(K); free(work); free(y_new); free(y_stage); free(F);
@@ -1019,6 +1031,13 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
         if status == STOPPED:
             hook.stopped(state[0], method)
         full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
-        _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method,
-              steps=int(counts[1]), t_end=t_end)
+        try:
+            _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method,
+                  steps=int(counts[1]), t_end=t_end)
+        except SimulationError as exc:
+            hint = getattr(session, "failure_hint", None)
+            extra = hint(status) if hint is not None else None
+            if extra:
+                raise SimulationError(f"{exc}; {extra}") from None
+            raise
 

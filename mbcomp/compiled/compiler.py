@@ -67,11 +67,10 @@ class CompiledModel:
         from mbcomp.build.constraint_set import ConstraintSet
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
-        #: The lagrange formulation's reduced loop is compiled in (constraints or contacts on
-        #: coordinates that are their own chart; drive states only without contacts: see
+        #: The lagrange formulation's reduced loop is compiled in (constraints or contacts, with
+        #: quaternions stepped in their chart; drive states only without contacts: see
         #: formulations/lagrange_c.py).
         self.reduced_loop = ((self.constraint_set is not None or bool(self.topology.contacts))
-                             and self.topology.state_map.identity
                              and not (self.drives.nz and self.topology.contacts))
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)

@@ -39,6 +39,7 @@ class LagrangeWorkspace(Workspace):
         # Newton starts from the last accepted state, advanced by its speeds: stage values of
         # rejected steps must not carry the iteration onto another assembly branch.
         self.t_accepted, self.q_accepted, self.qd_accepted = t0, q0.copy(), qd0.copy()
+        self._span = None  # (t, q, qd) at the end of the step whose samples are being taken
         self.chart = Chart(self.state_map, q0)
         self.choose(t0, q0)
         self.y0 = np.concatenate((self.chart.to_x(q0)[self.ind], qd0[self.ind]))
@@ -52,11 +53,38 @@ class LagrangeWorkspace(Workspace):
         self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts, self.rows)
         self.dep, self.ind = partition(cv.J[self.rows])
 
+    def span(self, t_end: float, y_end: np.ndarray) -> None:
+        """Before the dense output and samples of the step to ``(t_end, y_end)``: Newton starts
+        from the interpolant of the step's two full states (Hermite; for quaternions the nearer
+        end advanced by its speeds) instead of the start state advanced by its speeds, which
+        near a singular position can be closer to another assembly branch."""
+        self._span = None
+        q, qd, _ = self._full_state(t_end, np.asarray(y_end)[:2 * len(self.ind)])  # (without drive states)
+        self._span = (float(t_end), q, qd)
+
+    def end_span(self) -> None:
+        """After the step's samples: Newton starts from the accepted state again."""
+        self._span = None
+
+    def _predictor(self, t: float) -> np.ndarray:
+        """Where Newton starts for time ``t`` (coordinates)."""
+        ta, qa, va = self.t_accepted, self.q_accepted, self.qd_accepted
+        if self._span is None or not self._span[0] > ta:
+            return self.state_map.integrate(qa, va * (t - ta))
+        te, qe, ve = self._span
+        h = te - ta
+        u = (t - ta) / h
+        if not self.state_map.identity:
+            return (self.state_map.integrate(qe, ve * (t - te)) if u > 0.5
+                    else self.state_map.integrate(qa, va * (t - ta)))
+        return ((2 * u**3 - 3 * u**2 + 1) * qa + (u**3 - 2 * u**2 + u) * h * va
+                + (-2 * u**3 + 3 * u**2) * qe + (u**3 - u**2) * h * ve)
+
     def dependent(self, t, xi):
         """Full q (and its chart coordinates) from the independent chart coordinates (Newton
-        from the last accepted state, advanced along its velocity)."""
+        from the last accepted state, advanced along its velocity, or ``span``'s predictor)."""
         chart = self.chart
-        x = chart.to_x(self.state_map.integrate(self.q_accepted, self.qd_accepted * (t - self.t_accepted)))
+        x = chart.to_x(self._predictor(t))
         x[self.ind] = xi
         q = chart.to_q(x)
         zero = np.zeros(self.kernel.nv)
@@ -170,6 +198,8 @@ class LagrangeFormulation(Formulation):
     workspace_class = LagrangeWorkspace
     #: condition number of the dependent block above which the independent coordinates are chosen anew
     repartition_condition = REPARTITION_CONDITION
+    #: largest rotation vector (rad) of a ball's chart before it is re-centred
+    chart_limit = CHART_LIMIT
 
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:
@@ -191,8 +221,6 @@ class LagrangeFormulation(Formulation):
         if self.constraints is None:
             return None
         topology = self.compiled.topology
-        if not topology.state_map.identity:
-            return "the lagrange formulation steps constrained models with ball or free joints in Python"
         if self.compiled.drives.nz and topology.contacts:
             return "the lagrange formulation steps models with drive states and contacts in Python"
         from mbcomp.codegen.expressions_c import NotCompilable

@@ -18,7 +18,11 @@ expression of t: ``s`` and its exact derivatives run as postfix programs, ``expr
 are evaluated here, the geometric rows come from the generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
 and the accepted-state buffer (``[t, q, qd]``, written after every accepted step) are
 numpy arrays that Python owns and configures per thread with ``lagrange_configure``.
-Only models whose coordinates are their own chart (no free rotations) use this code.
+Quaternions (``Ball``/``Free`` joints) are stepped in the chart of ``statemap.Chart``: the
+reduced state holds the independent chart coordinates (a screw coordinate itself, a rotation
+vector about Python's chart base for a ball) and their speeds; Newton runs on ``J D`` (``D``
+the right Jacobian of each rotation vector), the rates are ``x' = D^-1 v``, and the loop
+pauses for Python to re-centre the chart once a rotation vector exceeds ``CHART_LIMIT``.
 
 Contacts: a contact held closed (persistent) is one more row (its gap).  With
 ``lagrange_watch`` configured, the loop checks every accepted step for a free contact whose
@@ -62,7 +66,111 @@ static __thread double *lag_mem = 0;
 /* scratch (in lag_mem): constraint outputs, g, J (nc x NQ), g_t, bias, Jd LU, pivots,
    X (nr x (ni + 1)), dynamics, M B (NQ x ni), reduced matrix, vectors, eigen work */
 static __thread double *lag_c, *lag_g, *lag_J, *lag_gt, *lag_bias, *lag_lu, *lag_X, *lag_dyn, *lag_MB,
-    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd;
+    *lag_Mr, *lag_h, *lag_v, *lag_eig, *lag_q, *lag_qd, *lag_x, *lag_rate, *lag_end;
+/* Output times inside a step (lag_span, between lagrange_span and lagrange_span_end): the
+   Newton predictor is the cubic Hermite interpolant of the step's two full states (the
+   accepted one and lag_end = [q, qd] at lag_t_end), not the start state advanced by its
+   speeds: near a singular position the latter can be closer to another assembly branch
+   than to the step's own (a sample of the wrong branch, energy off by joules, in A02). */
+static __thread int lag_span = 0;
+static __thread double lag_t_end;
+/* the chart of the quaternions (MB_HAS_QUAT): x (NV) is a screw coordinate itself and, for
+   each quaternion, the rotation vector phi (rotated frame) with quat = base exp(phi / 2)
+   (statemap.Chart); lag_base (NCOORD) is Python's chart base, lag_chart_limit the largest
+   |phi| before the loop pauses for Python to re-centre the chart */
+static __thread const double *lag_base = 0;
+static __thread double lag_chart_limit = 1.0;
+double atan2(double, double);
+
+int lagrange_chart(const double *base, double limit) {
+    lag_base = base; lag_chart_limit = limit;
+    return 0;
+}
+
+/* Hamilton product out = a b (out may not alias a or b). */
+static void lag_qmul(const double *a, const double *b, double *out) {
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
+    out[1] = a[0] * b[1] + b[0] * a[1] + a[2] * b[3] - a[3] * b[2];
+    out[2] = a[0] * b[2] + b[0] * a[2] + a[3] * b[1] - a[1] * b[3];
+    out[3] = a[0] * b[3] + b[0] * a[3] + a[1] * b[2] - a[2] * b[1];
+}
+
+/* out = a exp(phi / 2), normalised (statemap.StateMap.integrate on one quaternion). */
+static void lag_qstep(const double *a, const double *phi, double *out) {
+    const double angle = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
+    const double k = angle < 1e-4 ? 0.5 - angle * angle / 48 : sin(angle / 2) / angle;
+    const double step[4] = {cos(angle / 2), k * phi[0], k * phi[1], k * phi[2]};
+    lag_qmul(a, step, out);
+    const double n = sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3]);
+    for (int i = 0; i < 4; ++i) out[i] /= n;
+}
+
+/* q (NCOORD) of the chart coordinates x (NV). */
+static void lag_to_q(const double *x, double *q) {
+    for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] = x[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) lag_qstep(lag_base + QUAT_Q[k], x + QUAT_V[k], q + QUAT_Q[k]);
+}
+
+/* The chart coordinates x (NV) of q (NCOORD): the rotation vector of base^-1 q (the
+   shorter way, rotations.quat_log). */
+static void lag_to_x(const double *q, double *x) {
+    for (int i = 0; i < NSCREW; ++i) x[SCREW_V[i]] = q[SCREW_Q[i]];
+    for (int k = 0; k < NQUAT; ++k) {
+        const double *a = lag_base + QUAT_Q[k], *b = q + QUAT_Q[k];
+        const double na = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
+        const double nb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] + b[3] * b[3]);
+        const double ac[4] = {a[0] / na, -a[1] / na, -a[2] / na, -a[3] / na};
+        const double bn[4] = {b[0] / nb, b[1] / nb, b[2] / nb, b[3] / nb};
+        double r[4];
+        lag_qmul(ac, bn, r);
+        if (r[0] < 0) for (int i = 0; i < 4; ++i) r[i] = -r[i];
+        const double n = sqrt(r[1] * r[1] + r[2] * r[2] + r[3] * r[3]);
+        const double scale = n < 1e-12 ? 2.0 / (r[0] > 1e-300 ? r[0] : 1e-300) : 2.0 * atan2(n, r[0]) / n;
+        for (int i = 0; i < 3; ++i) x[QUAT_V[k] + i] = scale * r[1 + i];
+    }
+}
+
+/* J_r(phi) (3 x 3, row-major): w = J_r(phi) phi' (statemap._right_jacobian). */
+static void lag_right_jacobian(const double *phi, double *R) {
+    const double theta = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
+    double a, b;
+    if (theta < 1e-5) { a = 0.5 - theta * theta / 24; b = 1.0 / 6 - theta * theta / 120; }
+    else { a = (1 - cos(theta)) / (theta * theta); b = (theta - sin(theta)) / (theta * theta * theta); }
+    const double K[9] = {0.0, -phi[2], phi[1], phi[2], 0.0, -phi[0], -phi[1], phi[0], 0.0};
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            double kk = 0.0;
+            for (int l = 0; l < 3; ++l) kk += K[i * 3 + l] * K[l * 3 + j];
+            R[i * 3 + j] = (i == j ? 1.0 : 0.0) - a * K[i * 3 + j] + b * kk;
+        }
+}
+
+/* The chart rates x' (NV) for speeds v: v on screws, J_r(phi)^-1 w on rotations. */
+static void lag_chart_rate(const double *x, const double *v, double *rate) {
+    for (int i = 0; i < NSCREW; ++i) rate[SCREW_V[i]] = v[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) {
+        const int o = QUAT_V[k];
+        double R[9];
+        lag_right_jacobian(x + o, R);
+        const double c0 = R[4] * R[8] - R[5] * R[7], c1 = R[5] * R[6] - R[3] * R[8], c2 = R[3] * R[7] - R[4] * R[6];
+        const double det = R[0] * c0 + R[1] * c1 + R[2] * c2;
+        const double inv[9] = {c0 / det, (R[2] * R[7] - R[1] * R[8]) / det, (R[1] * R[5] - R[2] * R[4]) / det,
+                               c1 / det, (R[0] * R[8] - R[2] * R[6]) / det, (R[2] * R[3] - R[0] * R[5]) / det,
+                               c2 / det, (R[1] * R[6] - R[0] * R[7]) / det, (R[0] * R[4] - R[1] * R[3]) / det};
+        for (int i = 0; i < 3; ++i) rate[o + i] = inv[i * 3] * v[o] + inv[i * 3 + 1] * v[o + 1] + inv[i * 3 + 2] * v[o + 2];
+    }
+}
+
+/* The largest |phi| of the chart coordinates x (0 without quaternions). */
+static double lag_largest_rotation(const double *x) {
+    double largest = 0.0;
+    for (int k = 0; k < NQUAT; ++k) {
+        const double *phi = x + QUAT_V[k];
+        const double a = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
+        if (!(a <= largest)) largest = a;
+    }
+    return largest;
+}
 static __thread int *lag_piv;
 static double lag_u[1];
 /* motors prescribing their position by an expression of t (expressions_c.py): row r runs
@@ -139,10 +247,11 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_mem = 0;
     lag_on = 0;
     lag_nk = 0;
-    if (nc < 0) { lag_prog = 0; lag_info = 0; return 0; }
+    if (nc < 0) { lag_prog = 0; lag_info = 0; lag_base = 0; return 0; }
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
-        + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 4L * n + 8;
+        + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 2L * NCOORD + 2L * n
+        + 2L * n + NCOORD + n + 8;
     lag_mem = malloc(sizeof(double) * size);
     if (!lag_mem) return -4;
     double *w = lag_mem;
@@ -160,8 +269,12 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_h = w; w += n;
     lag_v = w; w += n;
     lag_eig = w; w += 2L * m * m + 6L * n + 8;
-    lag_q = w; w += 2L * n;
+    lag_q = w; w += 2L * NCOORD;
     lag_qd = w; w += 2L * n;
+    lag_x = w; w += n;
+    lag_rate = w; w += n;
+    lag_end = w; w += NCOORD + n;
+    lag_span = 0;
     lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
     lag_nr = nr; lag_rows = rows; lag_dep = dep; lag_ni = ni; lag_ind = ind;
     lag_scale = scale; lag_limit = limit; lag_acc = acc; lag_info = info;
@@ -243,25 +356,66 @@ static void lag_solve(double *b) {
     }
 }
 
-/* Full q and qd (NQ each) at time t from the reduced state y = [q_i, qd_i]: Newton from the
-   last accepted state advanced by its speeds.  Leaves J (and the LU of J_d) at q.
-   Returns 0 or LAG_TRIAL. */
+/* Full q (NCOORD) and qd (NV) at time t from the reduced state y = [x_i, qd_i] (the
+   independent chart coordinates, which are the coordinates themselves without quaternions):
+   Newton from the last accepted state advanced by its speeds.  Leaves J (speed space, and
+   the LU of J_d) at q and the chart coordinates in lag_x.  Returns 0 or LAG_TRIAL. */
 int lagrange_full(double t, const double *y, double *q, double *qd, const double *p) {
     const int nr = lag_nr, ni = lag_ni;
-    const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NQ;
-    double *s = lag_h;
-    for (int i = 0; i < NQ; ++i) { q[i] = qa[i] + va[i] * (t - ta); lag_v[i] = 0.0; }
-    for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+    const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NCOORD;
+    double *s = lag_h, *x = lag_x;
+    const int span = lag_span && lag_t_end > ta;
+    const double h = lag_t_end - ta, u = span ? (t - ta) / h : 0.0, u2 = u * u, u3 = u2 * u;
+    const double h00 = 2 * u3 - 3 * u2 + 1, h10 = (u3 - 2 * u2 + u) * h, h01 = -2 * u3 + 3 * u2, h11 = (u3 - u2) * h;
+    const double *qe = lag_end, *ve = lag_end + NCOORD;
+    if (MB_HAS_QUAT) {  /* the predictor in the chart: q_a advanced along v_a (or the nearer end of an output's step), then x */
+        const int from_end = span && u > 0.5;
+        const double *q0 = from_end ? qe : qa, *v0 = from_end ? ve : va, dt = t - (from_end ? lag_t_end : ta);
+        for (int i = 0; i < NSCREW; ++i)
+            q[SCREW_Q[i]] = span ? h00 * qa[SCREW_Q[i]] + h10 * va[SCREW_V[i]] + h01 * qe[SCREW_Q[i]] + h11 * ve[SCREW_V[i]]
+                                 : qa[SCREW_Q[i]] + va[SCREW_V[i]] * (t - ta);
+        for (int k = 0; k < NQUAT; ++k) {
+            double phi[3];
+            for (int i = 0; i < 3; ++i) phi[i] = v0[QUAT_V[k] + i] * dt;
+            lag_qstep(q0 + QUAT_Q[k], phi, q + QUAT_Q[k]);
+        }
+        lag_to_x(q, x);
+        for (int k = 0; k < ni; ++k) x[lag_ind[k]] = y[k];
+        lag_to_q(x, q);
+    } else if (span) {
+        for (int i = 0; i < NQ; ++i) q[i] = h00 * qa[i] + h10 * va[i] + h01 * qe[i] + h11 * ve[i];
+        for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+    } else {
+        for (int i = 0; i < NQ; ++i) q[i] = qa[i] + va[i] * (t - ta);
+        for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+    }
+    for (int i = 0; i < NQ; ++i) lag_v[i] = 0.0;
     int converged = 0;
     for (int it = 0; it < LAG_NEWTON_ITER; ++it) {
         if (lag_values(t, q, lag_v, p)) return LAG_TRIAL;
         double gmax = 0.0;
         for (int a = 0; a < nr; ++a) { const double e = fabs(lag_g[lag_rows[a]]); if (!(e <= gmax)) gmax = e; }
         if (gmax < LAG_NEWTON_TOL) { converged = 1; break; }
+        if (MB_HAS_QUAT)  /* Newton in the chart: J dv/dx = J D, D = J_r(phi) on each rotation */
+            for (int k = 0; k < NQUAT; ++k) {
+                const int o = QUAT_V[k];
+                double R[9];
+                lag_right_jacobian(x + o, R);
+                for (int a = 0; a < nr; ++a) {
+                    double *Jr = lag_J + lag_rows[a] * NQ + o;
+                    const double j0 = Jr[0], j1 = Jr[1], j2 = Jr[2];
+                    for (int c = 0; c < 3; ++c) Jr[c] = j0 * R[c] + j1 * R[3 + c] + j2 * R[6 + c];
+                }
+            }
         if (lag_factor()) return LAG_TRIAL;
         for (int a = 0; a < nr; ++a) s[a] = lag_g[lag_rows[a]];
         lag_solve(s);
-        for (int a = 0; a < nr; ++a) q[lag_dep[a]] -= s[a];
+        if (MB_HAS_QUAT) {
+            for (int a = 0; a < nr; ++a) x[lag_dep[a]] -= s[a];
+            lag_to_q(x, q);
+        } else {
+            for (int a = 0; a < nr; ++a) q[lag_dep[a]] -= s[a];
+        }
     }
     if (!converged) return LAG_TRIAL;
     for (int k = 0; k < ni; ++k) qd[lag_ind[k]] = y[ni + k];
@@ -277,6 +431,23 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
         for (int a = 0; a < nr; ++a) qd[lag_dep[a]] = s[a];
     }
     return 0;
+}
+
+/* Before the output times of a step to (t_end, y_end): its end state (by the usual predictor
+   from the accepted state, as the step's own evaluation there) becomes the other end of
+   the outputs' Hermite predictor.  Returns 0 or LAG_TRIAL. */
+int lagrange_span(double t_end, const double *y_end, const double *p) {
+    lag_span = 0;
+    const int status = lagrange_full(t_end, y_end, lag_end, lag_end + NCOORD, p);
+    if (status) return status;
+    lag_t_end = t_end;
+    lag_span = 1;
+    return 0;
+}
+
+/* After the output times of a step: the predictor is the accepted state's again. */
+void lagrange_span_end(void) {
+    lag_span = 0;
 }
 
 /* f = [qd_i, qdd_i] at (t, y): returns 0, 1 (reduced mass matrix not positive definite)
@@ -336,7 +507,12 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     }
     for (int i = 0; i < ni; ++i) { double s = r[i]; for (int k = 0; k < i; ++k) s -= Mr[i * ni + k] * r[k]; r[i] = s / Mr[i * ni + i]; }
     for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
-    for (int k = 0; k < ni; ++k) f[k] = y[ni + k];
+    if (MB_HAS_QUAT) {  /* x' of the independent chart coordinates */
+        lag_chart_rate(lag_x, qd, lag_rate);
+        for (int k = 0; k < ni; ++k) f[k] = lag_rate[lag_ind[k]];
+    } else {
+        for (int k = 0; k < ni; ++k) f[k] = y[ni + k];
+    }
     for (int k = 0; k < LAG_NZ; ++k) f[2 * ni + k] = lag_dv[DRIVES_RATES_OFF + k];
     return 0;
 }
@@ -403,24 +579,69 @@ static double lag_condition(void) {
     return smallest > 0.0 ? largest / smallest : INFINITY;
 }
 
+/* An upper bound of lag_condition() from J and the LU factors of J_d as lagrange_full left
+   them: the largest eigenvalue of a symmetric matrix is at most its largest absolute row
+   sum, so |J|_2 <= sqrt(|J J^T|_inf) and 1 / sigma_min(J_d) <= sqrt(|J_d^-1 J_d^-T|_inf); at
+   the cost of nr triangular solves and two small products instead of two Jacobi
+   eigenvalue computations. */
+static double lag_condition_bound(void) {
+    const int nr = lag_nr, nc = lag_nc;
+    double largest = 0.0, inverse = 0.0, *X = lag_eig, *e = lag_eig + (long)nr * nr;
+    for (int a = 0; a < nc; ++a) {  /* the rows of J J^T */
+        const double *Ja = lag_J + (long)a * NQ;
+        double sum = 0.0;
+        for (int b = 0; b < nc; ++b) {
+            const double *Jb = lag_J + (long)b * NQ;
+            double v = 0.0;
+            for (int i = 0; i < NQ; ++i) v += Ja[i] * Jb[i];
+            sum += fabs(v);
+        }
+        if (sum > largest) largest = sum;
+    }
+    largest = sqrt(largest);
+    if (lag_scale > largest) largest = lag_scale;
+    for (int c = 0; c < nr; ++c) {  /* X = J_d^-1, column c at X[a * nr + c] */
+        for (int a = 0; a < nr; ++a) e[a] = a == c ? 1.0 : 0.0;
+        lag_solve(e);
+        for (int a = 0; a < nr; ++a) X[a * nr + c] = e[a];
+    }
+    for (int a = 0; a < nr; ++a) {  /* the rows of X X^T */
+        double sum = 0.0;
+        for (int b = 0; b < nr; ++b) {
+            double v = 0.0;
+            for (int k = 0; k < nr; ++k) v += X[a * nr + k] * X[b * nr + k];
+            sum += fabs(v);
+        }
+        if (sum > inverse) inverse = sum;
+    }
+    const double bound = largest * sqrt(inverse);
+    return bound == bound ? bound : INFINITY;
+}
+
 /* After an accepted step to (t, y): the full state becomes the accepted one (written to
    out, NQ + NQ + LAG_NZ, when out is not NULL); returns LAG_PAUSED when the dependent block's
    condition reached the limit (Python looks for a better partition), 0, or LAG_TRIAL. */
 int lagrange_accept(double t, const double *y, double *out, const double *p) {
-    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     lag_acc[0] = t;
-    mb_copy(lag_acc + 1, q, sizeof(double) * NQ);
-    mb_copy(lag_acc + 1 + NQ, qd, sizeof(double) * NQ);
-    for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + 2 * NQ + k] = y[2 * lag_ni + k];
+    mb_copy(lag_acc + 1, q, sizeof(double) * NCOORD);
+    mb_copy(lag_acc + 1 + NCOORD, qd, sizeof(double) * NQ);
+    for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + NCOORD + NQ + k] = y[2 * lag_ni + k];
     if (out) {
-        mb_copy(out, q, sizeof(double) * NQ);
-        mb_copy(out + NQ, qd, sizeof(double) * NQ);
-        for (int k = 0; k < LAG_NZ; ++k) out[2 * NQ + k] = y[2 * lag_ni + k];
+        mb_copy(out, q, sizeof(double) * NCOORD);
+        mb_copy(out + NCOORD, qd, sizeof(double) * NQ);
+        for (int k = 0; k < LAG_NZ; ++k) out[NCOORD + NQ + k] = y[2 * lag_ni + k];
     }
+    if (MB_HAS_QUAT && lag_largest_rotation(lag_x) > lag_chart_limit) return LAG_PAUSED;  /* Python re-centres the chart */
     if (!lag_nr) return 0;
-    const double condition = lag_condition();  /* J at q from lagrange_full */
+    const double bound = lag_condition_bound();  /* J and J_d's factors at q from lagrange_full */
+    if (bound < lag_limit) {  /* clearly conditioned: the exact value (two eigenvalue sweeps) is not needed */
+        lag_info[0] = bound;
+        return 0;
+    }
+    const double condition = lag_condition();
     lag_info[0] = condition;
     return condition < lag_limit ? 0 : LAG_PAUSED;
 }
@@ -500,7 +721,7 @@ double lagrange_gap_at(double s, double t_old, double h, const double *y_old, co
                        const double *p) {
     double y[2 * NQ + LAG_NZ + 1];
     lag_dense(s, t_old, h, y_old, F, ny, y);
-    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
     contacts(q, qd, p, lag_u, lag_kc);
     return lag_kc[CONTACTS_GAP_OFF + k];
@@ -520,7 +741,7 @@ double lagrange_force_at(double s, double t_old, double h, const double *y_old, 
    step is an event step), 0 otherwise (the gaps become the accepted ones), or LAG_TRIAL. */
 int lagrange_event(double t, const double *y, const double *p, const double *tau) {
     const int nr = lag_nr;
-    double *q = lag_q + NQ, *qd = lag_qd + NQ;
+    double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     contacts(q, qd, p, lag_u, lag_kc);
@@ -542,16 +763,16 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
     return event;
 }
 
-/* No degree of freedom: the full state at each of the n times t_out (rows of NQ + NQ in
-   out), each Newton continued from the previous one.  Returns 0, or LAG_TRIAL with
+/* No degree of freedom: the full state at each of the n times t_out (rows of NCOORD + NQ
+   in out), each Newton continued from the previous one.  Returns 0, or LAG_TRIAL with
    *done the rows written. */
 int lagrange_prescribed(const double *p, long n, const double *t_out, double *out, long *done) {
     for (long k = 0; k < n; ++k) {
-        double *row = out + k * 2 * NQ;
-        int status = lagrange_full(t_out[k], lag_u, row, row + NQ, p);
+        double *row = out + k * (NCOORD + NQ);
+        int status = lagrange_full(t_out[k], lag_u, row, row + NCOORD, p);
         if (status) return status;
         lag_acc[0] = t_out[k];
-        mb_copy(lag_acc + 1, row, sizeof(double) * 2 * NQ);
+        mb_copy(lag_acc + 1, row, sizeof(double) * (NCOORD + NQ));
         *done = k + 1;
     }
     return 0;

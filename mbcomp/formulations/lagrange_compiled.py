@@ -26,6 +26,7 @@ import ctypes
 import numpy as np
 
 from mbcomp.core.errors import SimulationError
+from mbcomp.core.statemap import Chart
 from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
@@ -85,6 +86,7 @@ class ReducedRun(ContactWatching):
                  contacts: tuple = (), offsets: dict | None = None):
         self.formulation, self.kernel, self.lib = formulation, kernel, lib
         self.n = kernel.nv
+        self.nq = kernel.topology.nq  #: coordinates (more than speeds with quaternions)
         constraints = formulation.constraints
         topology = kernel.topology
         self.contacts = tuple(contacts)
@@ -150,6 +152,10 @@ class ReducedRun(ContactWatching):
             float(self.formulation.jacobian_scale), float(self.formulation.repartition_condition), _ptr(self.acc), _ptr(self.info))
         if status:
             raise SimulationError("the compiled lagrange loop could not allocate its work space")
+        self.base = np.ascontiguousarray(ws.chart.base, dtype=float)  # (the C side reads it: kept alive here)
+        chart = self.lib.lagrange_chart
+        chart.argtypes, chart.restype = [_VOID, _DBL], ctypes.c_int
+        chart(_ptr(self.base), float(self.formulation.chart_limit))
         if self.gaps is not None:  # (configuring clears the contact watch)
             self.lib.lagrange_watch(len(self.gaps), _ptr(self.held), _ptr(self.gaps), self.gap_tolerance,
                                     _ptr(self.event))
@@ -161,6 +167,23 @@ class ReducedRun(ContactWatching):
         if t != t or self.programs is None:
             return
         self.formulation.constraints.explain_position_failure(np.flatnonzero(self.programs[0] >= 0), t)
+
+    def failure_hint(self, status: int) -> str | None:
+        """What to add to a step-size failure: near a singular position of the constraints (the
+        dependent block ill-conditioned at the last accepted state) the dependent solve
+        amplifies rounding, and dae passes such positions."""
+        from mbcomp.codegen.integrators import STEP_TOO_SMALL, COLLAPSED
+        if status not in (STEP_TOO_SMALL, COLLAPSED) or not len(self.workspace.dep):
+            return None
+        ws = self.workspace
+        t, q, _ = self.accepted()
+        cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.n), ws.offsets, self.contacts)
+        condition = ws.condition(cv.J, ws.rows, ws.dep)
+        if condition < 10 * self.formulation.repartition_condition:
+            return None
+        return (f"the dependent coordinates are nearly singular there (condition {condition:.3g}: a singular "
+                f"position of the constraints {self.formulation.row_names(ws.rows)}); a looser tolerance steps "
+                f"over it, and the dae formulation passes such positions in motion")
 
     def close(self) -> None:
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
@@ -184,13 +207,13 @@ class ReducedRun(ContactWatching):
 
     def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
         """``(t, q, qd)`` of the last accepted state (as the C loop left it)."""
-        n = self.n
-        return float(self.acc[0]), self.acc[1:1 + n].copy(), self.acc[1 + n:1 + 2 * n].copy()
+        n, nq = self.n, self.nq
+        return float(self.acc[0]), self.acc[1:1 + nq].copy(), self.acc[1 + nq:1 + nq + n].copy()
 
     def drive_states(self, z: np.ndarray) -> None:
         """The drive states of the accepted state (at the start: the run's ``z0``); the loop
         writes them after every accepted step."""
-        self.acc[1 + 2 * self.n:] = z
+        self.acc[1 + self.nq + self.n:] = z
 
     def sync(self) -> None:
         """The Python workspace's accepted state becomes the loop's."""
@@ -216,10 +239,15 @@ class ReducedRun(ContactWatching):
         (``state`` is updated in place: a restart sets a new first step)."""
         ws = self.workspace
         self.sync()
-        z = self.acc[1 + 2 * self.n:].copy()  # the accepted drive states
+        z = self.acc[1 + self.nq + self.n:].copy()  # the accepted drive states
         if status == PAUSED:
             t, q, qd = self.accepted()
-            y_new = ws.repartition(t, q, qd)
+            chart = ws.chart
+            if chart.largest_rotation(chart.to_x(q)) > self.formulation.chart_limit:  # re-centre the rotations' chart (as after_step)
+                ws.chart = Chart(ws.state_map, q)
+                y_new = np.concatenate((ws.chart.to_x(q)[ws.ind], qd[ws.ind]))
+            else:
+                y_new = ws.repartition(t, q, qd)
             if y_new is None:
                 return y, f  # no clearly better choice: carry on with the same step size
             self._configure()
@@ -254,7 +282,7 @@ class ReducedRun(ContactWatching):
             count = int(np.ceil(t_end / min(max_step, t_end / 200.0)))
             t_eval = np.linspace(0.0, t_end, count + 1)
         times = np.ascontiguousarray(t_eval, dtype=float)
-        out = np.empty((len(times), 2 * self.n))
+        out = np.empty((len(times), self.nq + self.n))
         done = np.zeros(1, dtype=np.int64)
         fn = self.lib.lagrange_prescribed
         fn.argtypes = [_VOID, _LONG, _VOID, _VOID, _VOID]

@@ -133,11 +133,19 @@ class _Recorder:
         if self.t_eval is None:
             return
         dense = None
-        while self.next < len(self.t_eval) and self.t_eval[self.next] < t_new:
-            ts = self.t_eval[self.next]
-            dense = dense or solver.dense_output()
-            self.add(ts, *workspace.full_state(ts, dense(ts)))
-            self.next += 1
+        span = getattr(workspace, "span", None)  # (lagrange: Newton's predictor spans the step)
+        try:
+            while self.next < len(self.t_eval) and self.t_eval[self.next] < t_new:
+                ts = self.t_eval[self.next]
+                if dense is None:
+                    if span is not None:
+                        span(t_new, solver.y)
+                    dense = solver.dense_output()
+                self.add(ts, *workspace.full_state(ts, dense(ts)))
+                self.next += 1
+        finally:
+            if span is not None:
+                workspace.end_span()
 
     def record_end(self, workspace, t_new, y_end):
         """The state at the end of a step (after any projection), when it is a sample."""

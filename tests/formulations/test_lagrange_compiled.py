@@ -11,6 +11,7 @@ import pytest
 import mbcomp as mb
 from conftest import fourbar
 from mbcomp.formulations.lagrange_compiled import ReducedRun
+from mbcomp.codegen.integrators import PAUSED
 from mbcomp.files.toml_model import load
 
 LIBRARY = __import__("pathlib").Path(__file__).resolve().parents[2] / "library"
@@ -75,9 +76,13 @@ class TestRightHandSide:
                     y = run.y0 + np.array(dy)
                     np.testing.assert_allclose(run.rhs(t, y), workspace.rhs(t, y), rtol=1e-9, atol=1e-9)
 
-    def test_condition_of_the_dependent_block_equals_the_python_one(self, loop):
-        """The compiled bookkeeping after a step measures J_d's condition as Python does."""
+    @pytest.mark.parametrize("limit", [None, 1.0])
+    def test_condition_of_the_dependent_block_equals_the_python_one(self, loop, limit, monkeypatch):
+        """The compiled bookkeeping after a step measures J_d's condition as Python does where
+        it matters (at or above the limit: exact); below it, an upper bound may say so."""
         kernel, formulation = loop.kernel, loop._formulation
+        if limit is not None:
+            monkeypatch.setattr(type(formulation), "repartition_condition", limit)
         q0, qd0 = loop.assemble([1.0, -0.5, 1.5], [2.0, 0.0, 0.0])
         lib = kernel.compiled.functions.lib
         with ReducedRun(formulation, kernel, lib, q0, qd0, None) as run:
@@ -85,11 +90,15 @@ class TestRightHandSide:
             accept.argtypes = [ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
             out = np.empty(6)
             y = run.y0 + np.array([0.4, 0.0])
-            accept(0.1, y.ctypes.data, out.ctypes.data, kernel.p.ctypes.data)
+            status = accept(0.1, y.ctypes.data, out.ctypes.data, kernel.p.ctypes.data)
             ws = run.workspace
             cv = formulation.constraint_values(kernel, 0.1, out[:3], np.zeros(3))
             assert abs(cv.g).max() < 1e-11  # the full state is on the loop
-            assert run.info[0] == pytest.approx(ws.condition(cv.J, ws.rows, ws.dep), rel=1e-9)
+            exact = ws.condition(cv.J, ws.rows, ws.dep)
+            if limit is None:  # below the limit: no pause, the bound is above the exact value
+                assert status == 0 and exact <= run.info[0] * (1 + 1e-12) < formulation.repartition_condition
+            else:
+                assert status == PAUSED and run.info[0] == pytest.approx(exact, rel=1e-9)
             np.testing.assert_array_equal(run.acc, np.concatenate(([0.1], out)))
 
 
