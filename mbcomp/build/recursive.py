@@ -33,7 +33,9 @@ from typing import Literal
 
 import numpy as np
 
+from mbcomp.core import c_text, tolerances
 from mbcomp.core.errors import ModelError
+from mbcomp.core.tolerances import PIVOT_TOLERANCE
 
 #: ``compile(dynamics=...)``: how the tree accelerations are computed.
 DYNAMICS = ("auto", "dense", "recursive")
@@ -206,83 +208,11 @@ def c_dae(topology, ng: int) -> str:
     ``dae_accelerations`` it replaces through ``MBCOMP_RECURSIVE_DAE``; the projection after
     each step stays dense).  ``X = M^-1 J_r^T`` column by column by ``aba_solve`` (O(N) each),
     ``(J_r X) lam = rhs - J_r qdd_free``, ``qdd = qdd_free + X lam``: the same Schur complement
-    as the dense code, with the same row selection, Baumgarte terms and rank handling."""
+    as the dense code, with the same row selection, Baumgarte terms and rank handling.
+    The C is ``c/recursive_dae.c``."""
     if ng == 0:
         return ""
-    return f"""
-/* ABA_PRED: the parent speed of each speed (-1 at a root), a table of the sizes unit (aba_sizes) */
-
-/* x = M^-1 b from the factors of an aba call (D, W = U / D and S, speed-major): the
-   articulated-body recursion without velocity terms.  pa: 6 ABA_NV doubles of scratch. */
-static void aba_solve(const double *D, const double *W, const double *S, const double *b, double *x, double *pa) {{
-    for (int i = 0; i < 6 * ABA_NV; ++i) pa[i] = 0.0;
-    for (int k = ABA_NV - 1; k >= 0; --k) {{
-        const double *s = S + 6 * k, *w = W + 6 * k, *pk = pa + 6 * k;
-        const double uk = b[k] - (s[0] * pk[0] + s[1] * pk[1] + s[2] * pk[2] + s[3] * pk[3] + s[4] * pk[4] + s[5] * pk[5]);
-        x[k] = uk;
-        const int j = ABA_PRED[k];
-        if (j >= 0) for (int i = 0; i < 6; ++i) pa[6 * j + i] += pk[i] + w[i] * uk;
-    }}
-    for (int k = 0; k < ABA_NV; ++k) {{  /* forward: pa now holds each node's acceleration */
-        const int j = ABA_PRED[k];
-        const double *s = S + 6 * k, *w = W + 6 * k;
-        double *dk = pa + 6 * k;
-        double xk = x[k] / D[k];
-        if (j >= 0) {{
-            const double *dj = pa + 6 * j;
-            xk -= w[0] * dj[0] + w[1] * dj[1] + w[2] * dj[2] + w[3] * dj[3] + w[4] * dj[4] + w[5] * dj[5];
-            for (int i = 0; i < 6; ++i) dk[i] = dj[i] + s[i] * xk;
-        }} else {{
-            for (int i = 0; i < 6; ++i) dk[i] = s[i] * xk;
-        }}
-        x[k] = xk;
-    }}
-}}
-
-int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
-                      const double *tau, double *qdd, double *work) {{
-    const int n = ABA_NV, nr = dae_nr;
-    double ue[ABA_NU + ABA_NV + 1], fac[14 * ABA_NV], X[ABA_NV * DAE_NR], A[DAE_NR * DAE_NR];
-    double r[DAE_NR], lam[DAE_NR], col[ABA_NV], pa[6 * ABA_NV];
-    for (int i = 0; i < ABA_NU; ++i) ue[i] = u[i];
-    for (int i = 0; i < n; ++i) ue[ABA_NU + i] = tau ? tau[i] : 0.0;
-    aba(q, qd, p, ue, fac);
-    const double *free_ = fac, *D = fac + n, *W = fac + 2 * n, *S = fac + 8 * n;
-    double scale = 1e-300;
-    for (int i = 0; i < n; ++i) if (fabs(D[i]) > scale) scale = fabs(D[i]);
-    for (int i = 0; i < n; ++i) if (!(D[i] > 1e-13 * scale)) return 1;
-    dae_rows_eval(q, qd, p, u, work);  /* the configured rows (formulations/dae_c.py) */
-    const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
-    for (int k = 0; k < nr; ++k) {{  /* X[:, k] = M^-1 J_row^T; the row's right-hand side */
-        const double *Jr = J + k * n;
-        aba_solve(D, W, S, Jr, col, pa);
-        double gdot = gt[k], jfree = 0.0;
-        for (int i = 0; i < n; ++i) {{
-            X[i * DAE_NR + k] = col[i];
-            gdot += Jr[i] * qd[i];
-            jfree += Jr[i] * free_[i];
-        }}
-        r[k] = -bias[k] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[k] - jfree;
-    }}
-    for (int a = 0; a < nr; ++a)  /* A = J_r M^-1 J_r^T (lower) */
-        for (int b = 0; b <= a; ++b) {{
-            const double *Ja = J + a * n;
-            double s = 0.0;
-            for (int i = 0; i < n; ++i) s += Ja[i] * X[i * DAE_NR + b];
-            A[a * DAE_NR + b] = s;
-        }}
-    const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
-    if (dropped < 0) return 2;
-    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
-    for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
-    for (int i = 0; i < n; ++i) {{
-        double s = free_[i];
-        for (int k = 0; k < nr; ++k) s += X[i * DAE_NR + k] * lam[k];
-        qdd[i] = s;
-    }}
-    return 0;
-}}
-"""
+    return "\n" + tolerances.c_defines() + c_text.read("mbcomp.build", "recursive_dae.c")
 
 
 def c_accelerations(nv: int, n_inputs: int, dense: str, factors: bool = False) -> str:
@@ -291,26 +221,13 @@ def c_accelerations(nv: int, n_inputs: int, dense: str, factors: bool = False) -
     largest, the same relative threshold as the Cholesky pivots; ``tau`` may be NULL; ``work``
     is not used).  ``dense`` is the dense template, kept as ``dense_accelerations`` for the
     factorisation helpers the dae formulation's code shares.  With ``factors`` (constraints)
-    the ``aba`` output carries the factors and ``c_dae`` replaces the dense KKT solve."""
+    the ``aba`` output carries the factors and ``c_dae`` replaces the dense KKT solve.
+    The C is ``c/recursive_accelerations.c`` (threshold ``tolerances.PIVOT_TOLERANCE``)."""
     renamed = dense.replace("int accelerations(", "int dense_accelerations(")
     if renamed.count("int dense_accelerations(") != 1:
         raise AssertionError("the dense accelerations template changed: cannot rename it")
-    return renamed + ("\n#define MBCOMP_RECURSIVE_DAE 1" if factors else "") + f"""
-/* ABA_NV speeds, ABA_NU inputs, ABA_OUT outputs of aba: the model's sizes unit (aba_sizes) */
-int accelerations(const double *q, const double *qd, const double *p, const double *u,
-                  const double *tau, double *qdd, double *work) {{
-    double ue[ABA_NU + ABA_NV + 1], out[ABA_OUT + 1];
-    (void)work;
-    for (int i = 0; i < ABA_NU; ++i) ue[i] = u[i];
-    for (int i = 0; i < ABA_NV; ++i) ue[ABA_NU + i] = tau ? tau[i] : 0.0;
-    aba(q, qd, p, ue, out);
-    double scale = 1e-300;
-    for (int i = 0; i < ABA_NV; ++i) if (fabs(out[ABA_NV + i]) > scale) scale = fabs(out[ABA_NV + i]);
-    for (int i = 0; i < ABA_NV; ++i) if (!(out[ABA_NV + i] > 1e-13 * scale)) return i + 1;
-    for (int i = 0; i < ABA_NV; ++i) qdd[i] = out[i];
-    return 0;
-}}
-"""
+    return (renamed + ("\n#define MBCOMP_RECURSIVE_DAE 1" if factors else "") + "\n" + tolerances.c_defines()
+            + c_text.read("mbcomp.build", "recursive_accelerations.c"))
 
 
 class PythonAccelerations:
@@ -336,5 +253,5 @@ class PythonAccelerations:
             return 1, np.full(nv, np.nan)  # a zero pivot: the caller's dense path diagnoses it
         pivots = np.asarray(out[nv:2 * nv], dtype=float)
         scale = max(float(np.max(np.abs(pivots))) if nv else 0.0, 1e-300)
-        bad = np.flatnonzero(~(pivots > 1e-13 * scale))
+        bad = np.flatnonzero(~(pivots > PIVOT_TOLERANCE * scale))
         return (int(bad[0]) + 1 if len(bad) else 0), np.asarray(out[:nv], dtype=float)

@@ -1,8 +1,8 @@
 """Event location in compiled code: Brent's root finder in C, for any formulation's loop.
 
-``C_BRENTQ`` defines ``mb_brentq(f, ctx, a, b, xtol, rtol, maxiter, &status)``, the same
-algorithm, tests and step choices as scipy's ``brentq`` (scipy/optimize/Zeros/brentq.c),
-so that a root located in C equals the one ``scipy.optimize.brentq`` finds on the same
+``c/brentq.h`` (``C_BRENTQ``) defines ``mb_brentq(f, ctx, a, b, xtol, rtol, maxiter,
+&status)``, the same algorithm, tests and step choices as scipy's ``brentq``
+(scipy/optimize/Zeros/brentq.c), so that a root located in C equals the one ``scipy.optimize.brentq`` finds on the same
 function to rounding.  A formulation's C code includes it and passes its own gap or contact
 force on an event step's dense output as ``f`` (see ``formulations/dae_c.py``:
 ``dae_gap_root``, ``dae_force_root``).  ``status``: 0 converged, 1 no sign change
@@ -10,65 +10,12 @@ between a and b, 2 not converged in ``maxiter`` iterations, 3 ``f`` returned NaN
 """
 from __future__ import annotations
 
+from mbcomp.core import c_text
+
 #: Iterations (scipy's default for brentq).
 MAX_ITERATIONS = 100
 
-C_BRENTQ = r"""
-#ifndef MB_BRENTQ_DEFINED
-#define MB_BRENTQ_DEFINED 1
-typedef double (*mb_root_fn)(double x, void *ctx);
-
-static double mb_brentq(mb_root_fn f, void *ctx, double xa, double xb, double xtol, double rtol, int iter,
-                        int *status) {
-    double xpre = xa, xcur = xb, xblk = 0.0, fblk = 0.0, spre = 0.0, scur = 0.0;
-    double fpre = f(xpre, ctx), fcur = f(xcur, ctx);
-    *status = 0;
-    if (fpre != fpre || fcur != fcur) { *status = 3; return NAN; }
-    if (fpre == 0.0) return xpre;
-    if (fcur == 0.0) return xcur;
-    if (signbit(fpre) == signbit(fcur)) { *status = 1; return NAN; }
-    for (int i = 0; i < iter; ++i) {
-        if (fpre != 0.0 && fcur != 0.0 && signbit(fpre) != signbit(fcur)) {
-            xblk = xpre;
-            fblk = fpre;
-            spre = scur = xcur - xpre;
-        }
-        if (fabs(fblk) < fabs(fcur)) {
-            xpre = xcur; xcur = xblk; xblk = xpre;
-            fpre = fcur; fcur = fblk; fblk = fpre;
-        }
-        const double delta = (xtol + rtol * fabs(xcur)) / 2.0;
-        const double sbis = (xblk - xcur) / 2.0;
-        if (fcur == 0.0 || fabs(sbis) < delta) return xcur;
-        if (fabs(spre) > delta && fabs(fcur) < fabs(fpre)) {
-            double stry;
-            if (xpre == xblk) {  /* interpolate */
-                stry = -fcur * (xcur - xpre) / (fcur - fpre);
-            } else {  /* extrapolate */
-                const double dpre = (fpre - fcur) / (xpre - xcur), dblk = (fblk - fcur) / (xblk - xcur);
-                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre));
-            }
-            const double limit = fabs(spre) < 3.0 * fabs(sbis) - delta ? fabs(spre) : 3.0 * fabs(sbis) - delta;
-            if (2.0 * fabs(stry) < limit) {  /* good short step */
-                spre = scur;
-                scur = stry;
-            } else {  /* bisect */
-                spre = sbis;
-                scur = sbis;
-            }
-        } else {  /* bisect */
-            spre = sbis;
-            scur = sbis;
-        }
-        xpre = xcur;
-        fpre = fcur;
-        if (fabs(scur) > delta) xcur += scur;
-        else xcur += (sbis > 0.0 ? delta : -delta);
-        fcur = f(xcur, ctx);
-        if (fcur != fcur) { *status = 3; return NAN; }
-    }
-    *status = 2;
-    return xcur;
-}
-#endif
-"""
+#: The ``#define`` a unit that calls ``mb_brentq`` needs (its iteration limit).
+C_DEFINES = f"#define MB_BRENTQ_ITERATIONS {MAX_ITERATIONS}\n"
+#: ``mb_brentq`` (``c/brentq.h``), after ``C_DEFINES``.
+C_BRENTQ = C_DEFINES + c_text.read("mbcomp.codegen", "brentq.h")

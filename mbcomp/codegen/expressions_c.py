@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mbcomp.core import c_text
 from mbcomp.core.errors import ModelError
 
 #: Opcodes (``arg`` is read by ``NUM`` only).
@@ -139,36 +140,12 @@ def run_program(program: np.ndarray, t: float, index: int = 0) -> float:
     return stack[-1]
 
 
-#: The C evaluator: ``mb_program(&prog, t)`` returns the value of the program at ``prog``
-#: and advances ``prog`` past it (NaN on a domain error, as C's libm gives).
-C_PROGRAM = f"""
-#ifndef MB_PROGRAM_DEFINED
-#define MB_PROGRAM_DEFINED 1
-static double mb_program(const double **prog, double t) {{
-    const double *pc = *prog;
-    const long n = (long)pc[0];
-    double st[{STACK} + 1];
-    int sp = -1;
-    for (long k = 0; k < n; ++k) {{
-        const int op = (int)pc[1 + 2 * k];
-        switch (op) {{
-        case {NUM}: st[++sp] = pc[2 + 2 * k]; break;
-        case {TIME}: st[++sp] = t; break;
-        case {NEG}: st[sp] = -st[sp]; break;
-        case {SIN}: st[sp] = sin(st[sp]); break;
-        case {COS}: st[sp] = cos(st[sp]); break;
-        case {EXP}: st[sp] = exp(st[sp]); break;
-        case {SQRT}: st[sp] = st[sp] < 0.0 ? NAN : sqrt(st[sp]); break;
-        case {LOG}: st[sp] = st[sp] <= 0.0 ? NAN : log(st[sp]); break;
-        default: {{
-            const double b = st[sp--], a = st[sp];
-            st[sp] = op == {ADD} ? a + b : op == {SUB} ? a - b : op == {MUL} ? a * b
-                : op == {DIV} ? (b == 0.0 ? NAN : a / b) : pow(a, b);
-        }}
-        }}
-    }}
-    *prog = pc + 1 + 2 * n;
-    return sp >= 0 ? st[sp] : NAN;
-}}
-#endif
-"""
+#: The ``#define``s of ``c/program.h``: the opcodes and the stack depth.
+C_DEFINES = "".join(f"#define MB_OP_{name} {code}\n" for name, code in (
+    ("NUM", NUM), ("TIME", TIME), ("NEG", NEG), ("ADD", ADD), ("SUB", SUB), ("MUL", MUL), ("DIV", DIV), ("POW", POW),
+    ("SIN", SIN), ("COS", COS), ("EXP", EXP), ("SQRT", SQRT), ("LOG", LOG))) + f"#define MB_PROGRAM_STACK {STACK}\n"
+
+#: The C evaluator (``c/program.h``, after ``C_DEFINES``): ``mb_program(&prog, t)`` returns the
+#: value of the program at ``prog`` and advances ``prog`` past it (NaN on a domain error, as
+#: C's libm gives).
+C_PROGRAM = C_DEFINES + c_text.read("mbcomp.codegen", "program.h")

@@ -1,7 +1,7 @@
 """Integration loops compiled with the model: DOP853 (adaptive, dense output) and RK4.
 
-The C source is generated next to the model's code so that the right-hand side is a
-direct C call: no Python between steps.  DOP853 follows scipy's implementation step
+The C source (``c/integrators.c``, ``c/dop853_loop.c``) is compiled next to the model's
+code so that the right-hand side is a direct C call: no Python between steps.  DOP853 follows scipy's implementation step
 for step (same tableau, error norm, step-size control and dense output; Hairer,
 Norsett & Wanner, Solving ODEs I, II.5), so results match ``solve_ivp`` to rounding.
 """
@@ -13,6 +13,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from mbcomp.core import c_text
 
 #: Status codes returned by the compiled loops.
 FINISHED, BUFFER_FULL, STEP_TOO_SMALL, SINGULAR, NOT_FINITE, RANK_LOST, STOPPED, COLLAPSED = 0, 1, -1, -2, -3, -5, -6, -7
@@ -28,9 +30,14 @@ COLLAPSE_WINDOW, COLLAPSE_STEPS = 4096, 1e9
 
 
 def _array(name: str, values) -> str:
-    flat = ", ".join(repr(float(v)) for v in np.ravel(values))
-    shape = "".join(f"[{s}]" for s in np.shape(values))
-    return f"static const double {name}{shape} = {{{flat}}};"
+    """A C table of ``values`` (1-D or 2-D; ``repr`` of each float, so each entry is the same double)."""
+    values = np.asarray(values, dtype=float)
+    shape = "".join(f"[{s}]" for s in values.shape)
+
+    def row(v) -> str:
+        return ", ".join(repr(float(x)) for x in v)
+    body = row(values) if values.ndim == 1 else ", ".join(f"{{{row(r)}}}" for r in values)
+    return f"static const double {name}{shape} = {{{body}}};"
 
 
 @functools.lru_cache(maxsize=1)
@@ -71,14 +78,13 @@ def c_integrators() -> str:
     join ``tau``, their rates come from ``drives``).
     Where ``REDUCED_LOOP`` is defined (a constrained model the lagrange formulation steps
     in compiled code), also ``dop853_reduced_run``: the same loop on the reduced state of
-    ``formulations/lagrange_c.py``."""
+    ``formulations/lagrange_c.py``.  The C is ``c/integrators.c`` with ``c/dop853_loop.c``
+    instantiated once per loop (``@RUN@``, ``@INIT@``), after the tables and sizes above."""
     lines = [
         "#include <float.h>",
         "#include <time.h>",
         f"#define COLLAPSE_WINDOW {COLLAPSE_WINDOW}",
         f"#define COLLAPSE_STEPS {COLLAPSE_STEPS!r}",
-        "static __thread double step_budget = COLLAPSE_STEPS;  /* set by Python before each run */",
-        "void set_step_budget(double steps) { step_budget = steps > 0 ? steps : COLLAPSE_STEPS; }",
         f"#define LOOP_EVENT {EVENT}",
         "#define NY (NMECH + NZ)",
         "#define NWORK (DYNAMICS_SIZE > NDAEWORK ? DYNAMICS_SIZE : NDAEWORK)",
@@ -86,7 +92,7 @@ def c_integrators() -> str:
     ]
     loops = [_instance("dop853_run", "initial_step", reduced=False),
              "#ifdef REDUCED_LOOP", _instance("dop853_reduced_run", "reduced_initial_step", reduced=True), "#endif"]
-    return "\n".join(lines + [_C_BODY.replace("@LOOPS@", "\n".join(loops))])
+    return "\n".join(lines + [c_text.fill(c_text.read("mbcomp.codegen", "integrators.c"), LOOPS="\n".join(loops))])
 
 
 def _instance(run: str, init: str, reduced: bool) -> str:
@@ -95,433 +101,8 @@ def _instance(run: str, init: str, reduced: bool) -> str:
     macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni + NZ)\n"
               "#define LOOP_RHS(tt, yy, ff) lagrange_rhs(tt, yy, ff, p, tau)\n" if reduced else
               "#define LOOP_REDUCED 0\n#define LOOP_NY NY\n#define LOOP_RHS(tt, yy, ff) rhs(tt, yy, ff, p, tau, work)\n")
-    return (macros + _LOOP.replace("@RUN@", run).replace("@INIT@", init)
+    return (macros + c_text.fill(c_text.read("mbcomp.codegen", "dop853_loop.c"), RUN=run, INIT=init)
             + "#undef LOOP_REDUCED\n#undef LOOP_NY\n#undef LOOP_RHS\n")
-
-
-_LOOP = r"""
-/* scipy's select_initial_step (order 7). */
-static double @INIT@(double t0, const double *y0, const double *f0, double t_end, double max_step,
-                           double rtol, double atol, const double *p, const double *tau, double *work,
-                           double *y1, double *f1, long *nfev) {
-    double scaled[NY], d0, d1, d2, h0, h1;
-    if (LOOP_NY == 0) return INFINITY;  /* nothing to integrate (every coordinate held): as scipy */
-    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = y0[i] / (atol + fabs(y0[i]) * rtol);
-    d0 = rms(scaled, LOOP_NY);
-    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = f0[i] / (atol + fabs(y0[i]) * rtol);
-    d1 = rms(scaled, LOOP_NY);
-    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    if (h0 > t_end - t0) h0 = t_end - t0;
-    for (int i = 0; i < LOOP_NY; ++i) y1[i] = y0[i] + h0 * f0[i];
-    if (LOOP_RHS(t0 + h0, y1, f1)) mb_copy(f1, f0, sizeof(double) * LOOP_NY);  /* (a failed trial: no curvature estimate) */
-    ++*nfev;
-    for (int i = 0; i < LOOP_NY; ++i) scaled[i] = (f1[i] - f0[i]) / (atol + fabs(y0[i]) * rtol);
-    d2 = rms(scaled, LOOP_NY) / h0;
-    if (d1 <= 1e-15 && d2 <= 1e-15) {
-        h1 = h0 * 1e-3 > 1e-6 ? h0 * 1e-3 : 1e-6;
-    } else {
-        h1 = pow(0.01 / (d1 > d2 ? d1 : d2), 1.0 / 8.0);
-    }
-    double h = 100 * h0 < h1 ? 100 * h0 : h1;
-    if (h > t_end - t0) h = t_end - t0;
-    return h < max_step ? h : max_step;
-}
-
-/*
- * Adaptive DOP853 from state[0] = t to t_end.  state[1] = h (<= 0: choose one).
- * y (LOOP_NY) and f (LOOP_NY, the derivative at y; computed when state[1] <= 0) are updated in place.
- * Output: dense values at t_out[*i_out .. n_out) into y_out (rows of NY), or, when
- * n_out == 0, every accepted step into t_steps / y_steps (capacity cap, count *n_steps).
- * counts: [nfev, accepted, rejected].  Returns FINISHED (0), BUFFER_FULL (1, resume by
- * calling again), STEP_TOO_SMALL (-1), SINGULAR (-2) or NOT_FINITE (-3); the reduced loop
- * (state [q_i, qd_i] of the lagrange formulation, full [q, qd] output rows) also PAUSED (2:
- * after an accepted step, for Python to choose the partition afresh; resume by calling
- * again) and TRIAL_FAILED (-8: no dependent coordinates at a trial state).
- */
-int @RUN@(const double *p, const double *tau, double *state, double *y, double *f, double t_end,
-               double rtol, double atol, double max_step, const double *t_out, long n_out, long *i_out,
-               double *y_out, double *t_steps, double *y_steps, long cap, long *n_steps, long *counts) {
-    double *K = malloc(sizeof(double) * 16 * NY);
-    double *work = malloc(sizeof(double) * NWORK);
-    double *y_new = malloc(sizeof(double) * NY), *y_stage = malloc(sizeof(double) * NY);
-    double *F = malloc(sizeof(double) * 7 * NY);
-    int status = 0;
-    double t = state[0], h_abs = state[1], window_t0 = state[0];
-    long window_n = 0;
-    if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
-    if (h_abs <= 0) {
-        RHS_OR_FAIL(LOOP_RHS(t, y, f));
-        counts[0] += 1;
-        h_abs = @INIT@(t, y, f, t_end, max_step, rtol, atol, p, tau, work, y_stage, y_new, &counts[0]);
-    }
-    while (t < t_end) {
-        if (n_out == 0 && *n_steps >= cap) { status = 1; goto done; }
-        double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
-        if (h_abs > max_step) h_abs = max_step;
-        else if (h_abs < min_step) h_abs = min_step;
-        int rejected = 0;
-        double h, t_new, err;
-        for (;;) {
-            if (hook_says_stop(t)) { status = -6; goto done; }
-            if (h_abs < min_step) { status = -1; goto done; }
-            t_new = t + h_abs;
-            if (t_new > t_end) t_new = t_end;
-            h = t_new - t;
-            h_abs = fabs(h);
-            mb_copy(K, f, sizeof(double) * LOOP_NY);
-            for (int s = 1; s < 12; ++s) {
-                for (int i = 0; i < LOOP_NY; ++i) {
-                    double acc = 0.0;
-                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
-                    y_stage[i] = y[i] + h * acc;
-                }
-                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
-            }
-            for (int i = 0; i < LOOP_NY; ++i) {
-                double acc = 0.0;
-                for (int j = 0; j < 12; ++j) acc += DOP_B[j] * K[j * LOOP_NY + i];
-                y_new[i] = y[i] + h * acc;
-            }
-            RHS_OR_FAIL(LOOP_RHS(t_new, y_new, K + 12 * LOOP_NY));
-            counts[0] += 12;
-            if (!all_finite(y_new, LOOP_NY) || !all_finite(K + 12 * LOOP_NY, LOOP_NY)) { status = -3; goto done; }
-            double e5 = 0.0, e3 = 0.0;
-            for (int i = 0; i < LOOP_NY; ++i) {
-                double scale = atol + rtol * (fabs(y[i]) > fabs(y_new[i]) ? fabs(y[i]) : fabs(y_new[i]));
-                double a5 = 0.0, a3 = 0.0;
-                for (int j = 0; j < 13; ++j) { a5 += DOP_E5[j] * K[j * LOOP_NY + i]; a3 += DOP_E3[j] * K[j * LOOP_NY + i]; }
-                a5 /= scale; a3 /= scale;
-                e5 += a5 * a5; e3 += a3 * a3;
-            }
-            err = (e5 == 0.0 && e3 == 0.0) ? 0.0 : h_abs * e5 / sqrt((e5 + 0.01 * e3) * LOOP_NY);
-            if (err < 1) {
-                double factor = err == 0.0 ? 10.0 : 0.9 * pow(err, -1.0 / 8.0);
-                if (factor > 10.0) factor = 10.0;
-                if (rejected && factor > 1.0) factor = 1.0;
-                h_abs *= factor;
-                break;
-            }
-            double factor = 0.9 * pow(err, -1.0 / 8.0);
-            h_abs *= factor > 0.2 ? factor : 0.2;
-            rejected = 1;
-            counts[2] += 1;
-        }
-        counts[1] += 1;
-#if LOOP_REDUCED
-        /* contacts watched: a step in which one closes or a held one would pull is not taken */
-        const int event = lag_nk ? lagrange_event(t_new, y_new, p, tau) : 0;
-        if (event < 0) { status = event; goto done; }
-#elif defined(DAE_LOOP)
-        /* contacts watched (dae): the multipliers of the last evaluation, at (t_new, y_new) */
-        const int event = dae_nk ? dae_event(t_new, y_new, p) : 0;
-#else
-        const int event = 0;
-#endif
-        /* dense output for the requested times within (t, t_new] (and of an event step) */
-        if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
-#if LOOP_REDUCED
-            {  /* the Newton predictor of the dense-output stages and the outputs spans the accepted step */
-                const int ss_ = lagrange_span(t_new, y_new, p);
-                if (ss_) { status = ss_; goto done; }
-            }
-#endif
-            for (int s = 13; s < 16; ++s) {
-                for (int i = 0; i < LOOP_NY; ++i) {
-                    double acc = 0.0;
-                    for (int j = 0; j < s; ++j) acc += DOP_A[s][j] * K[j * LOOP_NY + i];
-                    y_stage[i] = y[i] + h * acc;
-                }
-                RHS_OR_FAIL(LOOP_RHS(t + DOP_C[s] * h, y_stage, K + s * LOOP_NY));
-            }
-            counts[0] += 3;
-            for (int i = 0; i < LOOP_NY; ++i) {
-                double dy = y_new[i] - y[i];
-                F[0 * LOOP_NY + i] = dy;
-                F[1 * LOOP_NY + i] = h * K[i] - dy;
-                F[2 * LOOP_NY + i] = 2 * dy - h * (K[12 * LOOP_NY + i] + K[i]);
-                for (int r = 0; r < 4; ++r) {
-                    double acc = 0.0;
-                    for (int j = 0; j < 16; ++j) acc += DOP_D[r][j] * K[j * LOOP_NY + i];
-                    F[(3 + r) * LOOP_NY + i] = h * acc;
-                }
-            }
-#if LOOP_REDUCED || defined(DAE_LOOP)
-            if (event) {  /* [t_new, y_new, f_new, F] for Python; the loop stays at the step's start */
-#if LOOP_REDUCED
-                double *ev_ = lag_ev;
-#else
-                double *ev_ = dae_ev;
-#endif
-                ev_[0] = t_new;
-                mb_copy(ev_ + 1, y_new, sizeof(double) * LOOP_NY);
-                mb_copy(ev_ + 1 + LOOP_NY, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
-                mb_copy(ev_ + 1 + 2 * LOOP_NY, F, sizeof(double) * 7 * LOOP_NY);
-                status = LOOP_EVENT;
-                goto done;
-            }
-#endif
-            while (*i_out < n_out && t_out[*i_out] <= t_new) {
-                double x = (t_out[*i_out] - t) / h;
-                double *out = y_out + (*i_out) * NY;
-#if LOOP_REDUCED
-                double *dense = y_stage;
-#else
-                double *dense = out;
-#endif
-                for (int i = 0; i < LOOP_NY; ++i) {
-                    double v = 0.0;
-                    for (int r = 6; r >= 0; --r) {
-                        v += F[r * LOOP_NY + i];
-                        v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
-                    }
-                    dense[i] = v + y[i];
-                }
-#if LOOP_REDUCED
-                if (t_out[*i_out] == t_new) dense = y_new;
-                const int os_ = lagrange_full(t_out[*i_out], dense, out, out + NCOORD, p);
-                if (os_) { status = os_; goto done; }
-                for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[2 * lag_ni + i];  /* the drive states */
-#else
-                normalize_state(out);
-                if (t_out[*i_out] == t_new) mb_copy(out, y_new, sizeof(double) * LOOP_NY);
-#endif
-                ++*i_out;
-            }
-#if LOOP_REDUCED
-            lagrange_span_end();
-#endif
-        }
-        t = t_new;
-#if LOOP_REDUCED
-        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
-        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
-        {  /* the full state becomes the accepted one (the next Newton starts there) */
-            const int as_ = lagrange_accept(t, y, n_out == 0 ? y_steps + (*n_steps) * NY : 0, p);
-            if (as_ < 0) { status = as_; goto done; }
-            if (n_out == 0) t_steps[(*n_steps)++] = t;
-            if (as_ == LAG_PAUSED) { status = LAG_PAUSED; goto done; }
-        }
-#else
-        normalize_state(y_new);
-        mb_copy(y, y_new, sizeof(double) * LOOP_NY);
-        mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
-#endif
-#if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
-            RHS_OR_FAIL(LOOP_RHS(t, y, f));
-            counts[0] += 1;
-        }
-#endif
-        if (n_out == 0 && !LOOP_REDUCED) {
-            t_steps[*n_steps] = t;
-            mb_copy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
-            ++*n_steps;
-        }
-        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
-            if (t < t_end && (t_end - t) > step_budget * ((t - window_t0) / COLLAPSE_WINDOW)) {
-                status = -7;
-                goto done;
-            }
-            window_n = 0;
-            window_t0 = t;
-        }
-    }
-done:
-#if LOOP_REDUCED
-    lagrange_span_end();  /* (an event step or a failure leaves the loop inside a step's outputs) */
-#endif
-    state[0] = t;
-    state[1] = h_abs;
-    free(K); free(work); free(y_new); free(y_stage); free(F);
-    return status;
-}
-
-"""
-
-
-_C_BODY = r"""
-static double dummy_input[1];
-/* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank; -8: a
-   trial state without dependent coordinates). */
-#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = (rs_ == -5 || rs_ == -8) ? rs_ : -2; goto done; } } while (0)
-
-/* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
-   when this thread configured it, -5 when its constraint rows lost rank). */
-static int mech_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
-    (void)t;
-    const double *v = y + NCOORD;
-    if (MB_HAS_QUAT) {
-        for (int i = 0; i < NSCREW; ++i) f[SCREW_Q[i]] = v[SCREW_V[i]];
-        for (int k = 0; k < NQUAT; ++k) {  /* q' = q (0, w) / 2, w in the rotated frame */
-            const double *a = y + QUAT_Q[k], *w = v + QUAT_V[k];
-            double *r = f + QUAT_Q[k];
-            r[0] = -0.5 * (a[1] * w[0] + a[2] * w[1] + a[3] * w[2]);
-            r[1] = 0.5 * (a[0] * w[0] + a[2] * w[2] - a[3] * w[1]);
-            r[2] = 0.5 * (a[0] * w[1] + a[3] * w[0] - a[1] * w[2]);
-            r[3] = 0.5 * (a[0] * w[2] + a[1] * w[1] - a[2] * w[0]);
-        }
-    } else {
-        for (int i = 0; i < NCOORD; ++i) f[i] = v[i];
-    }
-#ifdef DAE_LOOP
-    if (dae_nr >= 0) {
-        dae_time = t;
-        int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
-        return status == 2 ? -5 : status;
-    }
-#endif
-    return accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
-}
-
-/* Quaternions back to unit length (after each accepted step). */
-static void normalize_state(double *y) {
-    for (int k = 0; k < NQUAT; ++k) {
-        double *a = y + QUAT_Q[k];
-        const double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3]);
-        if (n > 0) for (int i = 0; i < 4; ++i) a[i] /= n;
-    }
-}
-
-/* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
-   f[NMECH..] gets the states' rates. */
-static int drive_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
-    double u[1 + NZ], out[NV + NZ], tau_all[NV];
-    u[0] = t;
-    for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
-    drives(y, y + NCOORD, p, u, out);
-    for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
-    for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
-    return mech_rhs(t, y, f, p, tau_all, work);
-}
-
-/* The rate of the state: with the drive elements' states when the model has drive elements
-   (inlined at every call: one call per evaluation, as before HAS_DRIVES was read at run time). */
-static inline __attribute__((always_inline)) int rhs(double t, const double *y, double *f, const double *p,
-                                                     const double *tau, double *work) {
-    return HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
-}
-/* The step hook: called with the simulated time about every `hook_interval` s of processor
-   time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it
-   around each run to react to Ctrl-C, to stop requests and to show progress. */
-typedef int (*step_hook_t)(double);
-static __thread step_hook_t step_hook = 0;
-static __thread double hook_interval = 0.0;
-static __thread clock_t hook_last = 0;
-static __thread long hook_tick = 0;
-
-void set_step_hook(step_hook_t hook, double interval) {
-    step_hook = hook;
-    hook_interval = interval;
-    hook_last = clock();
-    hook_tick = 0;
-}
-
-static int hook_says_stop(double t) {
-    if (!step_hook || (++hook_tick & 15)) return 0;
-    clock_t now = clock();
-    if ((double)(now - hook_last) < hook_interval * CLOCKS_PER_SEC) return 0;
-    hook_last = now;
-    return step_hook(t) != 0;
-}
-
-static int all_finite(const double *v, int n) {
-    for (int i = 0; i < n; ++i) if (!(fabs(v[i]) <= DBL_MAX)) return 0;
-    return 1;
-}
-
-static double rms(const double *v, int n) {
-    double s = 0.0;
-    for (int i = 0; i < n; ++i) s += v[i] * v[i];
-    return sqrt(s / n);
-}
-
-@LOOPS@
-/* Jacobian d f / d y (NY x NY, row-major) by forward differences, for implicit methods. */
-int rhs_jacobian(const double *p, const double *tau, double t, const double *y, double *J) {
-    double *f0 = malloc(sizeof(double) * NY), *f1 = malloc(sizeof(double) * NY);
-    double *yp = malloc(sizeof(double) * NY), *work = malloc(sizeof(double) * NWORK);
-    int status = 0;
-    if (!f0 || !f1 || !yp || !work) { status = -4; goto done; }
-    RHS_OR_FAIL(rhs(t, y, f0, p, tau, work));
-    mb_copy(yp, y, sizeof(double) * NY);
-    for (int j = 0; j < NY; ++j) {
-        const double h = sqrt(DBL_EPSILON) * (fabs(y[j]) > 1.0 ? fabs(y[j]) : 1.0);
-        yp[j] = y[j] + h;
-        RHS_OR_FAIL(rhs(t, yp, f1, p, tau, work));
-        for (int i = 0; i < NY; ++i) J[i * NY + j] = (f1[i] - f0[i]) / (yp[j] - y[j]);
-        yp[j] = y[j];
-    }
-done:
-    free(f0); free(f1); free(yp); free(work);
-    return status;
-}
-
-/* Rows of y_out for the output times t_out[*j ..] before t_b (all of them when last), by
-   cubic Hermite interpolation between the steps (t_a, ya, fa) and (t_b, yb, fb). */
-static void hermite_rows(double t_a, double t_b, const double *ya, const double *fa, const double *yb,
-                         const double *fb, const double *t_out, long n_out, long *j, int last, double *y_out) {
-    const double h = t_b - t_a;
-    for (; *j < n_out && (last || t_out[*j] < t_b); ++*j) {
-        const double s = (t_out[*j] - t_a) / h, s2 = s * s, s3 = s2 * s;
-        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = -2 * s3 + 3 * s2, h11 = s3 - s2;
-        double *out = y_out + *j * NY;
-        for (int i = 0; i < NY; ++i) out[i] = h00 * ya[i] + h10 * h * fa[i] + h01 * yb[i] + h11 * h * fb[i];
-        normalize_state(out);
-    }
-}
-
-/* Classical RK4 with fixed step dt for n steps from t0.  y: the start state in, the state
-   reached out (on failure: the state at step counts[1]).  Output only where asked: with
-   t_out == NULL every step's state goes to y_out (n + 1 rows, y0 first); else y_out gets one
-   row per output time t_out[0 .. n_out) (increasing, within [t0, t0 + n dt]) by cubic
-   Hermite interpolation between the two steps around it, whose rates the steps compute
-   anyway (one more evaluation, not counted in nfev, for the rate at the last step). */
-int rk4_run(const double *p, const double *tau, double t0, double *y, double dt, long n,
-            const double *t_out, long n_out, double *y_out, long *counts) {
-    double *k = malloc(sizeof(double) * 4 * NY), *stage = malloc(sizeof(double) * NY);
-    double *next = malloc(sizeof(double) * NY), *f_next = malloc(sizeof(double) * NY);
-    double *work = malloc(sizeof(double) * NWORK);
-    double *const y_start = y;
-    int status = 0, have_f = 0;  /* have_f: f_next holds the rate at y (computed for output) */
-    long j = 0;  /* the next output time */
-    if (!k || !stage || !next || !f_next || !work) { status = -4; goto done; }
-    for (long s = 0; s < n; ++s) {
-        const double t = t0 + s * dt, t_new = t0 + (s + 1) * dt;
-        if (hook_says_stop(t)) { status = -6; goto done; }
-        if (have_f) mb_copy(k, f_next, sizeof(double) * NY);
-        else RHS_OR_FAIL(rhs(t, y, k, p, tau, work));
-        have_f = 0;
-        if (!t_out) mb_copy(y_out + s * NY, y, sizeof(double) * NY);
-        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[i];
-        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + NY, p, tau, work));
-        for (int i = 0; i < NY; ++i) stage[i] = y[i] + 0.5 * dt * k[NY + i];
-        RHS_OR_FAIL(rhs(t + 0.5 * dt, stage, k + 2 * NY, p, tau, work));
-        for (int i = 0; i < NY; ++i) stage[i] = y[i] + dt * k[2 * NY + i];
-        RHS_OR_FAIL(rhs(t + dt, stage, k + 3 * NY, p, tau, work));
-        for (int i = 0; i < NY; ++i)
-            next[i] = y[i] + dt / 6.0 * (k[i] + 2 * k[NY + i] + 2 * k[2 * NY + i] + k[3 * NY + i]);
-        normalize_state(next);
-        counts[0] += 4;
-        counts[1] += 1;
-        double *swap = y; y = next; next = swap;  /* y: the state at step s + 1; next: at step s */
-        if (!all_finite(y, NY)) { status = -3; goto done; }
-        const int last = s == n - 1;
-        if (t_out && j < n_out && (last || t_out[j] < t_new)) {  /* outputs between the two steps */
-            RHS_OR_FAIL(rhs(t_new, y, f_next, p, tau, work));
-            have_f = 1;
-            hermite_rows(t, t_new, next, k, y, f_next, t_out, n_out, &j, last, y_out);
-        }
-    }
-    if (!t_out) mb_copy(y_out + n * NY, y, sizeof(double) * NY);
-done:
-    if (y != y_start) {  /* the reached state lives in the scratch buffer: hand it back */
-        mb_copy(y_start, y, sizeof(double) * NY);
-        next = y;
-    }
-    free(k); free(stage); free(next); free(f_next); free(work);
-    return status;
-}
-""".replace("FINISHED_CODE", "0")
 
 
 # -- Python drivers ------------------------------------------------------------------------------

@@ -7,6 +7,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
+from mbcomp.core import c_text, tolerances
+
 CODEGEN_VERSION = "10"
 
 
@@ -412,32 +414,25 @@ def _c_function(prog, fname: str, outputs, chunk: int, main_prefix: str, free: d
         lines.append(f"    out[{k}] = {printer(e)};")
     lines.append("}")
     lines.append("")
-    lines.append(MANY_TEMPLATE.format(name=fname, size=len(results)))
+    lines.append(c_many(fname, len(results)))
     return parts, "\n".join(lines)
 
 
 #: ``name_many``: the function at ``m`` states in one call (rows of q, qd, u with the given
-#: strides in doubles; a stride of 0 repeats the first row), ``size`` outputs per row.
-MANY_TEMPLATE = """void {name}_many(long m, const double *q, long sq, const double *qd, long sqd, const double *p,
-                const double *u, long su, double *out) {{
-    for (long i = 0; i < m; ++i) {name}(q + i * sq, qd + i * sqd, p, u + i * su, out + i * {size});
-}}
-"""
+#: strides in doubles; a stride of 0 repeats the first row), ``size`` outputs per row
+#: (``c/many.c``, placeholders ``@NAME@`` and ``@SIZE@``).
+def c_many(name: str, size) -> str:
+    """C of ``name_many`` for the function ``name`` of ``size`` outputs."""
+    return c_text.fill(c_text.read("mbcomp.codegen", "many.c"), NAME=name, SIZE=size)
 
 
 def c_late_stub(name: str, size: str, setter: str) -> str:
     """C of ``name`` (and ``name_many``) for a library built without it: it calls the
     separately built function once Python has passed its address to ``setter``, and writes
     NaN (``size`` values) before (a caller's finiteness check then sends it to the path that
-    builds it: ``CFunctions``).  Part of the templates (after ``c_prototypes``)."""
-    return f"""typedef void (*mb_late_fn)(const double *, const double *, const double *, const double *, double *);
-static mb_late_fn mb_late_{name} = 0;
-void {setter}(mb_late_fn f) {{ mb_late_{name} = f; }}
-void {name}(const double *q, const double *qd, const double *p, const double *u, double *out) {{
-    if (mb_late_{name}) {{ mb_late_{name}(q, qd, p, u, out); return; }}
-    for (int i = 0; i < {size}; ++i) out[i] = NAN;
-}}
-""" + MANY_TEMPLATE.format(name=name, size=size)
+    builds it: ``CFunctions``).  Part of the templates (after ``c_prototypes``); ``c/late_stub.c``."""
+    return (c_text.fill(c_text.read("mbcomp.codegen", "late_stub.c"), NAME=name, SIZE=size, SETTER=setter)
+            + c_many(name, size))
 
 
 def c_dense_stub() -> str:
@@ -460,65 +455,16 @@ def c_accelerations(nq: int | None = None) -> str:
     the mass matrix is not positive definite (same threshold as the Python path).
     ``work`` holds ``DYNAMICS_SIZE`` doubles (the offsets come from ``OutputLayout.c_names``);
     ``tau`` may be NULL.  ``nq``: define ``NQ`` here (None: the model's ``c_sizes`` unit gives it).
+    The C is ``c/accelerations.c``, after the tolerances' ``#define``s (``core/tolerances.py``).
     """
-    return ("" if nq is None else f"#define NQ {nq}\n") + f"""
-double fabs(double); double sqrt(double);  /* its own, so that it also follows c_source alone */
-#define IDX(i, j) ((i) * ((i) + 1) / 2 + (j))
-/* M = L L^T in place on the packed lower triangle; 0, or k + 1 when pivot k is not
-   positive against the largest diagonal entry. */
-static int mass_cholesky(double *L) {{
-    double scale = 1e-300;
-    for (int i = 0; i < NQ; ++i) if (fabs(L[IDX(i, i)]) > scale) scale = fabs(L[IDX(i, i)]);
-    for (int j = 0; j < NQ; ++j) {{
-        double s = L[IDX(j, j)];
-        for (int k = 0; k < j; ++k) s -= L[IDX(j, k)] * L[IDX(j, k)];
-        if (!(s > 1e-13 * scale)) return j + 1;
-        const double d = sqrt(s);
-        L[IDX(j, j)] = d;
-        for (int i = j + 1; i < NQ; ++i) {{
-            double t = L[IDX(i, j)];
-            for (int k = 0; k < j; ++k) t -= L[IDX(i, k)] * L[IDX(j, k)];
-            L[IDX(i, j)] = t / d;
-        }}
-    }}
-    return 0;
-}}
-
-/* b <- L^-1 b and b <- L^-T b with the packed factor. */
-static void lower_solve(const double *L, double *b) {{
-    for (int i = 0; i < NQ; ++i) {{
-        double s = b[i];
-        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * b[k];
-        b[i] = s / L[IDX(i, i)];
-    }}
-}}
-
-static void upper_solve(const double *L, double *b) {{
-    for (int i = NQ - 1; i >= 0; --i) {{
-        double s = b[i];
-        for (int k = i + 1; k < NQ; ++k) s -= L[IDX(k, i)] * b[k];
-        b[i] = s / L[IDX(i, i)];
-    }}
-}}
-
-int accelerations(const double *q, const double *qd, const double *p, const double *u,
-                  const double *tau, double *qdd, double *work) {{
-    double *L = work + DYNAMICS_MASS_MATRIX_OFF, *f = work + DYNAMICS_FORCES_OFF;
-    dynamics(q, qd, p, u, work);
-    for (int i = 0; i < NQ; ++i) qdd[i] = f[i] + (tau ? tau[i] : 0.0);
-    const int status = mass_cholesky(L);
-    if (status) return status;
-    lower_solve(L, qdd);
-    upper_solve(L, qdd);
-    return 0;
-}}
-"""
+    return (("" if nq is None else f"#define NQ {nq}\n") + tolerances.c_defines() + "\n"
+            + c_text.read("mbcomp.codegen", "accelerations.c") + "\n\n")
 
 
 # -- what the cache key needs ------------------------------------------------------------------
 @functools.lru_cache(maxsize=1)
 def generator_text() -> str:
-    """The code generator's own text (version, printer, source templates): part of the cache
+    """The code generator's own text (version, printer, every C file of the package): part of the cache
     key, so that a changed generator never reuses code it did not write.  This module's whole
     file (reading it costs a tenth of a millisecond; ``inspect.getsource`` of its functions
     tokenizes it, ten milliseconds of every process that loads a model)."""
@@ -530,7 +476,7 @@ def generator_text() -> str:
                                                        c_units, UnitStream, _c_function)]
         except (OSError, TypeError):
             parts = []
-    return "\n".join([CODEGEN_VERSION, *parts, MANY_TEMPLATE])
+    return "\n".join([CODEGEN_VERSION, *parts, c_text.all_text()])
 
 
 def load_python(source: str, key: str) -> dict[str, Callable]:

@@ -17,10 +17,11 @@ from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import ModelError, SimulationError, describe, format_state
 from mbcomp.build.layout import body_fields
 from mbcomp.core.small_linalg import lapack_routine
+from mbcomp.core.tolerances import PIVOT_TOLERANCE
 
 #: A pivot of the mass matrix's Cholesky factor below this fraction of its largest diagonal
 #: entry counts as singular (the same threshold as the compiled ``accelerations``).
-SINGULAR_PIVOT = 1e-13
+SINGULAR_PIVOT = PIVOT_TOLERANCE
 
 
 class Kernel:

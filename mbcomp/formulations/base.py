@@ -11,12 +11,8 @@ import numpy as np
 from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import format_state, ModelError, SimulationError
 from mbcomp.core.small_linalg import orthonormal_basis, pivoted_qr
+from mbcomp.core.tolerances import RANK_TOLERANCE, REST_SPEED
 
-#: Rows of the constraint Jacobian whose pivot in a column-pivoted QR falls below this
-#: fraction of the largest pivot count as dependent.  Rounding leaves redundant rows of
-#: a planar loop at ~1e-16 relative; a mechanism within 1e-9 of a dead point is treated
-#: as at it (its reaction there would exceed the loads by ~1e9).
-RANK_TOLERANCE = 1e-9
 
 #: Newton tolerance on position residuals (m for point equations, rad-like for angles).
 ASSEMBLY_TOLERANCE = 1e-12
@@ -215,7 +211,7 @@ class Formulation:
         independent rows of ``J`` when the caller has them (``rows_of``)."""
         rows = self.rows_of(J) if rows is None else rows
         nominal = self.nominal_rank
-        if nominal is not None and not contacts and rows.size < nominal and float(np.abs(qd).max(initial=0.0)) < 1e-9:
+        if nominal is not None and not contacts and rows.size < nominal and float(np.abs(qd).max(initial=0.0)) < REST_SPEED:
             lost = sorted(set(range(J.shape[0])) - set(rows.tolist()))
             raise SimulationError(
                 f"the constraint Jacobian loses rank at q = {format_state(q)} (t = {t:g}) with the "

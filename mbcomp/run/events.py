@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from mbcomp.core.errors import SimulationError
+from mbcomp.core.tolerances import EVENT_FORCE_XTOL, EVENT_GAP_XTOL
 from mbcomp.formulations.impact import GAP_TOLERANCE, solve_impact
 from mbcomp.core.result import Event
 
@@ -62,10 +63,10 @@ class ContactWatch:
             if gap(t_old) <= 0.0:
                 te = t_old
             elif hasattr(self.locator, "gap_root"):  # Brent's method in compiled code (events_c.py)
-                te = self.locator.gap_root(i, t_old, t_new, 1e-14, 4 * np.finfo(float).eps)
+                te = self.locator.gap_root(i, t_old, t_new, EVENT_GAP_XTOL, 4 * np.finfo(float).eps)
             else:
                 from scipy.optimize import brentq
-                te = brentq(gap, t_old, t_new, xtol=1e-14, rtol=4 * np.finfo(float).eps)
+                te = brentq(gap, t_old, t_new, xtol=EVENT_GAP_XTOL, rtol=4 * np.finfo(float).eps)
             if earliest is None or te < earliest:
                 earliest = te
         return earliest
@@ -97,9 +98,9 @@ class ContactWatch:
         if force(t_old) <= 0.0:
             return t_old, contact
         if hasattr(self.locator, "force_root"):  # Brent's method in compiled code (events_c.py)
-            return self.locator.force_root(k, t_old, t_new, 1e-13, 4 * np.finfo(float).eps), contact
+            return self.locator.force_root(k, t_old, t_new, EVENT_FORCE_XTOL, 4 * np.finfo(float).eps), contact
         from scipy.optimize import brentq
-        return brentq(force, t_old, t_new, xtol=1e-13, rtol=4 * np.finfo(float).eps), contact
+        return brentq(force, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=4 * np.finfo(float).eps), contact
 
     # -- acting on events --------------------------------------------------------------------------
     def impact(self, t, q, qd):

@@ -1,0 +1,50 @@
+"""Tolerances and thresholds shared by the Python and the C side, each named once.
+
+Python code imports the constants; the hand-written C (the ``.c``/``.h`` files of the
+package) reads them through the ``#define``s of :func:`c_defines`, which the templates
+carry before any code that uses them.  Changing a number here changes both sides (and,
+through the templates' text, the code cache's key).
+"""
+from __future__ import annotations
+
+#: Relative pivot threshold of the mass matrix: a pivot of its Cholesky factor (squared
+#: diagonal entry of ``L``; in the recursive dynamics, an articulated inertia ``D``) at or
+#: below this fraction of the largest diagonal entry means a singular mass matrix.  Used by
+#: the dense and recursive ``accelerations`` in C, the Python backend's recursive
+#: accelerations and ``Kernel``'s diagnosis; C name ``MB_PIVOT_TOLERANCE``.
+PIVOT_TOLERANCE = 1e-13
+
+#: Relative rank tolerance of constraint rows: a row whose pivot (column-pivoted QR of the
+#: Jacobian in Python, the Cholesky factor of the Gram matrix ``J M^-1 J^T`` in the dae
+#: formulation's C) falls below this fraction of the largest counts as dependent.  Rounding
+#: leaves redundant rows of a planar loop at ~1e-16 relative; a mechanism within 1e-9 of a
+#: dead point is treated as at it.  C name ``MB_RANK_TOLERANCE``.
+RANK_TOLERANCE = 1e-9
+
+#: Speed (m/s or rad/s, every entry of ``qd``) below which a state on a singular position
+#: counts as at rest: there a dropped constraint direction leaves the motion undetermined.
+#: C name ``MB_REST_SPEED``.
+REST_SPEED = 1e-9
+
+#: Largest constraint residual (m, or rad for angle rows) the dae formulation's compiled
+#: projection after an accepted step leaves uncorrected (absolute).  C name
+#: ``MB_PROJECTION_RESIDUAL``.
+PROJECTION_RESIDUAL = 1e-13
+
+#: Absolute time tolerances (s) of Brent's method locating a contact event on its step: the
+#: time a free contact's gap closes, and the time a held contact's normal force reaches zero
+#: (the same in the compiled ``mb_brentq`` and scipy's ``brentq``; relative tolerance
+#: ``4 eps``).
+EVENT_GAP_XTOL = 1e-14
+EVENT_FORCE_XTOL = 1e-13
+
+#: ``{C name: value}`` of every constant the C files read.
+C_NAMES = {"MB_PIVOT_TOLERANCE": PIVOT_TOLERANCE, "MB_RANK_TOLERANCE": RANK_TOLERANCE,
+           "MB_REST_SPEED": REST_SPEED, "MB_PROJECTION_RESIDUAL": PROJECTION_RESIDUAL}
+
+
+def c_defines() -> str:
+    """The ``#define``s of the tolerances for the C templates (``repr`` of each float: the
+    C literal is the same double).  Repeating them in one unit is allowed (identical macro
+    redefinitions)."""
+    return "".join(f"#define {name} {value!r}\n" for name, value in C_NAMES.items())

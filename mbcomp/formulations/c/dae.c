@@ -1,0 +1,363 @@
+#ifdef DAE_LOOP
+#define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
+/* most KKT rows: geometric, one motor per speed, every contact */
+#define DAE_NR (NG + NQ + DAE_NK)
+/* work: dynamics, constraints, contacts, then the rows' g, J, g_t, bias, then Y, A, r, lam, u */
+#define DAE_C_OFF DYNAMICS_SIZE
+#define DAE_K_OFF (DAE_C_OFF + CONSTRAINTS_SIZE)
+#define DAE_ROWS_OFF (DAE_K_OFF + CONTACTS_SIZE)
+#define DAE_SOLVE_OFF (DAE_ROWS_OFF + DAE_NR * (NQ + 3))
+#define NDAEWORK (DAE_SOLVE_OFF + NQ * DAE_NR + DAE_NR * DAE_NR + 3 * DAE_NR + NQ)
+#include "program.h"
+#include "brentq.h"
+/* defined below, or after this code by the recursive program (recursive.c_dae) */
+int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
+                      const double *tau, double *qdd, double *work);
+static __thread int dae_nr = -1;
+/* dae_rows (DAE_NR: legacy configuration, geometric rows), dae_legacy (DAE_SPEC_LONGS DAE_NR) and
+   dae_lam (DAE_NR + 1: multipliers of the last solve, per configured row) are per-thread
+   buffers of the model's sizes unit (c_sizes.py). */
+static __thread const long *dae_spec;             /* per row: kind, index, coordinate, speed index, program */
+static __thread const double *dae_data;           /* per row: speed, offset */
+static __thread const double *dae_programs;
+static __thread double dae_alpha, dae_beta, dae_scale, dae_tol = MB_RANK_TOLERANCE;
+static __thread double dae_time = 0.0;            /* the time of the state being evaluated */
+static __thread int dae_has_geo, dae_has_contacts;
+static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
+
+/* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
+double dae_motor_failure(void) {
+    return dae_bad_time;
+}
+
+static void dae_scan(void) {
+    dae_has_geo = dae_has_contacts = 0;
+    for (int k = 0; k < dae_nr; ++k) {
+        if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_GEOMETRIC) dae_has_geo = 1;
+        if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT) dae_has_contacts = 1;
+    }
+}
+
+/* Rows from Python-owned arrays (nr < 0: switched off): spec (5 longs per row), data (2
+   doubles per row), programs (postfix programs of position motors); gains and tolerances. */
+int dae_configure_rows(int nr, const long *spec, const double *data, const double *programs, double alpha,
+                       double beta, double scale, double tol) {
+    if (nr > DAE_NR) return -4;
+    dae_nr = nr; dae_spec = spec; dae_data = data; dae_programs = programs;
+    dae_bad_time = NAN;
+    dae_alpha = alpha; dae_beta = beta; dae_scale = scale; dae_tol = tol;
+    if (nr >= 0) dae_scan();
+    return 0;
+}
+
+/* Geometric rows only (models without motors): rows are indices of the generated constraints. */
+void dae_configure(int nr, const long *rows, double alpha, double beta, double scale, double tol) {
+    if (nr > NG) nr = NG;
+    for (int k = 0; k < nr; ++k) {
+        dae_rows[k] = rows[k];
+        long *s = dae_legacy + DAE_SPEC_LONGS * k;
+        s[0] = DAE_ROW_GEOMETRIC; s[1] = rows[k]; s[2] = s[3] = 0; s[4] = -1;
+    }
+    dae_configure_rows(nr, dae_legacy, 0, 0, alpha, beta, scale, tol);
+}
+
+/* g, J (rows of NQ), g_t and bias of the configured rows at (q, qd, dae_time) into work. */
+static void dae_rows_eval(const double *q, const double *qd, const double *p, const double *u, double *work) {
+    double *c = work + DAE_C_OFF, *kc = work + DAE_K_OFF;
+    double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
+    if (MB_HAS_NG && dae_has_geo) constraints(q, qd, p, u, c);
+    if (MB_HAS_CONTACTS && dae_has_contacts) contacts(q, qd, p, u, kc);
+    (void)c; (void)kc;
+    for (int k = 0; k < dae_nr; ++k) {
+        const long *s = dae_spec + DAE_SPEC_LONGS * k;
+        double *Jr = J + k * NQ;
+        const long j = s[1];
+        if (s[0] == DAE_ROW_GEOMETRIC) {
+            g[k] = c[CONSTRAINTS_RESIDUAL_OFF + j];
+            for (int i = 0; i < NQ; ++i) Jr[i] = c[CONSTRAINTS_JACOBIAN_OFF + j * NQ + i];
+            gt[k] = 0.0;
+            bias[k] = c[CONSTRAINTS_BIAS_OFF + j];
+        } else if (s[0] == DAE_ROW_CONTACT) {
+            g[k] = kc[CONTACTS_GAP_OFF + j];
+            for (int i = 0; i < NQ; ++i) Jr[i] = kc[CONTACTS_JACOBIAN_OFF + j * NQ + i];
+            gt[k] = 0.0;
+            bias[k] = kc[CONTACTS_BIAS_OFF + j];
+        } else {
+            for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
+            Jr[s[3]] = 1.0;
+            if (s[4] < 0) {  /* speed motor: q_k - offset - speed t */
+                const double speed = dae_data[DAE_DATA_DOUBLES * k], offset = dae_data[DAE_DATA_DOUBLES * k + 1];
+                g[k] = q[s[2]] - offset - speed * dae_time;
+                gt[k] = -speed;
+                bias[k] = 0.0;
+            } else {  /* position motor: q_k - s(t), s' and s'' exact */
+                const double *prog = dae_programs + s[4];
+                const double v0 = mb_program(&prog, dae_time), v1 = mb_program(&prog, dae_time);
+                const double v2 = mb_program(&prog, dae_time);
+                if (!(isfinite(v0) && isfinite(v1) && isfinite(v2)) && dae_bad_time != dae_bad_time)
+                    dae_bad_time = dae_time;
+                g[k] = q[s[2]] - v0;
+                gt[k] = -v1;
+                bias[k] = -v2;
+            }
+        }
+    }
+}
+
+/* Column ``col`` of Y = L^-1 J_r^T (rows of the configured Jacobian J, M = L L^T packed);
+   returns the row's rate J_r qd. */
+static double dae_row_solve(const double *L, const double *J, const double *qd, double *Y, int col) {
+    const double *Jr = J + col * NQ;
+    double rate = 0.0;
+    for (int i = 0; i < NQ; ++i) {
+        double s = Jr[i];
+        for (int k = 0; k < i; ++k) s -= L[IDX(i, k)] * Y[k * DAE_NR + col];
+        Y[i * DAE_NR + col] = s / L[IDX(i, i)];
+        rate += Jr[i] * qd[i];
+    }
+    return rate;
+}
+
+/* 1 when every speed is below MB_REST_SPEED: a dropped multiplier direction then leaves the motion
+   undetermined (a singular position at rest), 0 otherwise. */
+static int dae_at_rest(const double *qd, int n) {
+    for (int i = 0; i < n; ++i) if (fabs(qd[i]) >= MB_REST_SPEED) return 0;
+    return 1;
+}
+
+/* lam = A^-1 r for the Gram matrix A (lower triangle, rows of DAE_NR, nr x nr) by a Cholesky
+   factorisation in place that drops the directions whose pivot falls below dae_tol relative
+   to the largest (and scale): their multiplier is zero.  Returns 1 when one was dropped,
+   -1 on a non-finite pivot, 0 otherwise. */
+static int dae_gram_solve(double *A, const double *r, double *lam, int nr, double scale) {
+    double amax = 0.0;
+    for (int j = 0; j < nr; ++j) if (A[j * DAE_NR + j] > amax) amax = A[j * DAE_NR + j];
+    amax = sqrt(amax);
+    const double floor_ = dae_tol * (amax > scale ? amax : scale);
+    int dropped = 0;
+    for (int j = 0; j < nr; ++j) {
+        double s = A[j * DAE_NR + j];
+        for (int k = 0; k < j; ++k) s -= A[j * DAE_NR + k] * A[j * DAE_NR + k];
+        if (s != s) return -1;
+        if (!(s > floor_ * floor_)) {
+            dropped = 1;
+            A[j * DAE_NR + j] = 0.0;
+            for (int k = 0; k < j; ++k) A[j * DAE_NR + k] = 0.0;
+            for (int i = j + 1; i < nr; ++i) A[i * DAE_NR + j] = 0.0;
+            continue;
+        }
+        const double d = sqrt(s);
+        A[j * DAE_NR + j] = d;
+        for (int i = j + 1; i < nr; ++i) {
+            double t = A[i * DAE_NR + j];
+            for (int k = 0; k < j; ++k) t -= A[i * DAE_NR + k] * A[j * DAE_NR + k];
+            A[i * DAE_NR + j] = t / d;
+        }
+    }
+    for (int i = 0; i < nr; ++i) {
+        double s = r[i];
+        for (int k = 0; k < i; ++k) s -= A[i * DAE_NR + k] * lam[k];
+        lam[i] = A[i * DAE_NR + i] > 0.0 ? s / A[i * DAE_NR + i] : 0.0;
+    }
+    for (int i = nr - 1; i >= 0; --i) {
+        double s = lam[i];
+        for (int k = i + 1; k < nr; ++k) s -= A[k * DAE_NR + i] * lam[k];
+        lam[i] = A[i * DAE_NR + i] > 0.0 ? s / A[i * DAE_NR + i] : 0.0;
+    }
+    return dropped;
+}
+
+#ifndef MBCOMP_RECURSIVE_DAE  /* the recursive program brings its own (recursive.c_dae) */
+int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
+                      const double *tau, double *qdd, double *work) {
+    const int n = NQ, nr = dae_nr;
+    double *L = work + DYNAMICS_MASS_MATRIX_OFF, *f = work + DYNAMICS_FORCES_OFF;
+    const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
+    double *Y = work + DAE_SOLVE_OFF, *A = Y + n * DAE_NR;
+    double *r = A + DAE_NR * DAE_NR, *lam = r + DAE_NR, *uvec = lam + DAE_NR;
+    dynamics(q, qd, p, u, work);
+    dae_rows_eval(q, qd, p, u, work);
+    for (int i = 0; i < n; ++i) uvec[i] = f[i] + (tau ? tau[i] : 0.0);
+    if (mass_cholesky(L)) return 1;
+    lower_solve(L, uvec);  /* uvec <- L^-1 (f + tau) */
+    for (int col = 0; col < nr; ++col) {  /* Y[:, col] = L^-1 J_row^T; rhs of the row */
+        const double gdot = dae_row_solve(L, J, qd, Y, col) + gt[col];
+        r[col] = -bias[col] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[col];
+        for (int i = 0; i < n; ++i) r[col] -= Y[i * DAE_NR + col] * uvec[i];
+    }
+    for (int a = 0; a < nr; ++a)  /* A = Y^T Y (lower) */
+        for (int b = 0; b <= a; ++b) {
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Y[i * DAE_NR + a] * Y[i * DAE_NR + b];
+            A[a * DAE_NR + b] = s;
+        }
+    const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
+    if (dropped < 0) return 2;
+    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
+    for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
+    for (int i = 0; i < n; ++i) {  /* qdd = L^-T (uvec + Y lam) */
+        double s = uvec[i];
+        for (int k = 0; k < nr; ++k) s += Y[i * DAE_NR + k] * lam[k];
+        qdd[i] = s;
+    }
+    upper_solve(L, qdd);
+    return 0;
+}
+#endif
+
+/* Move y = [q, qd] back onto the constraints after an accepted step at dae_time: positions
+   by Newton (minimum-norm steps on the configured rows), speeds by the mass-orthogonal
+   projection onto J qd + g_t = 0.  Returns 1 when y changed (the caller re-evaluates its
+   derivative). */
+int dae_project(double *y, const double *p, const double *u, double *work) {
+    const int n = NQ, nr = dae_nr;
+    double *q = y, *qd = y + NQ;
+    double *L = work + DYNAMICS_MASS_MATRIX_OFF;
+    const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ;
+    double *Y = work + DAE_SOLVE_OFF, *A = Y + n * DAE_NR;
+    double *r = A + DAE_NR * DAE_NR, *lam = r + DAE_NR, *dq = lam + DAE_NR;
+    if (nr <= 0) return 0;
+    int changed = 0;
+    for (int it = 0; it < 4; ++it) {
+        dae_rows_eval(q, qd, p, u, work);
+        double gmax = 0.0;
+        for (int k = 0; k < nr; ++k) if (fabs(g[k]) > gmax) gmax = fabs(g[k]);
+        if (!(gmax > MB_PROJECTION_RESIDUAL)) break;
+        for (int a = 0; a < nr; ++a)
+            for (int b = 0; b <= a; ++b) {
+                const double *Ja = J + a * NQ, *Jb = J + b * NQ;
+                double s = 0.0;
+                for (int i = 0; i < n; ++i) s += Ja[i] * Jb[i];
+                A[a * DAE_NR + b] = s;
+            }
+        for (int k = 0; k < nr; ++k) r[k] = g[k];
+        if (dae_gram_solve(A, r, lam, nr, 0.0) < 0) return changed;
+        for (int i = 0; i < n; ++i) {
+            double s = 0.0;
+            for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
+            q[i] -= s;
+        }
+        changed = 1;
+    }
+    if (changed) dae_rows_eval(q, qd, p, u, work);
+    dynamics(q, qd, p, u, work);
+    if (mass_cholesky(L)) return changed;
+    for (int col = 0; col < nr; ++col) r[col] = dae_row_solve(L, J, qd, Y, col) + gt[col];  /* Y = L^-1 J_r^T */
+    for (int a = 0; a < nr; ++a)
+        for (int b = 0; b <= a; ++b) {
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Y[i * DAE_NR + a] * Y[i * DAE_NR + b];
+            A[a * DAE_NR + b] = s;
+        }
+    if (dae_gram_solve(A, r, lam, nr, dae_scale) < 0) return changed;
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < nr; ++k) s += Y[i * DAE_NR + k] * lam[k];
+        dq[i] = s;
+    }
+    upper_solve(L, dq);
+    for (int i = 0; i < n; ++i) qd[i] -= dq[i];
+    return 1;
+}
+
+/* The contact watch of the dae loop (dae_watch; nk = 0: off): after every accepted step
+   the gaps of the free contacts and the normal forces of the held ones (rows of kind
+   contact, from the multipliers of the step end's solve) are checked as
+   events.ContactWatch does; an event step is not taken: the loop returns EVENT with
+   [t_new, y_new, f_new, F (7 rows of 2 NQ)] in ev.  gaps: of every contact at the last
+   accepted step (updated); held[k] = 1 for a contact held closed. */
+static __thread int dae_nk = 0;
+static __thread const long *dae_held;
+static __thread double *dae_gaps, *dae_ev, dae_gap_tol;
+
+int dae_watch(int nk, const long *held, double *gaps, double gap_tol, double *ev) {
+    dae_nk = nk; dae_held = held; dae_gaps = gaps; dae_gap_tol = gap_tol; dae_ev = ev;
+    return 0;
+}
+
+/* 1 when the step to (t, y) closes a free contact or leaves a held one pulling, else 0
+   (and the gaps become the step end's).  dae_lam holds the multipliers at (t, y). */
+static int dae_event(double t, const double *y, const double *p) {
+    double kc[CONTACTS_SIZE + 1], u[1] = {0.0};
+    (void)t;
+    int event = 0;
+    if (!MB_HAS_CONTACTS) return 0;
+    contacts(y, y + NQ, p, u, kc);
+    for (int k = 0; k < dae_nk; ++k) {
+        if (dae_held[k]) continue;
+        const double g0 = dae_gaps[k], g1 = kc[CONTACTS_GAP_OFF + k];
+        if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -dae_gap_tol && -dae_gap_tol < g0)) event = 1;
+    }
+    if (!event)
+        for (int k = 0; k < dae_nr; ++k)
+            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < 0.0) event = 1;
+    if (!event) for (int k = 0; k < dae_nk; ++k) dae_gaps[k] = kc[CONTACTS_GAP_OFF + k];
+    return event;
+}
+
+/* The dense output of an event step at time s (y_old, 7 rows of F, ny entries, on
+   [t_old, t_old + h]) into y. */
+static void dae_dense(double s, double t_old, double h, const double *y_old, const double *F, int ny, double *y) {
+    const double x = (s - t_old) / h;
+    for (int i = 0; i < ny; ++i) {
+        double v = 0.0;
+        for (int r = 6; r >= 0; --r) {
+            v += F[r * ny + i];
+            v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
+        }
+        y[i] = v + y_old[i];
+    }
+}
+
+/* Locating an event on its step: the gap (m) of contact k, or the multiplier (N) of the
+   configured row `row` (a held contact's normal force), at time s of the event step. */
+double dae_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
+                  const double *p) {
+    double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {0.0};
+    dae_dense(s, t_old, h, y_old, F, ny, y);
+    if (!MB_HAS_CONTACTS) return NAN;
+    contacts(y, y + NQ, p, u, kc);
+    return kc[CONTACTS_GAP_OFF + k];
+}
+
+double dae_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
+                    const double *p, const double *tau) {
+    double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
+    double *work = malloc(sizeof(double) * (NDAEWORK + 1));
+    if (!work) return NAN;
+    dae_dense(s, t_old, h, y_old, F, ny, y);
+    dae_time = s;
+    const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
+    free(work);
+    return status ? NAN : dae_lam[row];
+}
+
+/* The event's time on its step by Brent's method in C (events_c.py): where the gap of
+   contact `index` (dae_gap_root) or the multiplier of configured row `index` (dae_force_root)
+   crosses zero in [a, b]; *status as mb_brentq's. */
+struct dae_root_ctx { double t_old, h; const double *y_old, *F; int ny; long index; const double *p, *tau; };
+
+static double dae_gap_fn(double s, void *c) {
+    const struct dae_root_ctx *x = c;
+    return dae_gap_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p);
+}
+
+static double dae_force_fn(double s, void *c) {
+    const struct dae_root_ctx *x = c;
+    return dae_force_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+double dae_gap_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny, long index,
+                    const double *p, double xtol, double rtol, int *status) {
+    struct dae_root_ctx c = {t_old, h, y_old, F, ny, index, p, 0};
+    return mb_brentq(dae_gap_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double dae_force_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                      long index, const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct dae_root_ctx c = {t_old, h, y_old, F, ny, index, p, tau};
+    return mb_brentq(dae_force_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+#else
+#define NDAEWORK 0
+#endif
