@@ -1,0 +1,1 @@
+"""Layer 2: a model made into its flat copy, topology, symbolic program and layouts."""

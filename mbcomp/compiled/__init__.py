@@ -1,0 +1,1 @@
+"""Layer 5: the compiled model and its numeric kernel."""

@@ -1,0 +1,1 @@
+"""Layer 7: time stepping, contact events, sweeps and derived series."""

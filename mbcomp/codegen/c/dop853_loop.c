@@ -118,6 +118,12 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
 #endif
         /* dense output for the requested times within (t, t_new] (and of an event step) */
         if (event || (n_out > 0 && *i_out < n_out && t_out[*i_out] <= t_new)) {
+#if LOOP_REDUCED
+            {  /* the Newton predictor of the dense-output stages and the outputs spans the accepted step */
+                const int ss_ = lagrange_span(t_new, y_new, p);
+                if (ss_) { status = ss_; goto done; }
+            }
+#endif
             for (int s = 13; s < 16; ++s) {
                 for (int i = 0; i < LOOP_NY; ++i) {
                     double acc = 0.0;
@@ -180,6 +186,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
 #endif
                 ++*i_out;
             }
+#if LOOP_REDUCED
+            lagrange_span_end();
+#endif
         }
         t = t_new;
 #if LOOP_REDUCED
@@ -217,6 +226,9 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         }
     }
 done:
+#if LOOP_REDUCED
+    lagrange_span_end();  /* (an event step or a failure leaves the loop inside a step's outputs) */
+#endif
     state[0] = t;
     state[1] = h_abs;
     free(K); free(work); free(y_new); free(y_stage); free(F);
