@@ -990,7 +990,7 @@ def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[st
     for item in members:
         if isinstance(item, Submodel):
             head = f"{prefix}submodels.{toml_key(item.name)}"
-            lines += ["", f"# sub-model instance {item.path!r} ({type(item).__name__}), written inline", f"[{head}]"]
+            lines += ["", f"# sub-model instance {item.path!r}, written inline", f"[{head}]"]
             lines += _parameter_lines(model, item, scope, head)
             lines += _part_lines(model, list(item.members().values()), item.path, head + ".")
     return lines
