@@ -32,7 +32,7 @@ from mbcomp.files.library import LIBRARY_PREFIX, library_name_problem
 from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting, read_file
 from mbcomp.spec.compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from mbcomp.spec.components.frame import Frame
-from mbcomp.spec.components.expr import Expr, _signal_args
+from mbcomp.spec.components.expr import Expr, map_exprs
 import numpy as np
 from mbcomp.files.component_tables import read_shapes
 from mbcomp.spec.shapes import shape_table
@@ -840,28 +840,14 @@ def _expr_text(expr: Any, scope: str) -> str | None:
 
 
 def _marked(value: Any, markers: dict) -> Any:
-    """``value`` with every ``Expr`` replaced by its marker (a float a few ulps from its
-    value, distinct for each expression), structure kept as ``expr.substitute`` keeps it."""
-    if isinstance(value, Expr):
-        if value not in markers:
-            x, k = value.value, len(markers) + 1
-            markers[value] = float(np.nextafter(x, np.inf if x >= 0 else -np.inf) if k == 0 else
-                                   x + k * (np.spacing(x) if x else 5e-324))
-        return markers[value]
-    args = _signal_args(value)
-    if args is not None:
-        return type(value)(*_marked(args[0], markers), **_marked(args[1], markers))
-    if isinstance(value, tuple):
-        return tuple(_marked(v, markers) for v in value)
-    if isinstance(value, list):
-        return [_marked(v, markers) for v in value]
-    if isinstance(value, dict):
-        return {k: _marked(v, markers) for k, v in value.items()}
-    if isinstance(value, Frame):
-        frame = object.__new__(Frame)
-        frame.body, frame.point, frame.rotation = value.body, _marked(value.point, markers), value.rotation
-        return frame
-    return value
+    """``value`` with every ``Expr`` replaced by its marker: a float a few ulps from its value
+    (validation passes as for the value), distinct for each expression."""
+    def marker(expr: Expr) -> float:
+        if expr not in markers:
+            x, k = expr.value, len(markers) + 1
+            markers[expr] = float(x + k * (np.spacing(x) if x else 5e-324))
+        return markers[expr]
+    return map_exprs(value, marker)
 
 
 def _expression_table(comp: Any, copy: Any, written: Any, scope: str) -> tuple[dict, list[str]] | None:
