@@ -71,6 +71,13 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
             return ("num", float(value))
         except OverflowError:
             raise ExpressionError(f"{_shown(text)}: number {_short(value, 24)} is too large") from None
+    dotted = _dotted_name(node)
+    if dotted is not None and dotted in names:   # a sub-model instance's parameter by its path
+        return ("name", dotted) if keep_names else ("obj", names[dotted]) if not isinstance(
+            names[dotted], (int, float)) and not allow_t else ("num", float(names[dotted]))
+    if dotted is not None:
+        known = ", ".join(sorted(names)) or "none defined"
+        raise ExpressionError(f"{_shown(text)}: unknown name {_short(dotted, 40)} (parameters: {known})")
     if isinstance(node, ast.Name):
         if node.id == "t":
             if not allow_t:
@@ -109,6 +116,19 @@ def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, d
     what = type(node).__name__
     raise ExpressionError(f"{_shown(text)}: {what} is not allowed (numbers, parameter names, t, + - * / **, "
                           "sin, cos, exp, sqrt only)")
+
+
+def _dotted_name(node: ast.AST) -> str | None:
+    """``"upper.length"`` for the attribute chain ``upper.length`` of plain names, else None."""
+    if not isinstance(node, ast.Attribute):
+        return None
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if not isinstance(node, ast.Name):
+        return None
+    return ".".join([node.id] + parts[::-1])
 
 
 def evaluate(node: tuple, t: float = 0.0, env: dict | None = None) -> float:

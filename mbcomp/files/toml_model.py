@@ -9,6 +9,7 @@ in ``docs/files.md``.
 """
 from __future__ import annotations
 
+import keyword
 import os
 import re
 from pathlib import Path
@@ -31,6 +32,8 @@ from mbcomp.files.library import LIBRARY_PREFIX, library_name_problem
 from mbcomp.core.limits import INSTANCES, NESTING, max_instances, max_nesting, read_file
 from mbcomp.spec.compose import FileSubmodel, Parameter, Submodel, copy_component, PORT_REQUIRED as _PORT_REQUIRED
 from mbcomp.spec.components.frame import Frame
+from mbcomp.spec.components.expr import Expr, map_exprs
+import numpy as np
 from mbcomp.files.component_tables import read_shapes
 from mbcomp.spec.shapes import shape_table
 
@@ -179,7 +182,8 @@ def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
         if shapes is not BAD:
             model.ground.shape = shapes
     model.description = description
-    model.named_parameters = {k: float(v) for k, v in r.parameters.items()}
+    # the file's own [parameters] (instances' parameters, seen by their paths, are the System's)
+    model.named_parameters = {k: float(v) for k, v in r.parameters.items() if "." not in k}
     # With a broken joint the coordinate names are incomplete: check the values only.
     model.initial = _read_initial(r, sections["initial"], coords_seen, getattr(r, "speeds_seen", {}))
     model.simulation = _read_simulation(r, sections["simulation"])
@@ -251,6 +255,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
     speeds_seen: dict[str, str] = {}  # speeds that are not a coordinate's rate (a ball's)
     all_joints_read = True
     for comp_name, label, table in named_tables("submodels"):
+        _see_instance_parameters(r, target)
         instance = _read_submodel(r, comp_name, label, table, bodies, context)
         if instance is None:
             r.failed.add(comp_name)
@@ -277,6 +282,7 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
         for coord in _instance_coords(instance, comp_name):
             coords_seen[coord] = f"[{label}]"
 
+    _see_instance_parameters(r, target)
     for comp_name, label, table in named_tables("joints"):
         joint = read_component(r, "joints", comp_name, label, table, bodies, joints)
         joints[comp_name] = joint if joint is not None else comp_name
@@ -300,6 +306,16 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
     expose({p: s for p, s in exposed.items() if p not in own})
     r.speeds_seen = speeds_seen  # a ball's speeds, which [initial.qd] may name
     return coords_seen if all_joints_read else None
+
+
+def _see_instance_parameters(r: Reader, target: Any) -> None:
+    """Let expressions name the parameters of the sub-model instances built so far by their
+    paths (``"upper.length"``): the values stay linked, so they follow a run-time change."""
+    registry = target.registry if isinstance(target, Model) else getattr(target, "_registry", None)
+    if registry is None:
+        return
+    for path, entry in registry.parameters.items():
+        r.parameters.setdefault(path, Expr.parameter(path, entry.value))
 
 
 def _instance_bodies(instance: Any, path: str) -> list:
@@ -523,7 +539,7 @@ def _read_submodel(r: Reader, name: str, label: str, table: dict, bodies: dict, 
     overrides (numbers or expressions of this file's parameters) and dicts of modifiers
     for the part's own sub-models."""
     if "use" not in table:
-        if table and all(key in PART_SECTIONS + ("submodels",) for key in table):
+        if table and all(key in PART_SECTIONS + ("submodels", "parameters") for key in table):
             return _inline_class(r, label, table, bodies, context)(name)
         r.problem(label, "use", 'missing (required): the part file ("part.toml" or "library:NAME"), or the '
                   "part's own [bodies], [joints], ... tables")
@@ -587,25 +603,7 @@ def _part_class(path: Path, context: _FileContext) -> type:
     data = context.files.data_of(path, label)
     r = Reader(label)
     r.keys("", data, TOP_KEYS)
-    params_table = data.get("parameters", {})
-    declared: dict[str, Any] = {}
-    if not isinstance(params_table, dict):
-        r.problem(None, "parameters", f"must be a table [parameters], got {type_name(params_table)}")
-        params_table = {}
-    for key, value in params_table.items():
-        if not key.isidentifier() or key in RESERVED:
-            r.problem("parameters", key, f"{key!r} is not a valid parameter name")
-            continue
-        spec = value if isinstance(value, dict) else {"value": value}
-        r.keys(f"parameters.{key}", spec, ("value", "unit", "min", "max", "doc"), ("value",))
-        default = r.number("parameters", key, spec.get("value", BAD)) if "value" in spec else BAD
-        if default is BAD:
-            continue
-        try:
-            declared[key] = Parameter(float(default), unit=spec.get("unit"), min=spec.get("min"),
-                                      max=spec.get("max"), doc=str(spec.get("doc", "")))
-        except ModelError as exc:
-            r.problem("parameters", key, str(exc))
+    declared, _ = _declare_parameters(r, data.get("parameters", {}), "parameters")
     external, exposed = _read_ports(r, data.get("ports", {}))
     if r.problems:
         raise ModelError(problems=r.problems)
@@ -628,20 +626,55 @@ def _part_class(path: Path, context: _FileContext) -> type:
     return type(_class_name(name), (FileSubmodel,), namespace)
 
 
-def _inline_class(r: Reader, label: str, table: dict, bodies: dict, context: _FileContext) -> type:
-    """A ``Submodel`` class for a part written inline (as ``save`` writes Python sub-models):
-    its tables name their own components locally and anything else by its full path."""
+def _declare_parameters(r: Reader, params_table: Any, label: str) -> tuple[dict, dict]:
+    """``Parameter``s of a part's ``[parameters]`` (a number, or a table {value, unit, min,
+    max, doc}) and the values given as expressions of ``r``'s names (an inline part's
+    parameters bound to the enclosing instance's: ``{name: Expr}``, the modifiers)."""
+    declared: dict[str, Any] = {}
+    bound: dict[str, Any] = {}
+    if not isinstance(params_table, dict):
+        r.problem(None, label, f"must be a table [{label}], got {type_name(params_table)}")
+        return declared, bound
+    for key, value in params_table.items():
+        if not key.isidentifier() or key in RESERVED:
+            r.problem(label, key, f"{key!r} is not a valid parameter name")
+            continue
+        spec = value if isinstance(value, dict) else {"value": value}
+        r.keys(f"{label}.{key}", spec, ("value", "unit", "min", "max", "doc"), ("value",))
+        default = r.number(label, key, spec.get("value", BAD)) if "value" in spec else BAD
+        if default is BAD:
+            continue
+        try:
+            declared[key] = Parameter(float(default), unit=spec.get("unit"), min=spec.get("min"),
+                                      max=spec.get("max"), doc=str(spec.get("doc", "")))
+        except ModelError as exc:
+            r.problem(label, key, str(exc))
+            continue
+        if isinstance(default, Expr):
+            bound[key] = default
+    return declared, bound
+
+
+def _inline_class(r: Reader, label: str, table: dict, bodies: dict, context: _FileContext) -> Any:
+    """A ``Submodel`` class for a part written inline (as ``save`` writes sub-model instances):
+    its tables name their own components locally and anything else by its full path; its
+    ``[parameters]`` are run-time parameters under the instance's path, as a part file's (a
+    value may be an expression of the enclosing scope's parameters, and follows them)."""
     outer = dict(bodies)
     where = f"{r.label} {label}"
+    declared, bound = _declare_parameters(r, table.get("parameters", {}), f"{label}.parameters")
 
     def build(self) -> None:
         reader = Reader(where)
-        reader.parameters = dict(r.parameters)
+        reader.parameters = {**r.parameters, **{key: getattr(self, key) for key in declared}}
+        _see_instance_parameters(reader, self)
         _read_parts(reader, table, self, dict(outer), context, {})
         if reader.problems:
             raise ModelError(problems=reader.problems)
 
-    return type("InlinePart", (FileSubmodel,), {"build": build, "__doc__": f"Part written inline in {where}"})
+    namespace = {**declared, "build": build, "__doc__": f"Part written inline in {where}"}
+    cls = type("InlinePart", (FileSubmodel,), namespace)
+    return lambda name: cls(name, **bound)
 
 
 def _class_name(name: Any) -> str:
@@ -757,17 +790,161 @@ def dumps(model: Model) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _section_lines(components: list, prefix: str) -> list[str]:
-    """TOML tables of ``components`` under ``prefix`` (``""`` or ``"submodels.NAME."``)."""
+def _section_lines(components: list, prefix: str, tables: dict | None = None) -> list[str]:
+    """TOML tables of ``components`` under ``prefix`` (``""`` or ``"submodels.NAME."``);
+    ``tables``: ``{id(component): (table, notes)}`` written instead of ``component_table``'s
+    (values as parameter expressions, and comments on the values written as numbers)."""
     lines = []
-    sections: dict[str, list[tuple[str, dict]]] = {}
+    sections: dict[str, list[tuple[str, dict, list]]] = {}
     for comp in components:
         section, table = component_table(comp)
-        sections.setdefault(section, []).append((comp.name, table))
+        table, notes = (tables or {}).get(id(comp), (table, []))
+        sections.setdefault(section, []).append((comp.name, table, notes))
     for section in PART_SECTIONS:
-        for name, table in sections.get(section, []):
-            lines += ["", f"[{prefix}{section}.{toml_key(name)}]"]
+        for name, table, notes in sections.get(section, []):
+            lines += [""] + [f"# {note}" for note in notes] + [f"[{prefix}{section}.{toml_key(name)}]"]
             lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in table.items()]
+    return lines
+
+
+# -- parameter expressions of sub-model instances -------------------------------------------------
+_WRITABLE_OPS = {"+", "-", "*", "/", "**", "neg", "sqrt", "sin", "cos", "exp"}
+
+
+def _expr_text(expr: Any, scope: str) -> str | None:
+    """``expr`` (an ``Expr``) in the file's expression language, seen from instance ``scope``
+    (``""``: the top level): its own parameters by local name, any other instance's by its
+    path (``"upper.length"``); ``None`` when the language cannot say it (tan, log, abs, or
+    a path that is not a chain of names)."""
+    if not isinstance(expr, Expr):
+        x = float(expr)
+        return repr(x) if x >= 0 else f"({x!r})"
+    if expr.op == "param":
+        path = expr.args[0]
+        if scope and path.startswith(scope + ".") and path[len(scope) + 1:].isidentifier():
+            return path[len(scope) + 1:]
+        parts = path.split(".")
+        if len(parts) < 2 or not all(p.isidentifier() and not keyword.iskeyword(p) for p in parts):
+            return None
+        return path
+    if expr.op not in _WRITABLE_OPS:
+        return None
+    args = [_expr_text(a, scope) for a in expr.args]
+    if any(a is None for a in args):
+        return None
+    if expr.op == "neg":
+        return f"(-{args[0]})"
+    if expr.op in ("sqrt", "sin", "cos", "exp"):
+        return f"{expr.op}({args[0]})"
+    return f"({args[0]} {expr.op} {args[1]})"
+
+
+def _marked(value: Any, markers: dict) -> Any:
+    """``value`` with every ``Expr`` replaced by its marker: a float a few ulps from its value
+    (validation passes as for the value), distinct for each expression."""
+    def marker(expr: Expr) -> float:
+        if expr not in markers:
+            x, k = expr.value, len(markers) + 1
+            markers[expr] = float(x + k * (np.spacing(x) if x else 5e-324))
+        return markers[expr]
+    return map_exprs(value, marker)
+
+
+def _expression_table(comp: Any, copy: Any, written: Any, scope: str) -> tuple[dict, list[str]] | None:
+    """The file table of ``copy`` (``comp`` with its references as written) whose values
+    built from sub-model parameters are written as expressions of them (seen from
+    ``scope``), and notes on those written as numbers; None when ``comp`` has no such values.
+
+    The component is built again with each expression replaced by a marker number; a value
+    of its table equal to a marker is that expression (the constructor passed it through),
+    any other value that moved is derived from them inside the constructor (written as its
+    number, with a note)."""
+    if comp.expression_args is None:
+        return None
+    _, plain = component_table(copy)
+    markers: dict = {}
+    args, kwargs = comp.expression_args
+    try:
+        rebuilt = type(comp)(*_marked(args, markers), **_marked(kwargs, markers))
+        refs = {role: written(ref) for role, ref in rebuilt.references().items()}
+        _, marked = component_table(copy_component(rebuilt, copy.name, refs))
+    except (ModelError, TypeError, ValueError, ArithmeticError):
+        return plain, [f"{copy.name}: values from sub-model parameters written as numbers "
+                       "(the component cannot be rebuilt with them marked)"]
+    by_marker = {m: e for e, m in markers.items()}
+    notes: list[str] = []
+
+    def merge(key: str, new: Any, old: Any) -> Any:
+        if isinstance(new, float) and new in by_marker:
+            text = _expr_text(by_marker[new], scope)
+            if text is not None:
+                return text
+            notes.append(f"{key} = {toml_value(old)}: the value of {by_marker[new]!r}, which a file cannot "
+                         "write as an expression (it will not follow a parameter change)")
+            return old
+        if isinstance(new, (list, tuple)) and isinstance(old, (list, tuple)) and len(new) == len(old):
+            return [merge(key, n, o) for n, o in zip(new, old)]
+        if isinstance(new, dict) and isinstance(old, dict) and new.keys() == old.keys():
+            return {k: merge(key, new[k], old[k]) for k in new}
+        if new != old and not isinstance(new, str):
+            notes.append(f"{key} = {toml_value(old)}: derived from sub-model parameters inside the component, "
+                         "written as its value (it will not follow a parameter change)")
+        return old
+
+    table = {}
+    for key, new in marked.items():
+        if key in plain:
+            table[key] = merge(key, new, plain[key])
+        elif _mentions(new, by_marker):   # a default value, here linked to parameters
+            table[key] = merge(key, new, _unmarked(new, by_marker))
+    for key, old in plain.items():
+        table.setdefault(key, old)
+    return table, list(dict.fromkeys(notes))
+
+
+def _mentions(value: Any, by_marker: dict) -> bool:
+    if isinstance(value, float):
+        return value in by_marker
+    if isinstance(value, (list, tuple)):
+        return any(_mentions(v, by_marker) for v in value)
+    if isinstance(value, dict):
+        return any(_mentions(v, by_marker) for v in value.values())
+    return False
+
+
+def _unmarked(value: Any, by_marker: dict) -> Any:
+    if isinstance(value, float):
+        return by_marker[value].value if value in by_marker else value
+    if isinstance(value, (list, tuple)):
+        return [_unmarked(v, by_marker) for v in value]
+    if isinstance(value, dict):
+        return {k: _unmarked(v, by_marker) for k, v in value.items()}
+    return value
+
+
+def _parameter_lines(model: Model, item: Submodel, outer_scope: str, head: str) -> list[str]:
+    """``[<head>.parameters]`` of instance ``item``: its parameters by local name, each a
+    number or (bound by the enclosing part) an expression seen from ``outer_scope``."""
+    declared = item.declared_parameters()
+    if not declared:
+        return []
+    lines = ["", f"[{head}.parameters]"]
+    for key, spec in declared.items():
+        entry = model.registry.parameters[f"{item.path}.{key}"]
+        value: Any = float(entry.value)
+        if isinstance(entry.binding, Expr):
+            text = _expr_text(entry.binding, outer_scope)
+            if text is None:
+                lines.append(f"# {key}: the value of {entry.binding!r}, which a file cannot write as an expression")
+            else:
+                value = text
+        extra = {k: v for k, v in (("unit", spec.unit), ("min", spec.min), ("max", spec.max), ("doc", spec.doc))
+                 if v not in (None, "")}
+        if extra:
+            table = {"value": value, **{k: (float(v) if k in ("min", "max") else str(v)) for k, v in extra.items()}}
+            lines.append(f"{toml_key(key)} = {toml_value(table)}")
+        else:
+            lines.append(f"{toml_key(key)} = {toml_value(value)}")
     return lines
 
 
@@ -786,13 +963,21 @@ def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[st
             return full[len(scope) + 1:]
         return full
 
-    components = [copy_component(c, c.name, {role: written(ref) for role, ref in c.references().items()})
-                  for c in members if not isinstance(c, Submodel)]
-    lines = _section_lines(components, prefix)
+    components, tables = [], {}
+    for c in members:
+        if isinstance(c, Submodel):
+            continue
+        copy = copy_component(c, c.name, {role: written(ref) for role, ref in c.references().items()})
+        components.append(copy)
+        table = _expression_table(c, copy, written, scope)
+        if table is not None:
+            tables[id(copy)] = table
+    lines = _section_lines(components, prefix, tables)
     for item in members:
         if isinstance(item, Submodel):
             head = f"{prefix}submodels.{toml_key(item.name)}"
-            lines += ["", f"# sub-model instance {item.path!r}, written with its values", f"[{head}]"]
+            lines += ["", f"# sub-model instance {item.path!r}, written inline", f"[{head}]"]
+            lines += _parameter_lines(model, item, scope, head)
             lines += _part_lines(model, list(item.members().values()), item.path, head + ".")
     return lines
 

@@ -183,6 +183,32 @@ def substitute(value: Any, env: Mapping[str, float]) -> Any:
     return value
 
 
+def map_exprs(value: Any, replace: Any) -> Any:
+    """``value`` with every ``Expr`` ``e`` replaced by ``replace(e)``, structure kept as
+    ``substitute`` keeps it (a signal is built again from its replaced arguments)."""
+    if isinstance(value, Expr):
+        return replace(value)
+    if isinstance(value, (str, bytes, int, float)) or value is None:
+        return value
+    args = _signal_args(value)
+    if args is not None:
+        return type(value)(*map_exprs(args[0], replace), **map_exprs(args[1], replace))
+    if isinstance(value, tuple):
+        return tuple(map_exprs(v, replace) for v in value)
+    if isinstance(value, list):
+        return [map_exprs(v, replace) for v in value]
+    if isinstance(value, dict):
+        return {k: map_exprs(v, replace) for k, v in value.items()}
+    if type(value).__name__ == "Frame":
+        frame = object.__new__(type(value))
+        frame.body, frame.point, frame.rotation = value.body, map_exprs(value.point, replace), value.rotation
+        return frame
+    if hasattr(value, "dtype") and getattr(value, "dtype", None) == object:
+        import numpy as np
+        return np.array(map_exprs(value.tolist(), replace), dtype=float)
+    return value
+
+
 def _signal_args(value: Any) -> Any:
     """``(args, kwargs)`` of a signal built from parameter expressions (``Signal.signal_args``),
     else None (components, such as a PID inside a signal, follow their own)."""
