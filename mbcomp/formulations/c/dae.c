@@ -295,26 +295,14 @@ static int dae_event(double t, const double *y, const double *p) {
     return event;
 }
 
-/* The dense output of an event step at time s (y_old, 7 rows of F, ny entries, on
-   [t_old, t_old + h]) into y. */
-static void dae_dense(double s, double t_old, double h, const double *y_old, const double *F, int ny, double *y) {
-    const double x = (s - t_old) / h;
-    for (int i = 0; i < ny; ++i) {
-        double v = 0.0;
-        for (int r = 6; r >= 0; --r) {
-            v += F[r * ny + i];
-            v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
-        }
-        y[i] = v + y_old[i];
-    }
-}
+#include "dop853_dense.h"
 
 /* Locating an event on its step: the gap (m) of contact k, or the multiplier (N) of the
    configured row `row` (a held contact's normal force), at time s of the event step. */
 double dae_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
                   const double *p) {
     double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {0.0};
-    dae_dense(s, t_old, h, y_old, F, ny, y);
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     if (!MB_HAS_CONTACTS) return NAN;
     contacts(y, y + NQ, p, u, kc);
     return kc[CONTACTS_GAP_OFF + k];
@@ -325,7 +313,7 @@ double dae_force_at(double s, double t_old, double h, const double *y_old, const
     double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
     double *work = malloc(sizeof(double) * (NDAEWORK + 1));
     if (!work) return NAN;
-    dae_dense(s, t_old, h, y_old, F, ny, y);
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     dae_time = s;
     const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
     free(work);

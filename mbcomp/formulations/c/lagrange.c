@@ -646,19 +646,7 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     return 0;
 }
 
-/* The event step's dense output at time s (the loop's interpolant of y_old and the 7 rows
-   of F, ny entries, on [t_old, t_old + h]) into y. */
-static void lag_dense(double s, double t_old, double h, const double *y_old, const double *F, int ny, double *y) {
-    const double x = (s - t_old) / h;
-    for (int i = 0; i < ny; ++i) {
-        double v = 0.0;
-        for (int r = 6; r >= 0; --r) {
-            v += F[r * ny + i];
-            v *= ((6 - r) % 2 == 0) ? x : 1.0 - x;
-        }
-        y[i] = v + y_old[i];
-    }
-}
+#include "dop853_dense.h"
 
 /* Locating an event on its step (Python's root finder calls these): the gap of contact k
    (m), or the normal force (N) of the held contact whose row is `row`, at time s of the
@@ -667,7 +655,7 @@ static void lag_dense(double s, double t_old, double h, const double *y_old, con
 double lagrange_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
                        const double *p) {
     double y[2 * NQ + LAG_NZ + 1];
-    lag_dense(s, t_old, h, y_old, F, ny, y);
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
     contacts(q, qd, p, lag_u, lag_kc);
@@ -677,7 +665,7 @@ double lagrange_gap_at(double s, double t_old, double h, const double *y_old, co
 double lagrange_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
                          const double *p, const double *tau) {
     double y[2 * NQ + LAG_NZ + 1], *lam;
-    lag_dense(s, t_old, h, y_old, F, ny, y);
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     if (lag_held_forces(s, y, p, tau, &lam)) return NAN;
     for (int a = 0; a < lag_nr; ++a) if (lag_rows[a] == row) return lam[a];
     return 0.0;
