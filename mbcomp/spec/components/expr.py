@@ -160,32 +160,13 @@ def contains_expr(value: Any) -> bool:
 
 def substitute(value: Any, env: Mapping[str, float]) -> Any:
     """``value`` with every ``Expr`` replaced by its number under ``env`` (structure kept)."""
-    if isinstance(value, Expr):
-        return value.evaluate(env)
-    if isinstance(value, (str, bytes, int, float)) or value is None:
-        return value
-    args = _signal_args(value)
-    if args is not None:   # a signal: built again from the new numbers
-        return type(value)(*substitute(args[0], env), **substitute(args[1], env))
-    if isinstance(value, tuple):
-        return tuple(substitute(v, env) for v in value)
-    if isinstance(value, list):
-        return [substitute(v, env) for v in value]
-    if isinstance(value, dict):
-        return {k: substitute(v, env) for k, v in value.items()}
-    if type(value).__name__ == "Frame":
-        frame = object.__new__(type(value))
-        frame.body, frame.point, frame.rotation = value.body, substitute(value.point, env), value.rotation
-        return frame
-    if hasattr(value, "dtype") and getattr(value, "dtype", None) == object:
-        import numpy as np
-        return np.array(substitute(value.tolist(), env), dtype=float)
-    return value
+    return map_exprs(value, lambda e: e.evaluate(env))
 
 
 def map_exprs(value: Any, replace: Any) -> Any:
-    """``value`` with every ``Expr`` ``e`` replaced by ``replace(e)``, structure kept as
-    ``substitute`` keeps it (a signal is built again from its replaced arguments)."""
+    """``value`` with every ``Expr`` ``e`` replaced by ``replace(e)``, structure kept (a signal
+    is built again from its replaced arguments, a ``Frame`` keeps its body and rotation, an
+    object array becomes a float array)."""
     if isinstance(value, Expr):
         return replace(value)
     if isinstance(value, (str, bytes, int, float)) or value is None:
