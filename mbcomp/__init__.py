@@ -2,7 +2,7 @@
 
 # Composing a model
 from mbcomp.spec.model import Model
-from mbcomp.spec.components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
+from mbcomp.spec.components import (Ball, Body, Collision, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
                          Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 from mbcomp.spec.components import DCMotor, Drive, JointFriction, JointLimit
 from mbcomp.spec.components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
@@ -11,7 +11,7 @@ from mbcomp.spec.servo import Servo
 from mbcomp.spec.compose import Option, Parameter, Submodel
 
 # What the 3D viewer draws for a body
-from mbcomp.spec.shapes import Box, Cylinder, Mesh, Sphere
+from mbcomp.spec.shapes import Box, Capsule, Cylinder, Mesh, Plane, Sphere
 
 # The compiled system and its results
 from mbcomp.core.result import Energy, Event, Result
@@ -79,7 +79,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
-    "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Mesh",
+    "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Capsule", "Plane", "Mesh", "Collision",
     "ModelError", "CompileError", "SimulationError", "WriteError", "load", "load_urdf", "sweep",
     "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",
     "Servo",

@@ -133,6 +133,10 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
     if topology.contacts and not getattr(formulation, "compiled_contacts", False):
         return "the model has contacts"
+    from mbcomp.spec.components.collision import Collision
+    if any(isinstance(c, Collision) for c in topology.components.values()):
+        return ("the model has collisions, whose contacts are measured and located in Python from the compiled "
+                "body kinematics")
     if kernel.n_inputs:
         return "the model has callable forces or torques"
     if kernel.compiled.drives.callables:

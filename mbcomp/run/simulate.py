@@ -9,6 +9,7 @@ import numpy as np
 from mbcomp.core import checks
 from mbcomp.core.errors import ModelError, SimulationError, TrialStateError
 from mbcomp.run.events import ContactWatch
+from mbcomp.compiled.collision_kernel import with_collisions
 from mbcomp.formulations.impact import GAP_TOLERANCE
 from mbcomp.run.drive_runtime import DriveTorque, DriveWorkspace
 from mbcomp.codegen.integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_dop853, bind_reduced, collapse_message, compiled_jacobian,
@@ -164,6 +165,7 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     ``System.simulate``.  The Result carries no System (the caller binds one).  With
     ``t_eval=None`` at most ``max_samples`` steps are kept (``checks.StepBudget``)."""
     t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
+    kernel = with_collisions(kernel)  # collision features join the contacts (stepped in Python)
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     columns = len(q0) + len(qd0) + len(z0)
     budget = checks.StepBudget(max_samples, columns + 1, t_end)  # (a row: t and the state)

@@ -11,6 +11,12 @@ same code.  Every shape sits in its body's frame: ``origin`` (m) is where its ce
 triangle mesh file (STL, OBJ, DAE, ... through the optional ``trimesh`` package) when the page
 is written.  ``color`` is a CSS-style ``"#rrggbb"`` string, a name known to matplotlib, or an
 ``(r, g, b)`` triple in 0..1; ``None`` picks one per body.
+
+``Capsule(radius, length, axis)`` (a cylinder of ``length`` between the centres of two
+hemispherical caps of ``radius``) and ``Plane(normal, origin)`` (the half-space behind the
+plane, drawn as a large square) complete the shapes that collide: ``Sphere``, ``Box``,
+``Capsule`` and ``Plane`` take part in ``mb.Collision`` contacts (``Cylinder`` and ``Mesh``
+are drawn only).  A shape is still no parameter: its sizes are read when a run starts.
 """
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ import numpy as np
 
 from mbcomp.core.errors import ModelError
 
-__all__ = ["Shape", "Box", "Cylinder", "Sphere", "Mesh", "as_shapes", "shape_table", "shape_from_table", "SHAPE_KEYS"]
+__all__ = ["Shape", "Box", "Cylinder", "Sphere", "Capsule", "Plane", "Mesh", "COLLIDING", "as_shapes", "shape_table", "shape_from_table", "SHAPE_KEYS"]
 
 
 def _vector(value: Any, owner: str, what: str, *, positive: bool = False) -> tuple[float, float, float]:
@@ -153,6 +159,40 @@ class Sphere(Shape):
 
 
 @dataclass(frozen=True, init=False)
+class Capsule(Shape):
+    """A capsule: the points within ``radius`` (m) of the segment of ``length`` (m) along
+    ``axis`` centred on ``origin`` (a cylinder with hemispherical caps; overall length
+    ``length + 2 radius``)."""
+
+    radius: float = 1.0
+    length: float = 1.0
+    axis: tuple = (0.0, 0.0, 1.0)
+
+    def __init__(self, radius: float, length: float, axis: Any = "z", origin: Any = (0.0, 0.0, 0.0),
+                 color: Any = None):
+        object.__setattr__(self, "radius", _positive(radius, "Capsule", "radius"))
+        object.__setattr__(self, "length", _positive(length, "Capsule", "length"))
+        object.__setattr__(self, "axis", _axis(axis, "Capsule"))
+        self._place(origin, None, color)
+
+
+@dataclass(frozen=True, init=False)
+class Plane(Shape):
+    """The half-space behind the plane through ``origin`` (m) with outward unit ``normal``
+    (both in the frame of the body carrying it; the ground's is the world frame): what lies
+    on the side ``normal . (p - origin) < 0`` is solid.  Drawn as a square of ``extent`` (m)."""
+
+    normal: tuple = (0.0, 0.0, 1.0)
+    extent: float = 2.0
+
+    def __init__(self, normal: Any = (0.0, 0.0, 1.0), origin: Any = (0.0, 0.0, 0.0), extent: float = 2.0,
+                 color: Any = None):
+        object.__setattr__(self, "normal", _axis(normal, "Plane"))
+        object.__setattr__(self, "extent", _positive(extent, "Plane", "extent"))
+        self._place(origin, None, color)
+
+
+@dataclass(frozen=True, init=False)
 class Mesh(Shape):
     """A triangle mesh read from ``path`` (any format ``trimesh`` reads), its vertices scaled by
     ``scale`` (a number or a 3-vector; e.g. 0.001 for a file in millimetres)."""
@@ -198,7 +238,8 @@ def as_shapes(value: Any, owner: Any = "Body") -> tuple[Shape, ...]:
     items = value if isinstance(value, (list, tuple)) else (value,)
     for item in items:
         if not isinstance(item, Shape):
-            raise ModelError(owner, f"shape must be mb.Box, mb.Cylinder, mb.Sphere, mb.Mesh or a list of "
+            raise ModelError(owner, f"shape must be mb.Box, mb.Cylinder, mb.Sphere, mb.Capsule, mb.Plane, mb.Mesh "
+                                    f"or a list of "
                                     f"them, got {item!r}")
     return tuple(items)
 
@@ -206,10 +247,19 @@ def as_shapes(value: Any, owner: Any = "Body") -> tuple[Shape, ...]:
 _IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 #: The keys of a shape's table in a model file, by its ``type``.
 SHAPE_KEYS = {"box": ("size",), "cylinder": ("radius", "length", "axis"), "sphere": ("radius",),
-              "mesh": ("path", "scale")}
-_CLASSES = {"box": Box, "cylinder": Cylinder, "sphere": Sphere, "mesh": Mesh}
+              "capsule": ("radius", "length", "axis"), "plane": ("normal", "extent"), "mesh": ("path", "scale")}
+_CLASSES = {"box": Box, "cylinder": Cylinder, "sphere": Sphere, "capsule": Capsule, "plane": Plane, "mesh": Mesh}
 _PLACEMENT = {"box": ("origin", "rotation", "color"), "cylinder": ("origin", "rotation", "color"),
-              "sphere": ("origin", "color"), "mesh": ("origin", "rotation", "color")}
+              "sphere": ("origin", "color"), "capsule": ("origin", "color"), "plane": ("origin", "color"),
+              "mesh": ("origin", "rotation", "color")}
+#: The shapes that collide (``mb.Collision``): the others are drawn only.
+COLLIDING = (Sphere, Box, Capsule, Plane)
+
+
+def axis_name(axis: tuple) -> Any:
+    """``"x"``, ``"y"`` or ``"z"`` for a unit coordinate axis, else the 3 numbers as a list."""
+    return next((name for name, unit in (("x", (1.0, 0.0, 0.0)), ("y", (0.0, 1.0, 0.0)), ("z", (0.0, 0.0, 1.0)))
+                 if tuple(axis) == unit), list(axis))
 
 
 def shape_table(shape: Shape) -> dict:
@@ -220,9 +270,11 @@ def shape_table(shape: Shape) -> dict:
     for key in SHAPE_KEYS[kind]:
         value = getattr(shape, key)
         table[key] = list(value) if isinstance(value, tuple) else value
-    if kind == "cylinder":
-        table["axis"] = next((name for name, unit in (("x", (1.0, 0.0, 0.0)), ("y", (0.0, 1.0, 0.0)),
-                                                      ("z", (0.0, 0.0, 1.0))) if shape.axis == unit), list(shape.axis))
+    if kind in ("cylinder", "capsule", "plane"):
+        key = "normal" if kind == "plane" else "axis"
+        table[key] = axis_name(getattr(shape, key))
+    if kind == "plane" and shape.extent == 2.0:
+        del table["extent"]
     if kind == "mesh" and len(set(shape.scale)) == 1:
         table["scale"] = shape.scale[0]
     if any(shape.origin):
@@ -247,12 +299,13 @@ def shape_from_table(table: Any, owner: str = "shape") -> Shape:
     unknown = [k for k in table if k not in allowed]
     if unknown:
         raise ModelError(owner, f"unknown key {unknown[0]!r} for a {kind}; allowed: {', '.join(allowed[1:])}")
-    required = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("path",)}[kind]
+    required = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",),
+                "capsule": ("radius", "length"), "plane": (), "mesh": ("path",)}[kind]
     missing = [k for k in required if k not in table]
     if missing:
         raise ModelError(owner, f"a {kind} needs {', '.join(missing)}")
     for key, value in table.items():
-        if key in ("type", "path", "color", "axis"):
+        if key in ("type", "path", "color", "axis") or (key == "normal" and isinstance(value, str)):
             continue   # checked by the shape's own constructor
         flat = value if isinstance(value, list) else [value]
         flat = [x for row in flat for x in (row if isinstance(row, list) else [row])]

@@ -2,6 +2,7 @@
 from mbcomp.spec.components.base import Component, Constraint, ForceElement
 from mbcomp.spec.components.body import Body, Ground
 from mbcomp.spec.components.constraints import Motor, Slider
+from mbcomp.spec.components.collision import Collision
 from mbcomp.spec.components.contacts import Contact
 from mbcomp.spec.components.drivetrain import DCMotor, Drive, JointFriction, JointLimit
 from mbcomp.spec.components.forces import Damper, Force, JointTorque, Spring, TorsionSpring
@@ -10,5 +11,5 @@ from mbcomp.spec.components.joints import Ball, Cylindrical, Fixed, Free, Joint,
 __all__ = [
     "Component", "Constraint", "ForceElement", "Body", "Ground", "Joint", "Revolute", "Prismatic",
     "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
-    "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "Drive", "DCMotor", "JointFriction", "JointLimit",
+    "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "Collision", "Drive", "DCMotor", "JointFriction", "JointLimit",
 ]

@@ -1,0 +1,340 @@
+"""Collision contacts as contact rows: a kernel whose ``contacts`` adds, after the model's own
+contacts, one row per candidate feature of every ``mb.Collision``.
+
+The features are fixed when the kernel is made (each pair of collision shapes has
+``collide.feature_count`` of them), so contact indices, names and persistent sets keep their
+meaning through a run and every piece of the contact machinery (event location, Newton's
+impact law, resting contacts held as constraints, both formulations) works on them as on a
+``Contact``.  Their gaps, Jacobians and biases are computed numerically from the compiled
+body kinematics at each call:
+
+- a broad phase (``collide.near_pairs``, a k-d tree over bounding spheres, re-run at every
+  call) picks the pairs whose bounding spheres come within a margin; the features of every
+  other pair get a positive lower bound of their gap (the bounding spheres' clearance) and a
+  zero Jacobian row, which keeps the sign of every gap right for event location;
+- the narrow phase (``collide.features``) measures the rest: gap ``g``, normal ``n`` (A to
+  B), points ``pa`` of body A and ``pb`` of body B; the Jacobian row is
+  ``n . (J_b(pb) - J_a(pa))`` with ``J(p)`` a point's velocity columns ``v0_k + w_k x p``;
+- the acceleration bias (``gddot = J qdd + bias``) is ``n . (a_b - a_a)`` at zero
+  generalised acceleration, plus ``2 (w x n) . (v_b - v_a)`` for a face normal turning with
+  its body, or ``(|dv|^2 - (n . dv)^2) / |pb - pa|`` for a normal along the line between two
+  rounded features (exact for spheres; for a point sliding on a capsule's axis the sliding
+  term is left out).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mbcomp.build.constraint_set import ConstraintValues
+from mbcomp.build.layout import body_fields
+from mbcomp.core import collide
+from mbcomp.core.errors import ModelError
+from mbcomp.spec.components.collision import Collision
+from mbcomp.spec.components.values import name_of
+from mbcomp.spec.shapes import Box, Capsule, Plane, Sphere
+
+#: Pairs whose bounding spheres are farther apart than this fraction of their radii (plus
+#: ``MARGIN_FLOOR``, m) are not measured (their gap is bounded below instead).
+MARGIN_FRACTION = 0.25
+MARGIN_FLOOR = 1e-6
+
+
+@dataclass(frozen=True)
+class CollisionFeature:
+    """One candidate contact of a collision: what the contact machinery reads of a contact
+    (``name``, ``restitution_key``, ``friction_key``) and where it comes from."""
+
+    name: str
+    collision: str
+    pair: int      #: index of its shape pair in ``CollisionKernel.pairs``
+    slot: int      #: which of the pair's features
+    kind: str = "collision"
+
+    @property
+    def restitution_key(self) -> str:
+        return f"{self.collision}.restitution"
+
+    @property
+    def friction_key(self) -> str:
+        return f"{self.collision}.friction"
+
+
+@dataclass(frozen=True)
+class ShapeEntry:
+    """A collision shape on a body: its kind, sizes and placement in the body frame."""
+
+    body: str
+    index: int     #: the body's index in the kinematics rows (-1: the ground)
+    shape: object
+
+
+@dataclass(frozen=True)
+class ShapePair:
+    a: int           #: entries' indices
+    b: int
+    first: int       #: index of its first feature among all contact rows
+    count: int
+    restitution_key: str
+
+
+def _entries_of(topology, collision, side_key):
+    """The collision shapes of one side of a collision, as ``(body name, shape)``."""
+    out = []
+    for body, shape in getattr(collision, side_key):
+        name = name_of(body)
+        comp = topology.components.get(name)
+        if comp is None:
+            raise ModelError(collision, f"{side_key}: body {name!r} is not in the model")
+        shapes = (shape,) if shape is not None else tuple(s for s in comp.shape
+                                                           if isinstance(s, (Sphere, Box, Capsule, Plane)))
+        if not shapes:
+            raise ModelError(collision, f"{side_key}: body {name!r} has no collision shape (mb.Sphere, mb.Box, "
+                                        "mb.Capsule or mb.Plane); give one as (body, shape)")
+        out.extend((name, s) for s in shapes)
+    return out
+
+
+def _kind(shape) -> str:
+    return {Sphere: "sphere", Box: "box", Capsule: "capsule", Plane: "plane"}[type(shape)]
+
+
+def collisions_of(topology) -> list:
+    """The model's ``Collision`` components (compiled copies)."""
+    return [c for c in topology.components.values() if isinstance(c, Collision)]
+
+
+class RowMatrix:
+    """A contact Jacobian (rows, nv) of mostly zero rows: the nonzero rows ``block`` at
+    ``rows``.  ``J @ x`` and ``J[indices]`` (dense rows) are what the contact machinery uses."""
+
+    def __init__(self, n_rows: int, head: np.ndarray, rows: np.ndarray, block: np.ndarray):
+        self.head = head                  # the model's own contacts' rows (dense)
+        self.rows = rows                  # indices (>= len(head)) of the nonzero collision rows
+        self.block = block
+        self.shape = (n_rows, head.shape[1])
+
+    def __matmul__(self, x):
+        x = np.asarray(x, dtype=float)
+        out = np.zeros(self.shape[0] if x.ndim == 1 else (self.shape[0], x.shape[1]))
+        out[:len(self.head)] = self.head @ x
+        if len(self.rows):
+            out[self.rows] = self.block @ x
+        return out
+
+    def __getitem__(self, index):
+        index = np.atleast_1d(np.arange(self.shape[0])[index])
+        out = np.zeros((len(index), self.shape[1]))
+        where = {int(r): k for k, r in enumerate(self.rows)}
+        nh = len(self.head)
+        for j, i in enumerate(index):
+            if i < nh:
+                out[j] = self.head[i]
+            elif int(i) in where:
+                out[j] = self.block[where[int(i)]]
+        return out
+
+    def __array__(self, dtype=None, copy=None):
+        return self[:].astype(dtype) if dtype is not None else self[:]
+
+
+class CollisionKernel:
+    """A ``Kernel`` (``base``) whose contacts include the collision features; every other
+    call goes to ``base``.  ``topology`` is the base topology with the features appended to
+    its ``contacts``."""
+
+    def __init__(self, base):
+        import dataclasses
+        self.base = base
+        topology = base.topology
+        self.entries: list[ShapeEntry] = []
+        index = {id(b): k for k, b in enumerate(topology.bodies)}
+        known: dict = {}
+
+        def entry(body: str, shape) -> int:
+            key = (body, id(shape))
+            if key not in known:
+                comp = topology.components[body]
+                known[key] = len(self.entries)
+                self.entries.append(ShapeEntry(body, index.get(id(comp), -1), shape))
+            return known[key]
+
+        self.pairs: list[ShapePair] = []
+        features = []
+        first = len(topology.contacts)
+        for coll in collisions_of(topology):
+            side_a = [entry(*e) for e in _entries_of(topology, coll, "a")]
+            side_b = [entry(*e) for e in _entries_of(topology, coll, "b")]
+            seen, pairs = set(), []
+            for i in side_a:
+                for j in side_b:
+                    ea, eb = self.entries[i], self.entries[j]
+                    if ea.body == eb.body or (ea.index < 0 and eb.index < 0):
+                        continue
+                    key = (min(i, j), max(i, j))
+                    if key in seen:
+                        continue
+                    seen.add(key)
+                    count = collide.feature_count(_kind(ea.shape), _kind(eb.shape))
+                    if count:
+                        pairs.append((i, j, count))
+            total = sum(c for _, _, c in pairs)
+            if total == 0:
+                raise ModelError(coll, "has no pair of shapes that can touch (two bodies, not both the ground, "
+                                       "and not two planes)")
+            k = 0
+            for i, j, count in pairs:
+                self.pairs.append(ShapePair(i, j, first, count, f"{coll.name}.restitution"))
+                for slot in range(count):
+                    name = coll.name if total == 1 else f"{coll.name}[{k}]"
+                    features.append(CollisionFeature(name, coll.name, len(self.pairs) - 1, slot))
+                    k += 1
+                first += count
+        self.features = tuple(features)
+        self.n_own = len(topology.contacts)
+        self.topology = dataclasses.replace(topology, contacts=tuple(topology.contacts) + self.features)
+        # Per-entry local geometry, for placing the shapes from the body kinematics.
+        self.finite = np.array([_kind(e.shape) != "plane" for e in self.entries])
+        self.pair_of = {(p.a, p.b): k for k, p in enumerate(self.pairs)}
+        self.plane_pairs = [k for k, p in enumerate(self.pairs) if not (self.finite[p.a] and self.finite[p.b])]
+        self.pair_feature_rows = [np.arange(p.first, p.first + p.count) for p in self.pairs]
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
+
+    def with_parameters(self, parameters) -> "CollisionKernel":
+        return CollisionKernel(self.base.with_parameters(parameters))
+
+    # -- placing the shapes -------------------------------------------------------------------
+    def _bodies(self, q, qd):
+        rows, columns = self.base.kinematics(q, qd)
+        return body_fields(rows), columns
+
+    def placed(self, fields, k: int) -> tuple:
+        """Entry ``k``'s shape placed in the world."""
+        e = self.entries[k]
+        if e.index < 0:
+            R, o = np.eye(3), np.zeros(3)
+        else:
+            R, o = fields["rotation"][e.index], fields["origin"][e.index]
+        s = e.shape
+        centre = o + R @ np.asarray(s.origin)
+        if isinstance(s, Sphere):
+            return ("sphere", centre, s.radius)
+        if isinstance(s, Capsule):
+            half = 0.5 * s.length * (R @ np.asarray(s.axis))
+            return ("capsule", centre - half, centre + half, s.radius)
+        if isinstance(s, Box):
+            return ("box", centre, R @ np.reshape(s.rotation, (3, 3)), 0.5 * np.asarray(s.size))
+        return ("plane", centre, R @ np.asarray(s.normal))
+
+    def measured(self, q, qd):
+        """``(pairs measured {pair index: [Feature]}, kinematics fields, columns)``: the
+        narrow phase on the pairs the broad phase keeps."""
+        fields, columns = self._bodies(q, qd)
+        placed = [self.placed(fields, k) for k in range(len(self.entries))]
+        spheres = [collide.bounding_sphere(p) for p in placed]
+        finite = np.flatnonzero(self.finite)
+        centres = np.array([spheres[k][0] for k in finite]).reshape(-1, 3)
+        radii = np.array([spheres[k][1] for k in finite])
+        margin = MARGIN_FRACTION * 2.0 * float(radii.max(initial=0.0)) + MARGIN_FLOOR
+        near = collide.near_pairs(centres, radii, margin) if len(finite) else set()
+        chosen = list(self.plane_pairs)
+        for i, j in near:
+            a, b = int(finite[i]), int(finite[j])
+            k = self.pair_of.get((a, b), self.pair_of.get((b, a)))
+            if k is not None:
+                chosen.append(k)
+        out = {}
+        for k in chosen:
+            p = self.pairs[k]
+            out[k] = collide.features(placed[p.a], placed[p.b])
+        return out, fields, columns, spheres, margin
+
+    # -- the contact rows ---------------------------------------------------------------------
+    def contacts(self, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
+        """The model's contacts, then every collision feature: gaps (m), Jacobian (a
+        ``RowMatrix``), zero ``g_t``, acceleration bias."""
+        own = self.base.contacts(q, qd)
+        nk = self.n_own + len(self.features)
+        g = np.empty(nk)
+        bias = np.zeros(nk)
+        g[:self.n_own], bias[:self.n_own] = own.g, own.bias
+        measured, fields, columns, spheres, margin = self.measured(q, qd)
+        # Unmeasured pairs: their bounding spheres are more than `margin` apart.
+        g[self.n_own:] = margin
+        rows, block = [], []
+        W, V0 = columns[:, :3], columns[:, 3:]
+        masks = self._masks()
+        for k, feats in measured.items():
+            p = self.pairs[k]
+            ea, eb = self.entries[p.a], self.entries[p.b]
+            for slot, f in enumerate(feats):
+                r = p.first + slot
+                g[r] = f.gap
+                row = np.zeros(self.base.nv)
+                if eb.index >= 0:
+                    row += masks[eb.index] * (V0 @ f.normal + W @ np.cross(f.pb, f.normal))
+                if ea.index >= 0:
+                    row -= masks[ea.index] * (V0 @ f.normal + W @ np.cross(f.pa, f.normal))
+                rows.append(r)
+                block.append(row)
+                bias[r] = self._bias(fields, ea.index, eb.index, f)
+        block = np.array(block).reshape(-1, self.base.nv)
+        J = RowMatrix(nk, np.asarray(own.J).reshape(self.n_own, self.base.nv), np.array(rows, dtype=int), block)
+        return ConstraintValues(g, J, np.zeros(nk), bias)
+
+    def _masks(self) -> np.ndarray:
+        masks = self.__dict__.get("_mask_cache")
+        if masks is None:
+            topology = self.base.topology
+            masks = np.zeros((len(topology.bodies), self.base.nv))
+            for i, body in enumerate(topology.bodies):
+                masks[i, topology.speed_indices_of_body(body)] = 1.0
+            self.__dict__["_mask_cache"] = masks
+        return masks
+
+    @staticmethod
+    def _point_motion(fields, index: int, p: np.ndarray):
+        """Velocity, bias acceleration (at zero generalised acceleration) and angular velocity
+        of the body point at world position ``p``."""
+        if index < 0:
+            zero = np.zeros(3)
+            return zero, zero, zero
+        V, A = fields["velocity"][index], fields["bias"][index]
+        w = V[:3]
+        v = V[3:] + np.cross(w, p)
+        a = A[3:] + np.cross(A[:3], p) + np.cross(w, v)
+        return v, a, w
+
+    def _bias(self, fields, ia: int, ib: int, f) -> float:
+        va, aa, wa = self._point_motion(fields, ia, f.pa)
+        vb, ab, wb = self._point_motion(fields, ib, f.pb)
+        dv = vb - va
+        value = float(f.normal @ (ab - aa))
+        if f.owner == collide.OWNER_LINE:
+            along = float(f.normal @ dv)
+            value += (float(dv @ dv) - along * along) / f.dist
+        else:
+            w = wa if f.owner == collide.OWNER_A else wb
+            value += 2.0 * float(np.cross(w, f.normal) @ dv)
+        return value
+
+    def contact_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """World point (m) midway between the touching points of every measured feature
+        whose gap is below the broad-phase margin (for drawing contacts)."""
+        measured, *_ = self.measured(q, np.zeros(self.base.nv))
+        out = {}
+        for k, feats in measured.items():
+            p = self.pairs[k]
+            for slot, f in enumerate(feats):
+                out[self.features[p.first - self.n_own + slot].name] = 0.5 * (f.pa + f.pb)
+        return out
+
+
+def with_collisions(kernel):
+    """``kernel`` itself when its model has no ``Collision``, else a ``CollisionKernel``."""
+    if isinstance(kernel, CollisionKernel) or not collisions_of(kernel.topology):
+        return kernel
+    return CollisionKernel(kernel)
