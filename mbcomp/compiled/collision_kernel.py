@@ -39,6 +39,9 @@ from mbcomp.spec.shapes import Box, Capsule, Plane, Sphere
 #: ``MARGIN_FLOOR``, m) are not measured (their gap is bounded below instead).
 MARGIN_FRACTION = 0.25
 MARGIN_FLOOR = 1e-6
+#: A step moves no shape relative to another by more than this fraction of the thinnest
+#: shape's half thickness (``CollisionKernel.step_limit``).
+STEP_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -320,6 +323,25 @@ class CollisionKernel:
             w = wa if f.owner == collide.OWNER_A else wb
             value += 2.0 * float(np.cross(w, f.normal) @ dv)
         return value
+
+    def step_limit(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """The longest step (s) after which no two shapes can have passed through each other
+        unseen: in it no shape moves by more than ``STEP_FRACTION`` of the thinnest shape's
+        half thickness relative to another (gaps are only checked at the ends of steps)."""
+        fields, _ = self._bodies(q, qd)
+        speeds, thin = [], np.inf
+        for k, e in enumerate(self.entries):
+            if not self.finite[k]:
+                continue
+            placed = self.placed(fields, k)
+            centre, radius = collide.bounding_sphere(placed)
+            thin = min(thin, collide.thickness(placed))
+            if e.index >= 0:
+                V = fields["velocity"][e.index]
+                speeds.append(float(np.linalg.norm(V[3:] + np.cross(V[:3], centre)) + np.linalg.norm(V[:3]) * radius))
+        speeds = sorted(speeds)[-2:]
+        total = sum(speeds)
+        return np.inf if not total > 0 else STEP_FRACTION * thin / total
 
     def contact_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """World point (m) midway between the touching points of every measured feature

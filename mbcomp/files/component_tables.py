@@ -37,7 +37,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 def name_of(ref: Any) -> str:
     """The name a reference stands for (a component or its name)."""
     return ref if isinstance(ref, str) else getattr(ref, "name", repr(ref))
-SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts")
+SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts", "collisions")
 #: Sections whose tables name their kind with a ``type`` key (the others hold one kind).
 TYPED_SECTIONS = ("joints", "forces", "constraints")
 
@@ -451,6 +451,8 @@ def _read_value(r: Reader, cls: type, label: str, key: str, value: Any, owner: s
         return read_rotation(r, label, key, value)
     if option == "shapes":  # display data: a shape table or a list of them
         return read_shapes(r, label, key, value)
+    if option == "collision_side":  # a body, {body = "...", shape = {...}} or a list of them
+        return read_collision_side(r, label, key, value, bodies)
     if option == "axis":  # "x", "-y" or a 3-vector
         return r.axis(label, key, value)
     if option == "axes":  # a list of axes ("x", "-y" or 3-vectors)
@@ -524,6 +526,44 @@ def read_shapes(r: Reader, label: str, key: str, value: Any) -> Any:
         except ModelError as exc:
             return r.problem(label, where, str(exc).split(": ", 1)[-1])
     return tuple(shapes)
+
+
+def read_collision_side(r: Reader, label: str, key: str, value: Any, bodies: dict) -> Any:
+    """A side of a collision: a body name, ``{ body = "...", shape = { type = "plane" } }``
+    (that shape on that body) or a list of these."""
+    items = value if isinstance(value, list) else [value]
+    if not items:
+        return r.problem(label, key, "must name at least one body")
+    out = []
+    for i, item in enumerate(items):
+        where = key if not isinstance(value, list) else f"{key}[{i}]"
+        if isinstance(item, str):
+            body = r.reference(label, where, item, bodies, "body")
+            if body is BAD:
+                return BAD
+            out.append(body)
+        elif isinstance(item, dict):
+            r.keys(f"{label}.{where}", item, ("body", "shape"), ("body", "shape"))
+            if "body" not in item or "shape" not in item:
+                return BAD
+            body = r.reference(f"{label}.{where}", "body", item["body"], bodies, "body")
+            shape = read_shapes(r, f"{label}.{where}", "shape", item["shape"])
+            if BAD in (body, shape):
+                return BAD
+            if len(shape) != 1:
+                return r.problem(f"{label}.{where}", "shape", "must be one shape table")
+            out.append((body, shape[0]))
+        else:
+            return r.problem(label, where, f"must be a body name or {{ body = \"...\", shape = {{ ... }} }}, "
+                                           f"got {type_name(item)} ({short(item)})")
+    return out if isinstance(value, list) else out[0]
+
+
+def collision_side_value(entries: Any) -> Any:
+    """The file form of a collision side (see ``read_collision_side``)."""
+    items = [name_of(body) if shape is None else {"body": name_of(body), "shape": shape_table(shape)}
+             for body, shape in entries]
+    return items[0] if len(items) == 1 else items
 
 
 def read_parameter(r: Reader, spec: ParameterSpec, label: str, key: str, value: Any, owner: str = "") -> Any:
@@ -624,6 +664,8 @@ def component_table(comp: Component) -> tuple[str, dict]:
             elif option == "shapes":
                 if value:
                     table[key] = [shape_table(shape) for shape in value]
+            elif option == "collision_side":
+                table[key] = collision_side_value(value)
             else:
                 table[key] = value
     return cls.section, table

@@ -44,8 +44,8 @@ __all__ = ["load", "save", "dumps", "parse_expression", "Expression", "Expressio
 # Schema
 # ----------------------------------------------------------------------------------------------
 TOP_KEYS = ("name", "description", "gravity", "parameters", "ports", "submodels", "bodies", "joints", "forces",
-            "constraints", "contacts", "initial", "simulation")
-PART_SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts")
+            "constraints", "contacts", "collisions", "initial", "simulation")
+PART_SECTIONS = ("bodies", "joints", "forces", "constraints", "contacts", "collisions")
 SIMULATION_KEYS = ("t_end", "method", "rtol", "atol", "formulation", "n_samples")
 METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 FORMULATIONS = ("lagrange", "dae")
@@ -302,6 +302,8 @@ def _read_parts(r: Reader, data: dict, target: Any, bodies: dict, context: "_Fil
         _add_component(r, target, read_component(r, "constraints", comp_name, label, table, bodies, joints), label)
     for comp_name, label, table in named_tables("contacts"):
         _add_component(r, target, read_component(r, "contacts", comp_name, label, table, bodies, joints), label)
+    for comp_name, label, table in named_tables("collisions"):
+        _add_component(r, target, read_component(r, "collisions", comp_name, label, table, bodies, joints), label)
 
     expose({p: s for p, s in exposed.items() if p not in own})
     r.speeds_seen = speeds_seen  # a ball's speeds, which [initial.qd] may name

@@ -255,8 +255,15 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
             and why_not_compiled(kernel, formulation, "DOP853", tau) is None):
         options["jac"] = compiled_jacobian(kernel, None if tau is None else kernel.tau(tau, 0.0, q0, qd0))
 
+    limit = getattr(kernel, "step_limit", None)  # collisions: a step may not carry a shape through another
+
+    def capped(t, y):
+        return max_step if limit is None else min(max_step, limit(*workspace.full_state(t, y)))
+
     def make_solver(t0, y0, first_step=None):
-        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, first_step=first_step, **options)
+        cap = capped(t0, y0)
+        first_step = first_step if first_step is None else min(first_step, cap)
+        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=cap, first_step=first_step, **options)
 
     def add_counts(solver):
         for key in ("nfev", "njev", "nlu"):
@@ -296,6 +303,8 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
             t, restart = solver.t, None
             if watch is not None:
                 t, restart, corrected, gaps_old = _contact_step(watch, workspace, solver, recorder, gaps_old)
+                if limit is not None and restart is None:
+                    solver.max_step = capped(t, solver.y if corrected is None else corrected)
             else:
                 # Samples inside the step come from its dense output, in the coordinates it was
                 # taken in; the end sample comes after the correction (projection, new partition).
