@@ -267,25 +267,29 @@ class CollisionKernel:
         measured, fields, columns, spheres, margin = self.measured(q, qd)
         # Unmeasured pairs: their bounding spheres are more than `margin` apart.
         g[self.n_own:] = margin
-        rows, block = [], []
-        W, V0 = columns[:, :3], columns[:, 3:]
-        masks = self._masks()
-        for k, feats in measured.items():
+        rows, ia, ib, feats = [], [], [], []
+        for k, found in measured.items():
             p = self.pairs[k]
-            ea, eb = self.entries[p.a], self.entries[p.b]
-            for slot, f in enumerate(feats):
-                r = p.first + slot
-                g[r] = f.gap
-                row = np.zeros(self.base.nv)
-                if eb.index >= 0:
-                    row += masks[eb.index] * (V0 @ f.normal + W @ np.cross(f.pb, f.normal))
-                if ea.index >= 0:
-                    row -= masks[ea.index] * (V0 @ f.normal + W @ np.cross(f.pa, f.normal))
-                rows.append(r)
-                block.append(row)
-                bias[r] = self._bias(fields, ea.index, eb.index, f)
-        block = np.array(block).reshape(-1, self.base.nv)
-        J = RowMatrix(nk, np.asarray(own.J).reshape(self.n_own, self.base.nv), np.array(rows, dtype=int), block)
+            rows.extend(range(p.first, p.first + len(found)))
+            ia.extend([self.entries[p.a].index] * len(found))
+            ib.extend([self.entries[p.b].index] * len(found))
+            feats.extend(found)
+        nv = self.base.nv
+        if feats:
+            rows = np.array(rows, dtype=int)
+            ia, ib = np.array(ia), np.array(ib)
+            n = np.array([f.normal for f in feats])
+            pa = np.array([f.pa for f in feats])
+            pb = np.array([f.pb for f in feats])
+            g[rows] = [f.gap for f in feats]
+            masks = np.vstack((self._masks(), np.zeros((1, nv))))   # row -1: the ground
+            W, V0 = columns[:, :3], columns[:, 3:]
+            block = (masks[ib] * (n @ V0.T + collide.cross(pb, n) @ W.T)
+                     - masks[ia] * (n @ V0.T + collide.cross(pa, n) @ W.T))
+            bias[rows] = self._biases(fields, ia, ib, n, pa, pb, feats)
+        else:
+            rows, block = np.zeros(0, dtype=int), np.zeros((0, nv))
+        J = RowMatrix(nk, np.asarray(own.J).reshape(self.n_own, nv), rows, block)
         return ConstraintValues(g, J, np.zeros(nk), bias)
 
     def _masks(self) -> np.ndarray:
@@ -299,30 +303,28 @@ class CollisionKernel:
         return masks
 
     @staticmethod
-    def _point_motion(fields, index: int, p: np.ndarray):
-        """Velocity, bias acceleration (at zero generalised acceleration) and angular velocity
-        of the body point at world position ``p``."""
-        if index < 0:
-            zero = np.zeros(3)
-            return zero, zero, zero
-        V, A = fields["velocity"][index], fields["bias"][index]
-        w = V[:3]
-        v = V[3:] + np.cross(w, p)
-        a = A[3:] + np.cross(A[:3], p) + np.cross(w, v)
-        return v, a, w
+    def _biases(fields, ia, ib, n, pa, pb, feats) -> np.ndarray:
+        """The gaps' acceleration at zero generalised acceleration (see the module docstring)."""
+        velocity = np.vstack((fields["velocity"], np.zeros((1, 6))))   # row -1: the ground
+        acc = np.vstack((fields["bias"], np.zeros((1, 6))))
 
-    def _bias(self, fields, ia: int, ib: int, f) -> float:
-        va, aa, wa = self._point_motion(fields, ia, f.pa)
-        vb, ab, wb = self._point_motion(fields, ib, f.pb)
+        def motion(index, p):
+            V, A = velocity[index], acc[index]
+            w = V[:, :3]
+            v = V[:, 3:] + collide.cross(w, p)
+            return v, A[:, 3:] + collide.cross(A[:, :3], p) + collide.cross(w, v), w
+
+        va, aa, wa = motion(ia, pa)
+        vb, ab, wb = motion(ib, pb)
         dv = vb - va
-        value = float(f.normal @ (ab - aa))
-        if f.owner == collide.OWNER_LINE:
-            along = float(f.normal @ dv)
-            value += (float(dv @ dv) - along * along) / f.dist
-        else:
-            w = wa if f.owner == collide.OWNER_A else wb
-            value += 2.0 * float(np.cross(w, f.normal) @ dv)
-        return value
+        value = np.einsum("ij,ij->i", n, ab - aa)
+        owner = np.array([f.owner for f in feats])
+        dist = np.array([max(f.dist, 1e-12) for f in feats])
+        along = np.einsum("ij,ij->i", n, dv)
+        line = (np.einsum("ij,ij->i", dv, dv) - along * along) / dist
+        w = np.where((owner == collide.OWNER_A)[:, None], wa, wb)
+        face = 2.0 * np.einsum("ij,ij->i", collide.cross(w, n), dv)
+        return value + np.where(owner == collide.OWNER_LINE, line, face)
 
     def step_limit(self, q: np.ndarray, qd: np.ndarray) -> float:
         """The longest step (s) after which no two shapes can have passed through each other
@@ -338,7 +340,7 @@ class CollisionKernel:
             thin = min(thin, collide.thickness(placed))
             if e.index >= 0:
                 V = fields["velocity"][e.index]
-                speeds.append(float(np.linalg.norm(V[3:] + np.cross(V[:3], centre)) + np.linalg.norm(V[:3]) * radius))
+                speeds.append(float(np.linalg.norm(V[3:] + collide.cross(V[:3], centre)) + np.linalg.norm(V[:3]) * radius))
         speeds = sorted(speeds)[-2:]
         total = sum(speeds)
         return np.inf if not total > 0 else STEP_FRACTION * thin / total
