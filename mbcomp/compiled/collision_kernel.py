@@ -200,7 +200,11 @@ class CollisionKernel:
         # Per-entry local geometry, for placing the shapes from the body kinematics.
         self.finite = np.array([_kind(e.shape) != "plane" for e in self.entries])
         self.pair_of = {(p.a, p.b): k for k, p in enumerate(self.pairs)}
-        self.plane_pairs = [k for k, p in enumerate(self.pairs) if not (self.finite[p.a] and self.finite[p.b])]
+        self.plane_pairs = np.array([k for k, p in enumerate(self.pairs) if not (self.finite[p.a] and self.finite[p.b])],
+                                    dtype=int)
+        # Each plane pair as (plane entry, other entry): the other's bounding sphere against the plane.
+        self.plane_side = np.array([(p.a, p.b) if not self.finite[p.a] else (p.b, p.a)
+                                    for p in (self.pairs[k] for k in self.plane_pairs)], dtype=int).reshape(-1, 2)
         self.pair_feature_rows = [np.arange(p.first, p.first + p.count) for p in self.pairs]
 
     def __getattr__(self, name):
@@ -243,7 +247,16 @@ class CollisionKernel:
         radii = np.array([spheres[k][1] for k in finite])
         margin = MARGIN_FRACTION * 2.0 * float(radii.max(initial=0.0)) + MARGIN_FLOOR
         near = collide.near_pairs(centres, radii, margin) if len(finite) else set()
-        chosen = list(self.plane_pairs)
+        chosen = []
+        if len(self.plane_pairs):  # planes: the bounding sphere's height above the plane
+            planes, others = self.plane_side[:, 0], self.plane_side[:, 1]
+            o = np.array([placed[k][1] for k in planes])
+            n = np.array([placed[k][2] for k in planes])
+            c = np.array([spheres[k][0] for k in others])
+            r = np.array([spheres[k][1] for k in others])
+            height = np.einsum("ij,ij->i", n, c - o) - np.where(np.isfinite(r), r, 0.0)
+            keep = ~np.isfinite(r) | (height <= margin)
+            chosen.extend(self.plane_pairs[keep].tolist())
         for i, j in near:
             a, b = int(finite[i]), int(finite[j])
             k = self.pair_of.get((a, b), self.pair_of.get((b, a)))
@@ -258,7 +271,17 @@ class CollisionKernel:
     # -- the contact rows ---------------------------------------------------------------------
     def contacts(self, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
         """The model's contacts, then every collision feature: gaps (m), Jacobian (a
-        ``RowMatrix``), zero ``g_t``, acceleration bias."""
+        ``RowMatrix``), zero ``g_t``, acceleration bias.  The last answer is kept: a step's
+        end is examined several times (event location, then the next step's start)."""
+        key = (q.tobytes(), qd.tobytes())
+        last = self.__dict__.get("_last")
+        if last is not None and last[0] == key:
+            return last[1]
+        values = self._contacts(q, qd)
+        self.__dict__["_last"] = (key, values)
+        return values
+
+    def _contacts(self, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
         own = self.base.contacts(q, qd)
         nk = self.n_own + len(self.features)
         g = np.empty(nk)
