@@ -133,6 +133,8 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
     if topology.contacts and not getattr(formulation, "compiled_contacts", False):
         return "the model has contacts"
+    if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in topology.contacts):
+        return "contacts with friction step in Python (the compiled loops have no friction law)"
     if kernel.n_inputs:
         return "the model has callable forces or torques"
     if kernel.compiled.drives.callables:
