@@ -104,6 +104,11 @@ class ContactWatch:
         self._closed = Closed(closed, closed.stick - {i}, slip)
         self.events.append(Event(time=float(t), contact=self.names[i], impulse=0.0, kind="slip"))
 
+    def slip_velocity(self, q, qd, i) -> np.ndarray:
+        """Contact ``i``'s slip velocity (m/s, world, in the tangent plane)."""
+        rows = plane_contact_rows(self.kernel, q, qd, [i])
+        return rows.basis[0, 1:].T @ (rows.tangent[0] @ qd)
+
     def slip_speed(self, q, qd, i, direction) -> float:
         """Contact ``i``'s slip velocity along a world ``direction`` (m/s)."""
         rows = plane_contact_rows(self.kernel, q, qd, [i])
@@ -272,15 +277,20 @@ class ContactWatch:
                 excess = self.cone_excess(t, q, qd)
                 self.start_slip(t, i, excess[i][1] if i in excess else self._closed.slip.get(i, np.zeros(3)))
                 return
+            # Every sliding contact that stopped with it tries to stick too (a box sliding
+            # on four corners stops on all four at once); settle() lets slide again those
+            # whose force the cone cannot hold.
             closed = self._closed
-            slip = {j: d for j, d in closed.slip.items() if j != i}
-            self._closed = Closed(closed, closed.stick | {i}, slip)
-            excess = self.cone_excess(t, q, qd)
-            if i in excess and excess[i][0] > 0.0:
-                self._closed = Closed(closed, closed.stick, slip)
-                self.start_slip(t, i, excess[i][1])
-            else:
-                self.events.append(Event(time=float(t), contact=self.names[i], impulse=0.0, kind="stick"))
+            stopped = {i} | {j for j, d in closed.slip.items()
+                             if abs(self.slip_speed(q, qd, j, d)) < self.rest_speed
+                             and float(np.linalg.norm(self.slip_velocity(q, qd, j))) < self.rest_speed}
+            self._closed = Closed(closed, closed.stick | stopped,
+                                  {j: d for j, d in closed.slip.items() if j not in stopped})
+            before = len(self.events)
+            self.settle(t, q, qd)
+            slipped = {self.names.index(e.contact) for e in self.events[before:]}
+            for j in sorted(stopped - slipped):
+                self.events.append(Event(time=float(t), contact=self.names[j], impulse=0.0, kind="stick"))
             return
         self.persistent = tuple(i for i in self.persistent if i != contact)
         self.events.append(Event(time=float(t or 0.0), contact=self.names[contact], impulse=0.0, kind="release"))
