@@ -44,6 +44,7 @@ _services.provide("orient_joints", _on_first_use("mbcomp.build.flatten", "orient
 _services.provide("save", _on_first_use("mbcomp.files.toml_model", "save"))
 _services.provide("energy", _post.energy)
 _services.provide("reactions", _post.reactions)
+_services.provide("contact_forces", _post.contact_forces)
 _services.provide("constraint_violation", _post.constraint_violation)
 _services.provide("plot", _on_first_use("mbcomp.face.plotting", "plot_result"))
 _services.provide("animate", _on_first_use("mbcomp.face.plotting", "animate_result"))

@@ -360,10 +360,21 @@ class System:
             return {}  # a tree without drive elements and no contact held closed: no reactions
         from mbcomp.formulations.impact import contact_indices
         q, qd = self.state_vector(q), self._velocity(qd)
-        closed = tuple(contacts) if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) \
+        closed = (contacts if isinstance(contacts, tuple) else tuple(contacts)) if contacts and all(
+            isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
         return self._formulation.reactions(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
                                            closed)
+
+    def contact_forces(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
+                       contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
+        """``{contact name: (3,) N}``: the force (world frame, on the body: normal plus
+        friction) of each contact in ``contacts`` held closed (indices, or a run's closed set
+        with its friction modes, as ``Result.closed_contacts`` records them)."""
+        q, qd = self.state_vector(q), self._velocity(qd)
+        closed = contacts if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) else ()
+        return self._formulation.contact_forces(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
+                                                closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv,) generalised forces that, applied, hold the system at rest at ``q``

@@ -267,6 +267,8 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             d = prog.lets([x - y for x, y in zip(pb, pa)])
             wn = prog.lets(cross(wf, n))
             g = dot(n, d)
+            if getattr(eq, "offset", None) is not None:
+                g = g - kin.layout.symbols(eq.offset)
             row = _combine(nv, (n, Jb), ([-c for c in n], Ja), (cross(n, d), Jwf))
             bias = (dot(n, [x - y for x, y in zip(ab, aa)]) + 2 * dot(wn, [x - y for x, y in zip(vb, va)])
                     + dot([x + y for x, y in zip(cross(alf, n), cross(wf, wn))], d))

@@ -137,6 +137,8 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
     if any(isinstance(c, Collision) for c in topology.components.values()):
         return ("the model has collisions, whose contacts are measured and located in Python from the compiled "
                 "body kinematics")
+    if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in topology.contacts):
+        return "contacts with friction step in Python (the compiled loops have no friction law)"
     if kernel.n_inputs:
         return "the model has callable forces or torques"
     if kernel.compiled.drives.callables:

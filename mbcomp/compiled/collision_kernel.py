@@ -238,7 +238,16 @@ class CollisionKernel:
 
     def measured(self, q, qd):
         """``(pairs measured {pair index: [Feature]}, kinematics fields, columns)``: the
-        narrow phase on the pairs the broad phase keeps."""
+        narrow phase on the pairs the broad phase keeps (the last answer is kept)."""
+        key = (q.tobytes(), qd.tobytes())
+        last = self.__dict__.get("_last_measured")
+        if last is not None and last[0] == key:
+            return last[1]
+        found = self._measure(q, qd)
+        self.__dict__["_last_measured"] = (key, found)
+        return found
+
+    def _measure(self, q, qd):
         fields, columns = self._bodies(q, qd)
         placed = [self.placed(fields, k) for k in range(len(self.entries))]
         spheres = [collide.bounding_sphere(p) for p in placed]
@@ -349,6 +358,45 @@ class CollisionKernel:
         face = 2.0 * np.einsum("ij,ij->i", collide.cross(w, n), dv)
         return value + np.where(owner == collide.OWNER_LINE, line, face)
 
+    def tangent_rows(self, q: np.ndarray, qd: np.ndarray, indices) -> dict:
+        """Friction rows of the collision features among the contact ``indices``:
+        ``{position in indices: (basis (3, 3) rows n, t1, t2; tangent rows (2, nv); their
+        bias (2,); touching point (3,) m; friction coefficient)}``, all world frame.  The
+        tangent rows give the slip velocity of B's touching point relative to A's; their
+        bias is the points' acceleration at zero generalised acceleration (the turning of
+        the basis left out, as for a fixed plane)."""
+        wanted = {int(i): r for r, i in enumerate(indices) if int(i) >= self.n_own}
+        if not wanted:
+            return {}
+        measured, fields, columns, _, _ = self.measured(q, qd)
+        masks = np.vstack((self._masks(), np.zeros((1, self.base.nv))))
+        W, V0 = columns[:, :3], columns[:, 3:]
+        velocity = np.vstack((fields["velocity"], np.zeros((1, 6))))
+        acc = np.vstack((fields["bias"], np.zeros((1, 6))))
+        out = {}
+        for k, feats in measured.items():
+            p = self.pairs[k]
+            ia, ib = self.entries[p.a].index, self.entries[p.b].index
+            for slot, f in enumerate(feats):
+                row = wanted.get(p.first + slot)
+                if row is None:
+                    continue
+                basis = np.vstack((f.normal, tangent_plane(f.normal)))
+                ca, cb = f.touching_points()
+                T = basis[1:]
+
+                def point_rows(index, c, material):
+                    Jc = masks[index][None, :] * (V0.T + (collide.cross(W, c[None, :])).T)   # (3, nv)
+                    V, A = velocity[index], acc[index]
+                    v_p = V[3:] + collide.cross(V[:3], material)
+                    return Jc, A[3:] + collide.cross(A[:3], c) + collide.cross(V[:3], v_p)
+
+                Jb, ab = point_rows(ib, cb, f.pb)
+                Ja, aa = point_rows(ia, ca, f.pa)
+                mu = float(self.base.parameters[self.features[p.first - self.n_own + slot].friction_key])
+                out[row] = (basis, T @ (Jb - Ja), T @ (ab - aa), 0.5 * (ca + cb), mu)
+        return out
+
     def step_limit(self, q: np.ndarray, qd: np.ndarray) -> float:
         """The longest step (s) after which no two shapes can have passed through each other
         unseen: in it no shape moves by more than ``STEP_FRACTION`` of the thinnest shape's
@@ -378,6 +426,14 @@ class CollisionKernel:
             for slot, f in enumerate(feats):
                 out[self.features[p.first - self.n_own + slot].name] = 0.5 * (f.pa + f.pb)
         return out
+
+
+def tangent_plane(normal: np.ndarray) -> np.ndarray:
+    """(2, 3) orthonormal tangents t1, t2 of a unit normal with t1 x t2 = normal."""
+    e = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    t1 = collide.cross(normal, e)
+    t1 = t1 / np.linalg.norm(t1)
+    return np.array([t1, collide.cross(normal, t1)])
 
 
 def with_collisions(kernel):

@@ -47,11 +47,19 @@ class Feature:
     pb: np.ndarray
     owner: int
     dist: float = 0.0
+    ra: float = 0.0     #: the rounding radius of A at pa (the surface is at pa + ra n)
+    rb: float = 0.0     #: and of B at pb (its surface at pb - rb n)
+
+    def touching_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The surface points of A and B that touch (or face each other), world (m)."""
+        return self.pa + self.ra * self.normal, self.pb - self.rb * self.normal
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross products of 3-vectors along the last axis (numpy's ``cross`` costs ten times
     more on small arrays)."""
+    if a.ndim == 1 and b.ndim == 1:
+        return np.array((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
     a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
     b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1), axis=-1)
@@ -94,18 +102,18 @@ def thickness(shape: tuple) -> float:
 
 
 # -- narrow phase ---------------------------------------------------------------------------------
-def _line(pa: np.ndarray, pb: np.ndarray, offset: float, fallback: np.ndarray) -> Feature:
-    """Two rounded features: points pa, pb with radii summing to ``offset``."""
+def _line(pa: np.ndarray, pb: np.ndarray, ra: float, rb: float, fallback: np.ndarray) -> Feature:
+    """Two rounded features: points pa, pb with radii ra, rb."""
     d = pb - pa
     dist = float(np.linalg.norm(d))
     n = d / dist if dist > 1e-12 else fallback
-    return Feature(dist - offset, n, pa, pb, OWNER_LINE, max(dist, 1e-12))
+    return Feature(dist - ra - rb, n, pa, pb, OWNER_LINE, max(dist, 1e-12), ra, rb)
 
 
 def _point_plane(point: np.ndarray, radius: float, plane: tuple) -> Feature:
     o, n = plane[1], plane[2]
     height = float(n @ (point - o))
-    return Feature(height - radius, n, point - height * n, point, OWNER_A)
+    return Feature(height - radius, n, point - height * n, point, OWNER_A, rb=radius)
 
 
 def _point_box(point: np.ndarray, radius: float, box: tuple) -> Feature:
@@ -120,15 +128,15 @@ def _point_box(point: np.ndarray, radius: float, box: tuple) -> Feature:
             k = int(np.flatnonzero(outside)[0])
             n = R[:, k] * np.sign(local[k])
             height = abs(local[k]) - half[k]
-            return Feature(float(height - radius), n, c + R @ clamped, point, OWNER_A)
-        return _line(c + R @ clamped, point, radius, R @ (np.sign(local) / np.sqrt(3)))
+            return Feature(float(height - radius), n, c + R @ clamped, point, OWNER_A, rb=radius)
+        return _line(c + R @ clamped, point, 0.0, radius, R @ (np.sign(local) / np.sqrt(3)))
     depth = half - np.abs(local)  # inside: out through the nearest face
     k = int(np.argmin(depth))
     sign = 1.0 if local[k] >= 0 else -1.0
     n = R[:, k] * sign
     surface = local.copy()
     surface[k] = sign * half[k]
-    return Feature(float(-depth[k] - radius), n, c + R @ surface, point, OWNER_A)
+    return Feature(float(-depth[k] - radius), n, c + R @ surface, point, OWNER_A, rb=radius)
 
 
 def closest_on_segment(p0: np.ndarray, p1: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -165,7 +173,7 @@ _UP = np.array([0.0, 0.0, 1.0])
 def _swap(f: Feature) -> Feature:
     """The feature seen from the other side."""
     owner = {OWNER_A: OWNER_B, OWNER_B: OWNER_A}.get(f.owner, f.owner)
-    return Feature(f.gap, -f.normal, f.pb, f.pa, owner, f.dist)
+    return Feature(f.gap, -f.normal, f.pb, f.pa, owner, f.dist, f.rb, f.ra)
 
 
 def features(a: tuple, b: tuple) -> list[Feature]:
@@ -195,12 +203,12 @@ def features(a: tuple, b: tuple) -> list[Feature]:
         of_a = [_swap(_point_box(p, 0.0, b)) for p in a[1] + (_CORNERS * a[3]) @ a[2].T]
         return of_b + of_a
     if kinds == ("capsule", "sphere"):
-        return [_line(closest_on_segment(a[1], a[2], b[1]), b[1], a[3] + b[2], _UP)]
+        return [_line(closest_on_segment(a[1], a[2], b[1]), b[1], a[3], b[2], _UP)]
     if kinds == ("capsule", "capsule"):
         pa, pb = closest_between_segments(a[1], a[2], b[1], b[2])
-        return [_line(pa, pb, a[3] + b[3], _UP)]
+        return [_line(pa, pb, a[3], b[3], _UP)]
     if kinds == ("sphere", "sphere"):
-        return [_line(a[1], b[1], a[2] + b[2], _UP)]
+        return [_line(a[1], b[1], a[2], b[2], _UP)]
     raise ValueError(f"no narrow phase for {kinds}")
 
 

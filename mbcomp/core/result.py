@@ -39,13 +39,18 @@ class Energy:
 
 @dataclass
 class Event:
-    """An impact on one contact: time (s), contact name, impulse (N s, positive pushing
-    apart) and the kinetic energy the whole impact lost (J)."""
+    """A contact event: time (s), contact name, impulse (N s along the normal, positive
+    pushing apart; 0 for events that are not impacts), the kinetic energy the whole impact
+    lost (J), and its ``kind``: ``"impact"`` (a closing contact's impulse), ``"stick"``
+    (a sliding contact starts to stick), ``"slip"`` (a sticking contact, or one whose slip
+    reverses, starts to slide) or ``"release"`` (a closed contact opens: its normal force
+    reached zero)."""
 
     time: float
     contact: Any
     impulse: Any
     energy_loss: float = 0.0
+    kind: str = "impact"
 
 
 @dataclass
@@ -80,6 +85,7 @@ class Result:
     parameters: dict = field(default_factory=dict, repr=False)  #: parameter values of the run
     formulation: str = ""
     _reactions: dict | None = field(default=None, repr=False, compare=False)
+    _contact_forces: dict | None = field(default=None, repr=False, compare=False)
     z: np.ndarray | None = field(default=None, repr=False)  #: (m, nz) drive-element states
     extra_states: tuple = ()  #: names of the columns of ``z`` (motor currents, PID integrals)
 
@@ -115,7 +121,7 @@ class Result:
         if system is not None and tuple(system.coords) != self.coords:
             raise ValueError(f"with_system: the System's coordinates {list(system.coords)} are not this "
                              f"result's {list(self.coords)}")
-        return replace(self, system=system, _reactions=None)
+        return replace(self, system=system, _reactions=None, _contact_forces=None)
 
     def _bound_system(self, what: str):
         if self.system is None:
@@ -158,6 +164,15 @@ class Result:
         if self._reactions is None:
             self._reactions = service("reactions")(self._bound_system("reactions"), self)
         return self._reactions
+
+    @property
+    def contact_forces(self) -> dict[str, np.ndarray]:
+        """``{contact name: (m, 3) array}``: the force (N, world frame) each contact applies
+        to its body, normal plus friction, at every sample where the run held it closed
+        (zero elsewhere; impacts are impulses, in ``events``)."""
+        if getattr(self, "_contact_forces", None) is None:
+            self._contact_forces = service("contact_forces")(self._bound_system("contact_forces"), self)
+        return self._contact_forces
 
     def to_csv(self, path) -> None:
         """Write t, every coordinate and speed (``<name>_d``) and energies as CSV columns."""

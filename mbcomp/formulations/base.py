@@ -73,7 +73,7 @@ class Workspace:
 
     def __init__(self, formulation, kernel, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts=()):
         self.formulation, self.kernel, self.tau = formulation, kernel, tau
-        self.contacts = tuple(contacts)
+        self.contacts = contacts if isinstance(contacts, tuple) else tuple(contacts)  # (a friction.Closed keeps its modes)
         self.n = kernel.nq
         self.state_map = kernel.topology.state_map
         self.offsets = formulation.motor_offsets(q0, t0)
@@ -280,6 +280,40 @@ class Formulation:
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
         return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
+
+    def contact_forces(self, kernel, t, q, qd, tau, offsets=None, contacts=()) -> dict[str, np.ndarray]:
+        """``{contact name: (3,) N, world}``: the force each closed contact in ``contacts``
+        applies to its body, normal plus friction (a joint limit's is zero: it has no point)."""
+        from mbcomp.formulations.friction import has_friction, plane_contact_rows, world_forces
+        if not contacts:
+            return {}
+        if has_friction(contacts):
+            solution = self.solve_friction(kernel, t, q, qd, tau, offsets, contacts)
+            lam, tangential = solution.lam, solution.tangential
+        else:
+            lam, tangential = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1], {}
+        normal = lam[len(lam) - len(contacts):]
+        forces = world_forces(plane_contact_rows(kernel, q, qd, contacts), normal, tangential, list(contacts))
+        names = [c.name for c in kernel.topology.contacts]
+        return {names[i]: forces[r] for r, i in enumerate(contacts)}
+
+    # -- friction on closed contacts (formulations/friction.py) ----------------------------------------
+    def acceleration_targets(self, cv: ConstraintValues, qd: np.ndarray) -> np.ndarray:
+        """``J qdd = targets`` of the constraint rows ``cv`` at speeds ``qd``: ``-bias`` (the
+        dae formulation adds its Baumgarte terms)."""
+        return -cv.bias
+
+    def solve_friction(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
+        """The friction hook of ``solve``: ``FrictionSolution`` (qdd, multipliers of the
+        constraint and closed-contact normal rows, tangential forces) when ``contacts`` is a
+        ``friction.Closed`` with sticking or sliding contacts.  Both formulations solve the
+        full KKT system here (at the consistent states the lagrange workspace hands it, its
+        accelerations are the partitioned ones)."""
+        from mbcomp.formulations.friction import friction_solve
+        M, f = kernel.checked_dynamics(t, q, qd, tau)
+        cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
+        Minv = kernel.inverse(kernel.factor(M, q))
+        return friction_solve(kernel, Minv, f, cv.J, self.acceleration_targets(cv, qd), contacts, q, qd, t)
 
     def assemble(self, kernel, q: np.ndarray, qd: np.ndarray, t: float = 0.0, offsets=None):
         """Positions onto ``g = 0`` (Newton, minimum-norm steps), speeds onto ``gdot = 0``

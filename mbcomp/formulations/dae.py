@@ -10,6 +10,7 @@ from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.formulations.base import Formulation, Workspace
 from mbcomp.formulations.dae_c import c_dae_accelerations
 from mbcomp.formulations.dae_compiled import DaeRows, DaeRun, motor_programs
+from mbcomp.formulations.friction import has_friction
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
@@ -137,10 +138,16 @@ class DaeFormulation(Formulation):
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         if self.constraints is None and not contacts:
             return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
+        if has_friction(contacts):
+            solution = self.solve_friction(kernel, t, q, qd, tau, offsets, contacts)
+            return solution.qdd, solution.lam
         M, f = kernel.checked_dynamics(t, q, qd, tau)
         cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
+        return self.solve_constrained(kernel, M, f, cv.J, self.acceleration_targets(cv, qd), q, t, contacts, qd)
+
+    def acceleration_targets(self, cv, qd):
+        """``-bias - 2 alpha gdot - beta^2 g`` (Baumgarte)."""
         alpha, beta = self.baumgarte
         gdot = cv.J @ qd + cv.g_t
         g = np.where(np.isfinite(cv.g), cv.g, 0.0)
-        return self.solve_constrained(kernel, M, f, cv.J, -cv.bias - 2 * alpha * gdot - beta ** 2 * g, q, t,
-                                      contacts, qd)
+        return -cv.bias - 2 * alpha * gdot - beta ** 2 * g

@@ -7,6 +7,7 @@ import numpy as np
 
 from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.formulations.friction import cone_impact, friction_of, plane_contact_rows
 
 #: A contact counts as closed when its gap is below this (m).
 GAP_TOLERANCE = 1e-9
@@ -21,6 +22,7 @@ class Impact:
     impulses: dict = field(default_factory=dict)
     energy_loss: float = 0.0
     closed: tuple = ()  #: indices of the contacts that carry an impulse (the final active set)
+    tangential: dict = field(default_factory=dict)  #: friction impulse (N s, world (3,)) by contact name
 
 
 def contact_values(kernel, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
@@ -80,6 +82,10 @@ def solve_impact(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, a
     gaps = contact_values(kernel, q, qd)
     approach = gaps.J @ qd
     involved = sorted(set(active) | persistent)
+    touching = sorted(set(involved) | {i for i in range(len(contacts)) if gaps.g[i] < GAP_TOLERANCE})
+    if any(friction_of(kernel, i) > 0.0 for i in touching):
+        return cone_impact_solve(kernel, formulation, t, q, qd, touching, set(involved), coefficient, M, Minv,
+                                 bilateral)
     nb = bilateral.J.shape[0]
     seen = set()
     for _ in range(4 * len(contacts) + 4):
@@ -117,3 +123,45 @@ def solve_impact(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, a
     loss = 0.5 * (qd @ M @ qd - qd_plus @ M @ qd_plus)
     impulses = {contacts[i].name: float(p) for i, p in zip(involved, impulse)}
     return Impact(qd_plus, impulses, float(loss), tuple(involved))
+
+
+def cone_impact_solve(kernel, formulation, t, q, qd, touching, involved, coefficient, M, Minv, bilateral) -> Impact:
+    """The impact law with Coulomb friction (``friction.cone_impact``) on every touching
+    contact at once, consistent with the bilateral constraints: normal ``v_n+ + e v_n- >= 0``
+    complementary to ``P_n >= 0`` (e = 0 on persistent contacts, and on touching contacts
+    that do not approach), tangential impulses in the cone ``|P_t| <= mu P_n`` opposing the
+    slip after the impact.  ``closed``: contacts that carry an impulse, and involved ones
+    left at zero normal speed."""
+    contacts = kernel.topology.contacts
+    rows = formulation.rows_of(bilateral.J)
+    Jb, gtb = bilateral.J[rows], bilateral.g_t[rows]
+    cr = plane_contact_rows(kernel, q, qd, touching)
+    blocks = []
+    for r in range(len(touching)):
+        blocks += [cr.normal[r], cr.tangent[r, 0], cr.tangent[r, 1]]
+    J = np.vstack([Jb] + ([np.array(blocks)] if blocks else []))
+    v_minus = J @ qd
+    b = v_minus.copy()
+    nb = Jb.shape[0]
+    b[:nb] += gtb
+    for r, i in enumerate(touching):
+        k = nb + 3 * r
+        e = coefficient(i) if i in involved else 0.0
+        b[k] += e * min(v_minus[k], 0.0)
+    G = J @ Minv @ J.T
+    names = ", ".join(repr(contacts[i].name) for i in touching)
+    P = cone_impact(G, b, nb, cr.mu, names, t)
+    qd_plus = qd + Minv @ (J.T @ P)
+    v_plus = J @ qd_plus
+    scale = max(1.0, float(np.abs(v_minus).max(initial=0.0)))
+    pscale = max(1e-300, float(np.abs(P).max(initial=0.0)))
+    closed, impulses, tangential = [], {}, {}
+    for r, i in enumerate(touching):
+        k = nb + 3 * r
+        if P[k] > 1e-12 * pscale or (i in involved and abs(v_plus[k]) <= 1e-9 * scale):
+            closed.append(i)
+        if i in involved or P[k] > 1e-12 * pscale:
+            impulses[contacts[i].name] = float(P[k])
+            tangential[contacts[i].name] = cr.basis[r, 1:].T @ P[k + 1:k + 3]
+    loss = 0.5 * (qd @ M @ qd - qd_plus @ M @ qd_plus)
+    return Impact(qd_plus, impulses, float(loss), tuple(closed), tangential)

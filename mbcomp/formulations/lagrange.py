@@ -7,6 +7,7 @@ from mbcomp.core.errors import SimulationError, TrialStateError, format_state
 from mbcomp.core.small_linalg import pivoted_qr, solve
 from mbcomp.core.statemap import Chart
 from mbcomp.formulations.base import ASSEMBLY_TOLERANCE, Formulation, Workspace
+from mbcomp.formulations.friction import has_friction
 from mbcomp.formulations.lagrange_c import c_lagrange
 
 #: Re-centre a ball's chart (a restart) once its rotation vector exceeds this (rad).
@@ -247,6 +248,9 @@ class LagrangeFormulation(Formulation):
         needs only qdd) lam is left zero instead of solved for."""
         if self.constraints is None and not contacts:
             return kernel.tree_accelerations(t, q, qd, tau), np.zeros(0)
+        if has_friction(contacts):
+            solution = self.solve_friction(kernel, t, q, qd, tau, offsets, contacts)
+            return solution.qdd, solution.lam
         M, f = kernel.checked_dynamics(t, q, qd, tau)
         cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         if partition_hint is None:

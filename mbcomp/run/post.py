@@ -53,3 +53,23 @@ def reactions(system: Any, result: Any) -> dict[str, np.ndarray]:
         for name, value in values.items():
             series.setdefault(name, []).append(np.atleast_1d(value))
     return {k: np.array(v) for k, v in series.items()}
+
+
+def contact_forces(system: Any, result: Any) -> dict[str, np.ndarray]:
+    """``{contact name: (m, 3) array}``: each contact's force on its body (N, world frame,
+    normal plus friction) at every sample where the run held it closed, zero elsewhere."""
+    system = bound_system(system, result)
+    names = [c.name for c in system.topology.contacts]
+    out = {name: np.zeros((len(result.t), 3)) for name in names}
+    closed = result.closed_contacts or [()] * len(result.t)
+    z = getattr(result, "z", None)
+    states = z if getattr(result, "extra_states", ()) and z is not None and len(z) == len(result.t) \
+        else [None] * len(result.t)
+    for k, (t, q, qd, shut, zk) in enumerate(zip(result.t, result.q, result.qd, closed, states)):
+        if not shut:
+            continue
+        values = system.contact_forces(q, qd, t, tau=result.tau, offsets=result.offsets, contacts=shut,
+                                       **({} if zk is None else {"states": zk}))
+        for name, force in values.items():
+            out[name][k] = force
+    return out

@@ -105,7 +105,8 @@ class _Recorder:
     def add(self, t, q, qd):
         if self.budget is not None and len(self.t) >= self.budget.rows:
             raise self.budget.exceeded(float(t))
-        self.closed.append(tuple(self.closed_now()))
+        closed = self.closed_now()
+        self.closed.append(closed if isinstance(closed, tuple) else tuple(closed))  # (a Closed keeps its friction modes)
         self.z.append(self.states_now())
         self.t.append(float(t))
         self.q.append(q)
@@ -383,8 +384,9 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
             gaps = watch.gaps(q, qd).g
             closing = [i for i in range(len(watch.names)) if i not in watch.persistent and gaps[i] < GAP_TOLERANCE]
             watch.persistent = tuple(sorted(set(watch.persistent) | set(closing)))
+        watch.settle(te, q, qd)  # friction modes of the contacts closed now
     else:
-        watch.open(release[1])
+        watch.open(release[1], te, q, qd)
         watch.release(te, q, qd)
     recorder.add_event_state(te, q, qd)
     return te, (te, q, qd), None, watch.gaps(q, qd).g

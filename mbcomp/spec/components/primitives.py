@@ -24,6 +24,7 @@ class PointEquation:
     body_b: Any
     point_b: tuple
     label: str = ""
+    offset: Any = None  #: a parameter key (m) subtracted from the residual (a contact sphere's radius)
 
 
 @dataclass(frozen=True)
