@@ -260,3 +260,22 @@ def test_collisions_are_saved_and_read_back(tmp_path):
     one = m.compile().simulate(0.5, q0, [0] * 12)
     two = again.compile().simulate(0.5, q0, [0] * 12)
     assert np.array_equal(one.q, two.q) and [e.contact for e in one.events] == [e.contact for e in two.events]
+
+
+# -- friction ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_a_sliding_ball_starts_rolling_at_the_closed_form_time(formulation):
+    """A ball launched sliding without spin on a Plane with Coulomb friction mu (the
+    collision's): it sticks (rolls) at t = 2 v0 / (7 mu g) with speed 5 v0 / 7."""
+    mu, v0, r = 0.3, 2.0, 0.1
+    m = mb.Model("rolling", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=1.5, inertia=ball_inertia(1.5, r), shape=mb.Sphere(r)))
+    m.add(mb.Planar("plane", m.ground, ball, normal="y", coords=["z", "x", "phi"]))
+    m.add(mb.Collision("floor", ball, (m.ground, mb.Plane()), friction=mu))
+    res = m.compile(formulation=formulation).simulate(0.3, [r, 0.0, 0.0], [0.0, v0, 0.0], rtol=1e-10, atol=1e-12)
+    sticks = [e for e in res.events if e.kind == "stick"]
+    assert len(sticks) == 1 and sticks[0].contact == "floor"
+    assert sticks[0].time == pytest.approx(2 * v0 / (7 * mu * G), rel=1e-7)
+    assert res["x_d"][-1] == pytest.approx(5 * v0 / 7, rel=1e-8)
+    forces = res.contact_forces["floor"]
+    assert forces[-1] == pytest.approx([0.0, 0.0, 1.5 * G], abs=1e-6)   # rolling: no friction force

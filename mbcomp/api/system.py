@@ -12,6 +12,7 @@ from mbcomp.core.rotations import cross
 from mbcomp.core.errors import ModelError
 from mbcomp.codegen.fastcall import DECLINE
 from mbcomp.compiled.kernel import Kernel
+from mbcomp.compiled.collision_kernel import with_collisions
 from mbcomp.build.layout import body_fields
 from mbcomp.core.result import Energy  # noqa: F401 - its old home; mbcomp.Energy
 from mbcomp.core.params import validate
@@ -63,7 +64,8 @@ class System:
         object.__setattr__(self, "_compiled", compiled)
         object.__setattr__(self, "_formulation", formulation)
         object.__setattr__(self, "_parameters", dict(parameters))
-        object.__setattr__(self, "_kernel", Kernel(compiled, parameters))
+        # (with collisions, the kernel's contacts include their features: compiled/collision_kernel.py)
+        object.__setattr__(self, "_kernel", with_collisions(Kernel(compiled, parameters)))
         object.__setattr__(self, "_p", self._kernel.p)
         object.__setattr__(self, "_fast", None)  # (calls, tree calls, body points): _bind_fast()
 
@@ -194,7 +196,7 @@ class System:
 
     @property
     def topology(self):
-        return self._compiled.topology
+        return self._kernel.topology   # (the compiled topology, with collision features among the contacts)
 
     @property
     def kernel(self) -> Kernel:

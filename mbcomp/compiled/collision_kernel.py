@@ -360,7 +360,7 @@ class CollisionKernel:
 
     def tangent_rows(self, q: np.ndarray, qd: np.ndarray, indices) -> dict:
         """Friction rows of the collision features among the contact ``indices``:
-        ``{position in indices: (basis (3, 3) rows n, t1, t2; tangent rows (2, nv); their
+        ``{position in indices: (basis (3, 3) rows n, t1, t2 with n from B to A; tangent rows (2, nv); their
         bias (2,); touching point (3,) m; friction coefficient)}``, all world frame.  The
         tangent rows give the slip velocity of B's touching point relative to A's; their
         bias is the points' acceleration at zero generalised acceleration (the turning of
@@ -394,7 +394,9 @@ class CollisionKernel:
                 Jb, ab = point_rows(ib, cb, f.pb)
                 Ja, aa = point_rows(ia, ca, f.pa)
                 mu = float(self.base.parameters[self.features[p.first - self.n_own + slot].friction_key])
-                out[row] = (basis, T @ (Jb - Ja), T @ (ab - aa), 0.5 * (ca + cb), mu)
+                # The basis as seen from A (n from B to A): the force these rows give is the one
+                # on A's body, the collision's side ``a``; the tangential rows are unchanged.
+                out[row] = (-basis, T @ (Jb - Ja), T @ (ab - aa), 0.5 * (ca + cb), mu)
         return out
 
     def step_limit(self, q: np.ndarray, qd: np.ndarray) -> float:
