@@ -131,12 +131,12 @@ def why_not_compiled(kernel, formulation, method, tau) -> str | None:
         return reason
     if method not in getattr(formulation, "compiled_methods", COMPILED_METHODS):
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
-    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
-        return "the model has contacts"
     from mbcomp.spec.components.collision import Collision
     if any(isinstance(c, Collision) for c in topology.components.values()):
         return ("the model has collisions, whose contacts are measured and located in Python from the compiled "
                 "body kinematics")
+    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
+        return "the model has contacts"
     if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in topology.contacts):
         return "contacts with friction step in Python (the compiled loops have no friction law)"
     if kernel.n_inputs:
