@@ -279,3 +279,20 @@ def test_a_sliding_ball_starts_rolling_at_the_closed_form_time(formulation):
     assert res["x_d"][-1] == pytest.approx(5 * v0 / 7, rel=1e-8)
     forces = res.contact_forces["floor"]
     assert forces[-1] == pytest.approx([0.0, 0.0, 1.5 * G], abs=1e-6)   # rolling: no friction force
+
+
+def test_the_viewer_draws_collision_shapes_and_hits():
+    from mbcomp.face.viewer.scene import build_scene
+    m = mb.Model("drawn", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=0.5, inertia=ball_inertia(0.5, 0.05),
+                         shape=[mb.Sphere(0.05), mb.Capsule(0.01, 0.2, axis="x")]))
+    m.add(mb.Prismatic("drop", m.ground, ball, axis="z", coords="z"))
+    m.add(mb.Collision("hit", (ball, mb.Sphere(0.05)), (m.ground, mb.Plane(extent=1.0)), restitution=0.5))
+    res = m.compile().simulate(0.5, [0.5], [0.0])
+    page = build_scene(res)
+    kinds = [s["type"] for s in page["bodies"][0]["shapes"]]
+    assert kinds == ["sphere", "capsule"]                       # the pair's own sphere is the body's
+    (floor,) = page["ground"]
+    assert floor["type"] == "box" and floor["size"] == [1.0, 1.0, 0.01] and floor["place"][2] == pytest.approx(-0.005)
+    (hit,) = page["hits"]
+    assert hit["t"] == pytest.approx(np.sqrt(2 * 0.45 / G), rel=1e-9) and np.allclose(hit["p"], 0.0, atol=1e-9)

@@ -419,14 +419,15 @@ class CollisionKernel:
         return np.inf if not total > 0 else STEP_FRACTION * thin / total
 
     def contact_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
-        """World point (m) midway between the touching points of every measured feature
-        whose gap is below the broad-phase margin (for drawing contacts)."""
+        """World point (m) midway between the touching surface points of every feature the
+        broad phase measures at ``q`` (for drawing contacts)."""
         measured, *_ = self.measured(q, np.zeros(self.base.nv))
         out = {}
         for k, feats in measured.items():
             p = self.pairs[k]
             for slot, f in enumerate(feats):
-                out[self.features[p.first - self.n_own + slot].name] = 0.5 * (f.pa + f.pb)
+                ca, cb = f.touching_points()
+                out[self.features[p.first - self.n_own + slot].name] = 0.5 * (ca + cb)
         return out
 
 

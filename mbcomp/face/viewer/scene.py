@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from mbcomp.core.errors import ModelError
 from mbcomp.face.scene import Scene, local_value, resample_result
-from mbcomp.spec.shapes import Box, Cylinder, Mesh, Sphere
+from mbcomp.spec.shapes import Box, Capsule, Cylinder, Mesh, Plane, Sphere
 
 #: Colors given to bodies without their own, in turn (Tableau 10, readable on a light background).
 PALETTE = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#ff9da7",
@@ -54,6 +54,17 @@ def shape_record(shape: Any, color: str) -> dict:
         R = np.reshape(shape.rotation, (3, 3)) @ turn.as_matrix()
         record.update(type="cylinder", radius=shape.radius, length=shape.length,
                       place=[*map(float, shape.origin), *map(float, Rotation.from_matrix(R).as_quat())])
+    elif isinstance(shape, Capsule):
+        turn = Rotation.align_vectors([shape.axis], [[0.0, 1.0, 0.0]])[0]   # the page's capsules run along y
+        record.update(type="capsule", radius=shape.radius, length=shape.length,
+                      place=[*map(float, shape.origin), *map(float, turn.as_quat())])
+    elif isinstance(shape, Plane):
+        # A square slab of the plane's extent just behind its surface (the solid side).
+        turn = Rotation.align_vectors([shape.normal], [[0.0, 0.0, 1.0]])[0]
+        thick = 0.01 * shape.extent
+        centre = np.asarray(shape.origin) - 0.5 * thick * np.asarray(shape.normal)
+        record.update(type="box", size=[shape.extent, shape.extent, thick],
+                      place=[*map(float, centre), *map(float, turn.as_quat())])
     elif isinstance(shape, Sphere):
         record.update(type="sphere", radius=shape.radius)
     elif isinstance(shape, Mesh):
@@ -134,6 +145,40 @@ def marks(scene: Scene, size: float) -> dict:
             "mark_size": size * 0.03}
 
 
+def collision_shapes(topology: Any) -> dict[str, tuple]:
+    """``{body name: shapes}`` given to collisions as ``(body, shape)`` pairs (not among the
+    body's own shapes), so that the page draws them (a floor Plane on the ground, ...)."""
+    from mbcomp.spec.components.collision import Collision
+    from mbcomp.spec.components.values import name_of
+    out: dict[str, tuple] = {}
+    for comp in topology.components.values():
+        if isinstance(comp, Collision):
+            for body, shape in tuple(comp.a) + tuple(comp.b):
+                if shape is not None and shape not in out.get(name_of(body), ()):
+                    out[name_of(body)] = out.get(name_of(body), ()) + (shape,)
+    return out
+
+
+def collision_hits(system: Any, result: Any) -> list[dict]:
+    """Where collisions touched: ``{"t": event time (s), "p": world point (m), "name": ...}``
+    for each impact of a collision contact (the middle of the touching points)."""
+    kernel = system.kernel
+    points_at = getattr(kernel, "contact_points", None)
+    if points_at is None:
+        return []
+    names = {f.name for f in getattr(kernel, "features", ())}
+    hits = []
+    events = [e for e in getattr(result, "events", []) if e.contact in names and getattr(e, "kind", "impact") == "impact"]
+    if not events:
+        return []
+    qs = resample_result(result, np.array([e.time for e in events]))
+    for e, q in zip(events, qs):
+        point = points_at(np.asarray(q, dtype=float)).get(e.contact)
+        if point is not None:
+            hits.append({"t": float(e.time), "p": [*map(float, point)], "name": e.contact})
+    return hits
+
+
 def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title: str | None = None) -> dict:
     """The whole page data of ``result`` as a JSON-ready dict (poses packed as base64 float32)."""
     system = result.system
@@ -153,11 +198,14 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
     low, high = cloud.min(axis=0), cloud.max(axis=0)
     size = float(max(np.max(high - low), 1e-3))
 
+    own = collision_shapes(scene.topology)   # shapes given to a Collision as (body, shape)
     bodies = []
     for k, body in enumerate(scene.bodies):
-        records = _records(scene.shapes[k], PALETTE[k % len(PALETTE)], body.name)
+        extra = tuple(x for x in own.get(body.name, ()) if x not in tuple(scene.shapes[k]))
+        records = _records(tuple(scene.shapes[k]) + extra, PALETTE[k % len(PALETTE)], body.name)
         bodies.append({"name": body.name, "shapes": records or default_shapes(scene, k, size)})
-    ground = _records(scene.ground_shapes, "#8c8c8c", scene.ground.name)
+    extra = tuple(x for x in own.get(scene.ground.name, ()) if x not in tuple(scene.ground_shapes))
+    ground = _records(tuple(scene.ground_shapes) + extra, "#8c8c8c", scene.ground.name)
 
     gravity = np.asarray(system.parameters.get("gravity", (0.0, 0.0, -9.81)), dtype=float)
     up = -gravity / np.linalg.norm(gravity) if np.linalg.norm(gravity) > 0 else np.array([0.0, 0.0, 1.0])
@@ -170,6 +218,7 @@ def build_scene(result: Any, *, fps: float = 60.0, max_frames: int = 2000, title
         "center": [*map(float, (low + high) / 2)], "low": [*map(float, low)], "high": [*map(float, high)],
         "size": size, "up": [*map(float, up)],
         "events": [float(getattr(e, "time", np.nan)) for e in getattr(result, "events", [])],
+        "hits": collision_hits(system, result),
     }
     page.update(marks(scene, size))
     return page

@@ -85,6 +85,7 @@ function shapeObject(s) {
   if (s.type === "box") obj = new THREE.Mesh(new THREE.BoxGeometry(s.size[0], s.size[1], s.size[2]), mat);
   else if (s.type === "cylinder") obj = new THREE.Mesh(new THREE.CylinderGeometry(s.radius, s.radius, s.length, 32), mat);
   else if (s.type === "sphere") obj = new THREE.Mesh(new THREE.SphereGeometry(s.radius, 32, 16), mat);
+  else if (s.type === "capsule") obj = new THREE.Mesh(new THREE.CapsuleGeometry(s.radius, s.length, 8, 32), mat);
   else if (s.type === "mesh") {
     const g = new THREE.BufferGeometry();
     g.setAttribute("position", new THREE.BufferAttribute(decode(s.vertices, Float32Array), 3));
@@ -152,6 +153,17 @@ for (const c of S.contacts) {
   scene.add(plane);
 }
 
+// Collision impacts: a red dot where the shapes touched, shown for a moment after each one.
+const hitWindow = Math.max(0.03 * (S.t1 - S.t0), 1e-9);
+const hitDots = (S.hits || []).map((h) => {
+  const dot = new THREE.Mesh(new THREE.SphereGeometry(markSize * 0.8, 16, 8), contactMat);
+  dot.position.set(...h.p);
+  dot.name = "hit " + h.name;
+  dot.visible = false;
+  scene.add(dot);
+  return dot;
+});
+
 // ---- poses at time t (interpolated between frames) ------------------------------------------
 const qa = new THREE.Quaternion(), qb = new THREE.Quaternion();
 function frameAt(t) {
@@ -167,6 +179,7 @@ function worldPoint(k, p, out) {
 }
 const tmpA = new THREE.Vector3(), tmpB = new THREE.Vector3();
 function pose(t) {
+  (S.hits || []).forEach((h, n) => { hitDots[n].visible = t >= h.t && t <= h.t + hitWindow; });
   const [i, j, w] = frameAt(t);
   for (let k = 0; k < NB; k++) {
     const a = (i * NB + k) * 7, b = (j * NB + k) * 7, g = groups[k];
