@@ -358,6 +358,16 @@ class CollisionKernel:
         face = 2.0 * np.einsum("ij,ij->i", collide.cross(w, n), dv)
         return value + np.where(owner == collide.OWNER_LINE, line, face)
 
+    def gap_of(self, q: np.ndarray, qd: np.ndarray, index: int) -> float:
+        """Contact ``index``'s gap (m) alone: a collision feature's exact gap from its own pair
+        of shapes (no broad phase), for locating its closing."""
+        if index < self.n_own:
+            return float(self.base.contacts(q, qd).g[index])
+        feature = self.features[index - self.n_own]
+        pair = self.pairs[feature.pair]
+        fields, _ = self._bodies(q, qd)
+        return float(collide.features(self.placed(fields, pair.a), self.placed(fields, pair.b))[feature.slot].gap)
+
     def tangent_rows(self, q: np.ndarray, qd: np.ndarray, indices) -> dict:
         """Friction rows of the collision features among the contact ``indices``:
         ``{position in indices: (basis (3, 3) rows n, t1, t2 with n from B to A; tangent rows (2, nv); their

@@ -147,7 +147,8 @@ class ContactWatch:
                 if self.locator is not None:
                     return self.locator.gap(s, i)
                 q, qd = workspace.full_state(s, dense(s))
-                return self.gaps(q, qd).g[i]
+                one = getattr(self.kernel, "gap_of", None)  # one contact's gap alone (collisions: its pair)
+                return one(q, qd, i) if one is not None else self.gaps(q, qd).g[i]
 
             if gap(t_old) <= 0.0:
                 te = t_old
