@@ -14,6 +14,7 @@ except ModuleNotFoundError:  # pragma: no cover
 
 import mbcomp as mb
 from mbcomp.spec.components.base import KINDS
+from mbcomp.files.component_tables import toml_value
 from mbcomp.files.toml_model import dumps, load
 from mbcomp.core.params import ParameterError, in_range, nonnegative, positive, spd_inertia
 
@@ -42,6 +43,8 @@ EXAMPLES = {
     "slider": ("sl", dict(body="c", point=(0, 0, -1.0), origin=(0, 0, -2.0), axis="x")),
     "motor": ("mo", dict(joint="h", speed=1.0)),
     "contact": ("ct", dict(body="c", point=(0, 0, -1.0), normal="z", origin=(0, 0, -3.0), restitution=0.5)),
+    "collision": ("hit", dict(a=("c", mb.Sphere(0.1, origin=(0, 0, -1.0))), b=("ground", mb.Plane(origin=(0, 0, -3.0))),
+                              restitution=0.5, friction=0.3)),
     "drive": ("dr", dict(joint="h", ratio=10.0, rotor_inertia=1e-4, torque=0.1)),
     "dc_motor": ("dc", dict(joint="h", ratio=10.0, resistance=1.0, inductance=1e-3, k=0.05, voltage=1.0)),
     "joint_friction": ("fr", dict(joint="h", coulomb=0.1, viscous=0.01)),
@@ -114,7 +117,7 @@ def write_file(tmp_path, model, section, name, key, bad, role=None):
     """The model's file with one value replaced by ``bad``."""
     data = tomllib.loads(dumps(model))
     lines = [f'name = "{data["name"]}"']
-    for sec in ("bodies", "joints", "forces", "constraints", "contacts"):
+    for sec in ("bodies", "joints", "forces", "constraints", "contacts", "collisions"):
         for comp, table in data.get(sec, {}).items():
             lines.append(f"[{sec}.{comp}]")
             for k, v in table.items():
@@ -124,6 +127,9 @@ def write_file(tmp_path, model, section, name, key, bad, role=None):
                     continue
                 if sec == section and comp == name and k == key:
                     v = bad
+                elif isinstance(v, dict) and "point" not in v:   # a collision side: a body and a shape
+                    lines.append(f"{k} = {toml_value(v)}")
+                    v = None
                 elif isinstance(v, dict):
                     v = None
                     lines.append(f'{k} = {{ body = "{table[k]["body"]}", point = {to_toml(table[k]["point"])} }}')
