@@ -103,6 +103,26 @@ def _kind(shape) -> str:
     return {Sphere: "sphere", Box: "box", Capsule: "capsule", Plane: "plane"}[type(shape)]
 
 
+def _bounding_radius(shape) -> float:
+    """Radius (m) of a sphere about the shape's origin holding it (0 for a plane)."""
+    if isinstance(shape, Sphere):
+        return float(shape.radius)
+    if isinstance(shape, Capsule):
+        return 0.5 * float(shape.length) + float(shape.radius)
+    if isinstance(shape, Box):
+        return 0.5 * float(np.linalg.norm(shape.size))
+    return 0.0
+
+
+def _thickness(shape) -> float:
+    """Half the thinnest dimension of a shape (m; a plane's is infinite)."""
+    if isinstance(shape, (Sphere, Capsule)):
+        return float(shape.radius)
+    if isinstance(shape, Box):
+        return 0.5 * float(min(shape.size))
+    return np.inf
+
+
 def collisions_of(topology) -> list:
     """The model's ``Collision`` components (compiled copies)."""
     return [c for c in topology.components.values() if isinstance(c, Collision)]
@@ -206,6 +226,14 @@ class CollisionKernel:
         self.plane_side = np.array([(p.a, p.b) if not self.finite[p.a] else (p.b, p.a)
                                     for p in (self.pairs[k] for k in self.plane_pairs)], dtype=int).reshape(-1, 2)
         self.pair_feature_rows = [np.arange(p.first, p.first + p.count) for p in self.pairs]
+        # Per entry, constant: its body's kinematics row (-1: the ground), the shape's origin in
+        # the body frame, its bounding radius about that origin (planes: 0) and a plane's normal.
+        self.entry_body = np.array([e.index for e in self.entries], dtype=int)
+        self.entry_local = np.array([e.shape.origin for e in self.entries], dtype=float).reshape(-1, 3)
+        self.entry_radius = np.array([_bounding_radius(e.shape) for e in self.entries])
+        self.entry_thickness = np.array([_thickness(e.shape) for e in self.entries])
+        self.entry_normal = np.array([getattr(e.shape, "normal", (0.0, 0.0, 0.0)) for e in self.entries],
+                                     dtype=float).reshape(-1, 3)
 
     def __getattr__(self, name):
         return getattr(self.base, name)
@@ -249,33 +277,33 @@ class CollisionKernel:
 
     def _measure(self, q, qd):
         fields, columns = self._bodies(q, qd)
-        placed = [self.placed(fields, k) for k in range(len(self.entries))]
-        spheres = [collide.bounding_sphere(p) for p in placed]
+        # Every entry's bounding sphere at once: its centre is the shape's origin.
+        R = np.concatenate((fields["rotation"], np.eye(3)[None]), axis=0)      # row -1: the ground
+        O = np.concatenate((fields["origin"], np.zeros((1, 3))), axis=0)
+        centres = O[self.entry_body] + np.einsum("eij,ej->ei", R[self.entry_body], self.entry_local)
         finite = np.flatnonzero(self.finite)
-        centres = np.array([spheres[k][0] for k in finite]).reshape(-1, 3)
-        radii = np.array([spheres[k][1] for k in finite])
+        radii = self.entry_radius[finite]
         margin = MARGIN_FRACTION * 2.0 * float(radii.max(initial=0.0)) + MARGIN_FLOOR
-        near = collide.near_pairs(centres, radii, margin) if len(finite) else set()
+        near = collide.near_pairs(centres[finite], radii, margin) if len(finite) else set()
         chosen = []
         if len(self.plane_pairs):  # planes: the bounding sphere's height above the plane
             planes, others = self.plane_side[:, 0], self.plane_side[:, 1]
-            o = np.array([placed[k][1] for k in planes])
-            n = np.array([placed[k][2] for k in planes])
-            c = np.array([spheres[k][0] for k in others])
-            r = np.array([spheres[k][1] for k in others])
-            height = np.einsum("ij,ij->i", n, c - o) - np.where(np.isfinite(r), r, 0.0)
-            keep = ~np.isfinite(r) | (height <= margin)
-            chosen.extend(self.plane_pairs[keep].tolist())
+            n = np.einsum("eij,ej->ei", R[self.entry_body[planes]], self.entry_normal[planes])
+            height = np.einsum("ij,ij->i", n, centres[others] - centres[planes]) - self.entry_radius[others]
+            chosen.extend(self.plane_pairs[height <= margin].tolist())
         for i, j in near:
             a, b = int(finite[i]), int(finite[j])
             k = self.pair_of.get((a, b), self.pair_of.get((b, a)))
             if k is not None:
                 chosen.append(k)
-        out = {}
+        out, placed = {}, {}
         for k in chosen:
             p = self.pairs[k]
+            for e in (p.a, p.b):
+                if e not in placed:
+                    placed[e] = self.placed(fields, e)
             out[k] = collide.features(placed[p.a], placed[p.b])
-        return out, fields, columns, spheres, margin
+        return out, fields, columns, (centres, self.entry_radius), margin
 
     # -- the contact rows ---------------------------------------------------------------------
     def contacts(self, q: np.ndarray, qd: np.ndarray) -> ConstraintValues:
@@ -414,18 +442,17 @@ class CollisionKernel:
         unseen: in it no shape moves by more than ``STEP_FRACTION`` of the thinnest shape's
         half thickness relative to another (gaps are only checked at the ends of steps)."""
         fields, _ = self._bodies(q, qd)
-        speeds, thin = [], np.inf
-        for k, e in enumerate(self.entries):
-            if not self.finite[k]:
-                continue
-            placed = self.placed(fields, k)
-            centre, radius = collide.bounding_sphere(placed)
-            thin = min(thin, collide.thickness(placed))
-            if e.index >= 0:
-                V = fields["velocity"][e.index]
-                speeds.append(float(np.linalg.norm(V[3:] + collide.cross(V[:3], centre)) + np.linalg.norm(V[:3]) * radius))
-        speeds = sorted(speeds)[-2:]
-        total = sum(speeds)
+        moving = self.finite & (self.entry_body >= 0)
+        if not moving.any():
+            return np.inf
+        rows = self.entry_body[moving]
+        R, O, V = fields["rotation"][rows], fields["origin"][rows], fields["velocity"][rows]
+        centres = O + np.einsum("eij,ej->ei", R, self.entry_local[moving])
+        w = V[:, :3]
+        speeds = (np.linalg.norm(V[:, 3:] + collide.cross(w, centres), axis=1)
+                  + np.linalg.norm(w, axis=1) * self.entry_radius[moving])
+        total = float(np.sort(speeds)[-2:].sum())
+        thin = float(self.entry_thickness[self.finite].min())
         return np.inf if not total > 0 else STEP_FRACTION * thin / total
 
     def contact_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
