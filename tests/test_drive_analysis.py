@@ -170,6 +170,8 @@ def test_time_varying_inputs_are_held_at_t_and_a_prescribed_motion_has_no_rest()
 #: Library models without an equilibrium, and why (the message must say so).
 NO_EQUILIBRIUM = {
     "bouncing_ball": "contacts",                         # free fall: a contact is not a static load
+    "sliding_ball": "contacts",                          # resting on its contact: not a static load
+    "box_on_slope": "contacts",                          # the same, on two contacts
     "double_pendulum_motor": "prescribes motion",        # a motor drives phi1(t)
     "slider_crank": "prescribes motion",                 # a motor turns the crank
     "slider_crank_parts": "prescribes motion",           # the same, from parts

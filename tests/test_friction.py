@@ -264,3 +264,24 @@ def test_friction_and_radius_survive_save_and_load(tmp_path):
     a = m.compile().simulate(0.3, [0.1, 0.0, 0.0], [0.0, 1.0, 0.0])
     b = again.compile().simulate(0.3, [0.1, 0.0, 0.0], [0.0, 1.0, 0.0])
     np.testing.assert_array_equal(a.q, b.q)
+
+
+def test_friction_modes_travel_with_a_pickled_result():
+    """The closed contacts recorded per sample keep their friction modes, so a result read
+    back and bound again gives the same contact forces (kinetic friction while sliding)."""
+    import pickle
+    system = planar_ball("lagrange", mu=0.3)
+    res = system.simulate(0.3, [0.1, 0.0, 0.0], [0.0, 2.0, 0.0], t_eval=np.linspace(0, 0.3, 7))
+    again = pickle.loads(pickle.dumps(res)).with_system(system)
+    np.testing.assert_array_equal(again.contact_forces["floor"], res.contact_forces["floor"])
+    assert again.contact_forces["floor"][0] == pytest.approx([-0.3 * 1.5 * G, 0.0, 1.5 * G], rel=1e-12)
+
+
+def test_impact_by_hand_with_friction():
+    """``sys.impact``: a ball (m = 1.5 kg) closing at 1 m/s while sliding at 1 m/s, e = 0,
+    mu = 0.3: P_n = 1.5 N s; sticking needs 2 m u / 7 = 0.43 <= mu P_n = 0.45, so it leaves
+    rolling at 5/7 m/s (spin 5/7 / r)."""
+    system = planar_ball("lagrange", mu=0.3)
+    impact = system.impact([0.1, 0.0, 0.0], [-1.0, 1.0, 0.0])
+    assert impact.impulses == {"floor": pytest.approx(1.5, rel=1e-12)}
+    np.testing.assert_allclose(impact.qd, [0.0, 5 / 7, 50 / 7], rtol=1e-10, atol=1e-12)

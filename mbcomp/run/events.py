@@ -259,7 +259,9 @@ class ContactWatch:
         if resting:
             result = solve_impact(self.kernel, self.formulation, t, q, qd, active, restitution={i: 0.0 for i in resting},
                                   offsets=self.offsets, persistent=self.persistent)
-        self.persistent = tuple(sorted((set(self.persistent) & set(result.closed)) | set(resting)))
+        # The impact law decided every touching contact's slip: friction modes start afresh
+        # from the speeds after it (settle()), not from what they were before.
+        self._closed = Closed(sorted((set(self.persistent) & set(result.closed)) | set(resting)))
         for name, impulse in result.impulses.items():
             if self.names.index(name) in active:
                 self.events.append(Event(time=float(t), contact=name, impulse=impulse,
