@@ -172,6 +172,7 @@ NO_EQUILIBRIUM = {
     "bouncing_ball": "contacts",                         # free fall: a contact is not a static load
     "sliding_ball": "contacts",                          # resting on its contact: not a static load
     "box_on_slope": "contacts",                          # the same, on two contacts
+    "ball_on_box": "contacts",                           # free fall onto a box: collisions are contacts
     "double_pendulum_motor": "prescribes motion",        # a motor drives phi1(t)
     "slider_crank": "prescribes motion",                 # a motor turns the crank
     "slider_crank_parts": "prescribes motion",           # the same, from parts
