@@ -486,7 +486,8 @@ class System:
                  rtol: float = 1e-8, atol: float = 1e-10, t_eval: Any = None, tau: Any = None,
                  parameters: Mapping[str, Any] | None = None, progress: bool = False,
                  max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-                 dt: float | None = None, x0: Mapping[str, float] | None = None, max_samples: int | None = None):
+                 dt: float | None = None, x0: Mapping[str, float] | None = None, max_samples: int | None = None,
+                 contact_mode: str = "events"):
         """Integrate from ``(q0, qd0)`` at t = 0 to ``t_end`` (s) and return a ``Result``.
 
         ``method`` is a scipy ``solve_ivp`` method name or ``OdeSolver`` subclass;
@@ -501,10 +502,20 @@ class System:
         ``t_eval=None`` keeps every step, at most ``max_samples`` (default
         ``mbcomp.core.checks.MAX_SAMPLES``) of them: a run that needs more stops with a
         ``SimulationError`` naming ``t_eval`` and ``max_samples``.
+        ``contact_mode="timestepping"`` (with a step ``dt``, s) runs Moreau-Jean time
+        stepping instead of locating contact events: first order, for dense contact
+        (docs/contacts.md, "Time stepping for dense contact"); ``method``, ``rtol``,
+        ``atol``, ``max_step``, ``rest_speed`` and ``integrator`` do not apply to it.
         """
         from mbcomp.run.simulate import simulate
+        from mbcomp.run.timestepping import check_mode, simulate_timestepping
+        dt = check_mode(contact_mode, dt, t_end)
         system = self.with_parameters(parameters)
         q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
+        if contact_mode == "timestepping":
+            result = simulate_timestepping(system._kernel, system._formulation, t_end, q0, qd0, dt=dt, tau=tau,
+                                           t_eval=t_eval, max_samples=max_samples)
+            return result.with_system(system)
         result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
                           atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
                           rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0),
