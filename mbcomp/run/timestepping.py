@@ -10,7 +10,7 @@ event-driven driver (docs/contacts.md, "Time stepping for dense contact").  One 
    free velocity ``v_f = v + dt M^-1 f``;
 3. contact rows at ``q_m`` (``Contact`` rows and ``Collision`` features alike:
    ``friction.plane_contact_rows``); a contact is active when its gap predicted at the
-   step's end, ``g(q_m) + dt/2 min(J_n v, 0)``, is not positive;
+   step's end without it, ``g(q_m) + dt/2 min(J_n v_f, 0)``, is below ``GAP_TOLERANCE``;
 4. Newton's law at velocity level and Coulomb's cone on the active contacts,
    ``xi_n = J_n v+ + e min(J_n v, 0) >= 0 _|_ P_n >= 0``, ``|P_t| <= mu P_n``
    (``cone_sweeps``, the law of ``friction.cone_impact``), ``v+ = v_f + M^-1 J^T P``;
@@ -35,7 +35,7 @@ from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.core.result import Result
 from mbcomp.formulations.cone_sweeps import cone_sweeps
 from mbcomp.formulations.friction import plane_contact_rows
-from mbcomp.formulations.impact import restitution_of
+from mbcomp.formulations.impact import GAP_TOLERANCE, restitution_of
 
 #: Below this many speeds the mass matrix and contact rows stay dense arrays (sparse
 #: matrices cost more than they save on small models).
@@ -144,7 +144,8 @@ def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0
         v_free = v + h * (Minv @ f)
         gaps = kernel.contacts(q_m, v)
         approach = gaps.J @ v
-        active = np.flatnonzero(gaps.g + 0.5 * h * np.minimum(approach, 0.0) <= 0.0)
+        predicted = gaps.g + 0.5 * h * np.minimum(gaps.J @ v_free, 0.0)    # the gap at the step's end
+        active = np.flatnonzero(predicted <= GAP_TOLERANCE)
         if active.size:
             rows = plane_contact_rows(kernel, q_m, v, active)
             k = active.size
