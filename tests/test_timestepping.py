@@ -163,3 +163,15 @@ def test_loops_are_refused_in_time_stepping():
     system = m.compile(formulation="dae")
     with pytest.raises(mb.ModelError, match="trees only"):
         system.simulate(0.1, np.zeros(system.nq), contact_mode="timestepping", dt=1e-3)
+
+
+def test_free_flight_is_exact_and_samples_follow_t_eval():
+    """Away from contact the midpoint step is exact under constant gravity; ``t_eval``
+    picks the steps at those times, and a last partial step ends at t_end."""
+    system = planar_ball()
+    res = system.simulate(0.1, [0.6, 0, 0], [0, 0, 0], contact_mode="timestepping", dt=1e-3, t_eval=[0, 0.05, 0.1])
+    assert np.allclose(res.t, [0, 0.05, 0.1])
+    assert np.allclose(res.q[:, 0], 0.6 - 0.5 * G * res.t ** 2, atol=1e-12)
+    every = system.simulate(0.1005, [0.6, 0, 0], [0, 0, 0], contact_mode="timestepping", dt=1e-3)
+    assert len(every.t) == 102 and every.t[-1] == pytest.approx(0.1005)
+    assert every.qd[-1, 0] == pytest.approx(-G * 0.1005, rel=1e-12)
