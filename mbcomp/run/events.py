@@ -11,6 +11,10 @@ from mbcomp.formulations.friction import CONE_TOLERANCE, Closed, friction_of, pl
 from mbcomp.formulations.impact import GAP_TOLERANCE, solve_impact
 from mbcomp.core.result import Event
 
+#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip along its
+#: direction falls below minus this; above it, round-off of a slip held at zero.
+STOP_SPEED = 1e-9
+
 
 class ContactWatch:
     """The contact state of one simulation: which contacts are persistent (closed and
@@ -209,7 +213,9 @@ class ContactWatch:
             v = rows.basis[0, 1:].T @ (rows.tangent[0] @ qd_old)
             speed = float(np.linalg.norm(v))
             direction = v / speed if speed > 1e-12 else closed.slip[i]
-            if self.slip_speed(q_new, qd_new, i, direction) > 0.0:
+            # A contact sliding at zero speed (at the cone's edge while the others hold the
+            # body: redundant contacts) has nothing to stop; only a slip that reverses is an event.
+            if self.slip_speed(q_new, qd_new, i, direction) > -STOP_SPEED:
                 continue
 
             def along(s, i=i, direction=direction):
