@@ -213,9 +213,12 @@ class ContactWatch:
             v = rows.basis[0, 1:].T @ (rows.tangent[0] @ qd_old)
             speed = float(np.linalg.norm(v))
             direction = v / speed if speed > 1e-12 else closed.slip[i]
-            # A contact sliding at zero speed (at the cone's edge while the others hold the
-            # body: redundant contacts) has nothing to stop; only a slip that reverses is an event.
-            if self.slip_speed(q_new, qd_new, i, direction) > -STOP_SPEED:
+            along_new = self.slip_speed(q_new, qd_new, i, direction)
+            if along_new > 0.0:
+                continue
+            # A contact sliding at zero speed from the step's start to its end at the cone's
+            # edge while sticking ones hold the body (redundant contacts) has nothing to stop.
+            if closed.stick and speed <= STOP_SPEED and along_new >= -STOP_SPEED:
                 continue
 
             def along(s, i=i, direction=direction):
