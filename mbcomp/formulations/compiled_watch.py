@@ -13,6 +13,8 @@ import ctypes
 
 import numpy as np
 
+from mbcomp.codegen.integrators import LoopSession
+
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
 
@@ -21,7 +23,7 @@ def pointer(array: np.ndarray) -> int:
     return array.__array_interface__["data"][0]
 
 
-class ContactWatching:
+class ContactWatching(LoopSession):
     """Mixin of a compiled run (``lib``, ``n`` reduced/full coordinates, ``contacts`` held):
     arming the loop's watch and reading back the step it stopped at.  ``WATCH`` names the C
     function of the formulation (``dae_watch``, ``lagrange_watch``)."""
