@@ -443,7 +443,7 @@ def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray
         names = []
         for i in involved:
             comp = constraints.groups_by_row(i)
-            kind = "loop closure" if type(comp).__name__ == "LoopClosure" else type(comp).__name__
+            kind = comp.noun or type(comp).__name__
             label = f"{kind} {constraints.owner[i]!r}"
             if label not in names:
                 names.append(label)
