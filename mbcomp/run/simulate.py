@@ -31,14 +31,6 @@ from mbcomp.run.stepping import IMPLICIT_METHODS, CompiledStepping, ScipySteppin
 PROGRESS_INTERVAL = 0.1
 
 
-def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_speed=1e-4):
-    """The numeric settings of a run, checked (``ModelError`` naming the argument):
-    ``(t_end, t_eval)`` (see ``RunOptions.checked``)."""
-    options = RunOptions.checked(t_end, rtol=rtol, atol=atol, t_eval=t_eval, max_step=max_step, dt=dt,
-                                 rest_speed=rest_speed)
-    return options.t_end, options.t_eval
-
-
 class _Rows:
     """Rows of ``width`` values appended one by one or in blocks into one growing float array
     (8 bytes a value, not a Python array object per row); ``np.array(rows)`` gives the rows."""
