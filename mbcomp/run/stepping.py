@@ -104,14 +104,19 @@ class ScipyStepping:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
         self.offsets = offsets
         self.workspace = self._workspace(t0, q0, qd0, contacts)
-        if watched and self.workspace.y0.size == 0:
+        if self.workspace.y0.size == 0:
+            if not watched:
+                return  # nothing to integrate: the driver evaluates the prescribed motion
             self.max_step = min(self.max_step, self.options.t_end / 500)  # nothing to integrate: step time to watch
         if (self.method in IMPLICIT_METHODS and self.formulation.constraints is None
                 and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None):
             tau = self.tau
             self.solver_options["jac"] = compiled_jacobian(
                 self.kernel, None if tau is None else self.kernel.tau(tau, 0.0, q0, qd0))
-        self.solver = self._solver(t0, self.workspace.y0)
+        try:
+            self.solver = self._solver(t0, self.workspace.y0)  # (scipy evaluates the right-hand side here)
+        except SimulationError as exc:
+            raise SimulationError(f"{self.error_prefix}{exc}") from None
 
     @property
     def nothing_to_integrate(self) -> bool:
