@@ -4,7 +4,7 @@ steps (events and output), one stats builder.
 ``simulate`` turns its arguments into a ``RunOptions`` (``core/run_options.py``), asks
 ``run/paths.py`` which stepping to take (the loop compiled with the model, or scipy's stepping
 of the compiled right-hand side: ``System.integration_path`` reports the same choice), and
-runs ``drive``: one loop in which a stepping (``run/stepping.py``) hands over accepted steps
+runs ``run_steps``: one loop in which a stepping (``run/stepping.py``) hands over accepted steps
 that need Python (an event in them, samples inside them, a projection after them) until t_end.
 ``Result.stats`` comes from ``run/stats.py`` on every path.
 """
@@ -25,7 +25,8 @@ from mbcomp.formulations.impact import GAP_TOLERANCE
 from mbcomp.run.events import ContactWatch
 from mbcomp.run.paths import IntegrationPath, choose_path
 from mbcomp.run.stats import PRESCRIBED, Counts, run_stats
-from mbcomp.run.stepping import IMPLICIT_METHODS, CompiledStepping, ScipyStepping, solver_class  # noqa: F401
+from mbcomp.run.stepping import CompiledStepping, ScipyStepping
+
 
 #: Processor seconds between progress updates from a compiled loop.
 PROGRESS_INTERVAL = 0.1
@@ -153,8 +154,6 @@ class _Recorder:
                 self.next += 1
 
 
-
-
 def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
@@ -172,7 +171,7 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
 def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray, *, tau: Any = None,
         z0: np.ndarray | None = None) -> Result:
     """The driver: checks what the options and inputs ask for, chooses the stepping
-    (``paths.choose_path``) and runs ``drive`` with it.  A compiled run that meets a singular
+    (``paths.choose_path``) and runs ``run_steps`` with it.  A compiled run that meets a singular
     position of the constraints (``RankLost``) is run again in scipy's stepping, which
     handles it, unless the options insist on compiled code."""
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
@@ -194,7 +193,7 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
                                      f"{path.reason}")
     if path.compiled:
         try:
-            return drive(CompiledStepping(kernel, formulation, options, tau, z0, Counts(), budget), kernel,
+            return run_steps(CompiledStepping(kernel, formulation, options, tau, z0, Counts(), budget), kernel,
                          formulation, options, q0, qd0, path, budget)
         except RankLost:
             if options.method == "RK4" or options.integrator == "compiled":
@@ -203,11 +202,11 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
             path = IntegrationPath("scipy", "the compiled loop met a singular position of the constraints")
     elif options.integrator == "compiled":
         raise ModelError("simulate", f"integrator='compiled' is not possible: {path.reason}")
-    return drive(ScipyStepping(kernel, formulation, options, tau, z0, Counts()), kernel, formulation, options,
+    return run_steps(ScipyStepping(kernel, formulation, options, tau, z0, Counts()), kernel, formulation, options,
                  q0, qd0, path, budget)
 
 
-def drive(stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,
+def run_steps(stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,
           path: IntegrationPath, budget=None) -> Result:
     """The one loop over accepted steps.  ``stepping`` (``run/stepping.py``) advances the run
     and returns each step that needs Python, or None at t_end; the driver samples it,
