@@ -25,7 +25,7 @@ from mbcomp.formulations.impact import GAP_TOLERANCE
 from mbcomp.run.events import ContactWatch
 from mbcomp.run.paths import IntegrationPath, choose_path
 from mbcomp.run.stats import PRESCRIBED, Counts, run_stats
-from mbcomp.run.stepping import CompiledStepping, ScipyStepping
+from mbcomp.run.stepping import CompiledStepping, ScipyStepping, Stepping
 
 
 #: Processor seconds between progress updates from a compiled loop.
@@ -206,7 +206,7 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
                  q0, qd0, path, budget)
 
 
-def run_steps(stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,
+def run_steps(stepping: Stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,
           path: IntegrationPath, budget=None) -> Result:
     """The one loop over accepted steps.  ``stepping`` (``run/stepping.py``) advances the run
     and returns each step that needs Python, or None at t_end; the driver samples it,

@@ -17,7 +17,7 @@ through its hooks (``Formulation.compiled_setup``, ``compiled_session``, ``conta
 from __future__ import annotations
 
 import contextlib
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
@@ -60,6 +60,45 @@ class Step:
 
     def dense_output(self):
         return self._dense()
+
+
+class Stepping(Protocol):
+    """What the driver (``simulate.run_steps``) asks of a stepping.
+
+    ``integrator`` (the name ``Result.stats`` gives it), ``method``, ``counts`` (``Counts``),
+    ``applied`` (the applied forces contact events see), ``records_start`` (its rows include
+    the start sample), ``state_columns`` (drive states in a sample, ``states()`` their values),
+    ``error_prefix``, ``result_tau``, ``nothing_to_integrate`` (after ``begin``)."""
+
+    integrator: str
+    records_start: bool
+    error_prefix: str
+
+    def running(self, bar, interval: float):
+        """A context manager around the run (the compiled loops' step hook)."""
+
+    def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple,
+              watched: bool) -> None:
+        """Start from the consistent ``(q0, qd0)`` at ``t0``."""
+
+    def advance(self, recorder, gaps: np.ndarray | None) -> "Step | None":
+        """The next accepted step that needs Python, or None at t_end (rows it wrote: into
+        ``recorder``)."""
+
+    def accepted(self, t: float, step: "Step") -> None:
+        """After the driver finished ``step`` at ``t``."""
+
+    def go_on(self, t: float, corrected: np.ndarray | None, step: "Step") -> None:
+        """Continue after a step without an event (from ``corrected`` when not None)."""
+
+    def stop(self) -> None:
+        """Stop for an event."""
+
+    def restart_at(self, t: float, q: np.ndarray, qd: np.ndarray, contacts: tuple) -> None:
+        """Start afresh after an event, with the closed ``contacts``."""
+
+    def finish_counts(self) -> None:
+        """Complete ``counts`` at the end of the run."""
 
 
 class ScipyStepping:
