@@ -50,17 +50,19 @@ class RunOptions:
     def checked(cls, t_end: float, **settings: Any) -> "RunOptions":
         """The options with every number checked (``ModelError`` naming the argument);
         ``t_eval`` becomes a float array."""
-        options = cls(t_end, **settings)
-        t_end = checks.number(options.t_end, "t_end", positive=True)
-        rtol = checks.number(options.rtol, "rtol", positive=True)
-        atol = checks.number(options.atol, "atol", positive=True)
-        checks.number(options.max_step, "max_step", positive=True, finite=False)
-        checks.number(options.rest_speed, "rest_speed", nonnegative=True)
-        dt = None if options.dt is None else checks.number(options.dt, "dt", positive=True)
-        t_eval = None if options.t_eval is None else checks.time_grid(options.t_eval, t_end)
-        if options.integrator not in INTEGRATORS:
-            raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {options.integrator!r}")
-        return dataclasses.replace(options, t_end=t_end, rtol=rtol, atol=atol, dt=dt, t_eval=t_eval)
+        t_end = checks.number(t_end, "t_end", positive=True)
+        rtol = checks.number(settings.pop("rtol", cls.rtol), "rtol", positive=True)
+        atol = checks.number(settings.pop("atol", cls.atol), "atol", positive=True)
+        checks.number(settings.get("max_step", cls.max_step), "max_step", positive=True, finite=False)
+        checks.number(settings.get("rest_speed", cls.rest_speed), "rest_speed", nonnegative=True)
+        dt = settings.pop("dt", None)
+        dt = None if dt is None else checks.number(dt, "dt", positive=True)
+        t_eval = settings.pop("t_eval", None)
+        t_eval = None if t_eval is None else checks.time_grid(t_eval, t_end)
+        integrator = settings.get("integrator", cls.integrator)
+        if integrator not in INTEGRATORS:
+            raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
+        return cls(t_end, rtol=rtol, atol=atol, dt=dt, t_eval=t_eval, **settings)
 
     def replace(self, **changes: Any) -> "RunOptions":
         """A copy with ``changes`` (not checked again)."""

@@ -73,6 +73,7 @@ class Stepping(Protocol):
     integrator: str
     records_start: bool
     error_prefix: str
+    finite_checked: bool
 
     def running(self, bar, interval: float):
         """A context manager around the run (the compiled loops' step hook)."""
@@ -109,6 +110,8 @@ class ScipyStepping:
     records_start = False
     #: Put before the message of a ``SimulationError`` raised during the run.
     error_prefix = "simulation stopped: "
+    #: The samples are known finite (else the driver checks them).
+    finite_checked = False
 
     def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts):
         self.kernel, self.formulation, self.options, self.counts = kernel, formulation, options, counts
@@ -253,6 +256,7 @@ class CompiledStepping:
 
     integrator = "compiled"
     error_prefix = ""  # (the compiled loops' messages name the method and the time)
+    finite_checked = True  # (the compiled loops stop at a non-finite state: NOT_FINITE)
 
     def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts,
                  budget=None):
