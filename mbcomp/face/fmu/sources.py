@@ -1,0 +1,126 @@
+"""The C of an exported FMU: the model's own library sources (``CompiledModel.export_sources``:
+the generated functions, the tree and KKT solves, DOP853) with the FMI 2.0 wrapper
+(``c/fmu2.c``) appended to the template unit, after the ``#define``s and tables this module
+writes: sizes, value-reference bases, start values, the dae formulation's rows and gains."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from mbcomp.core import c_text, tolerances
+from mbcomp.core.errors import ModelError
+from mbcomp.face.fmu.variables import SETTINGS, Table
+from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
+from mbcomp.formulations.dae_compiled import motor_programs
+from mbcomp.formulations.impact import GAP_TOLERANCE
+
+_INCLUDE = re.compile(r'^#include "fmi2_decl\.h"$', re.M)
+
+
+def _table(ctype: str, name: str, values) -> str:
+    """A C array with one spare entry (C has no empty arrays)."""
+    values = list(values)
+    if ctype == "double":
+        body = ", ".join(repr(float(v)) for v in values)
+    else:
+        body = ", ".join(str(int(v)) for v in values)
+    return f"static const {ctype} {name}[{len(values) + 1}] = {{{body}{', ' if values else ''}0}};\n"
+
+
+def dae_rows(system, formulation) -> tuple[np.ndarray, np.ndarray, list[int], np.ndarray]:
+    """The KKT rows of the model's constraints as the dae formulation configures them
+    (``dae_compiled.DaeRows``): ``(spec, data, motor speed parameter, programs)``; the speed
+    motor's entry is its speed's index in ``p`` (-1: fixed, -2: not a speed motor); its
+    offset (its coordinate at the start) is set when the FMU is initialised."""
+    kernel = system.kernel
+    topology, layout = kernel.topology, kernel.compiled.layout
+    constraints = formulation.constraints
+    rows = [] if constraints is None or formulation.nominal_rows is None else [int(r) for r in formulation.nominal_rows]
+    spec = np.zeros((len(rows), SPEC_LONGS), dtype=np.int64)
+    data = np.zeros((len(rows), DATA_DOUBLES))
+    speed_p: list[int] = []
+    programs: list[np.ndarray] = []
+    compiled = motor_programs(formulation) if rows else {}
+    start = 0
+    for k, r in enumerate(rows):
+        spec[k, 4] = -1
+        speed_p.append(-2)
+        if r not in constraints.coordinate_rows:
+            spec[k, :2] = (ROW_GEOMETRIC, constraints.geometric_rows.index(r))
+            continue
+        eq = constraints.equations[r]
+        joint = eq.joint if isinstance(eq.joint, str) else eq.joint.name
+        spec[k, :4] = (ROW_MOTOR, r, topology.q_slice[joint].start, topology.v_slice[joint].start)
+        speed = constraints.motor_speed(kernel, r)
+        if speed is not None:
+            data[k] = (speed, 0.0)
+            key = f"{constraints.owner[r]}.speed"
+            speed_p[-1] = layout.entries[key][0] if key in layout.entries else -1
+            continue
+        program = compiled.get(r)
+        if program is None:
+            raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
+                                                           "exported into an FMU (give it as an expression of t)")
+        spec[k, 4] = start
+        programs.append(np.asarray(program, dtype=float))
+        start += len(program)
+    return spec, data, speed_p, (np.concatenate(programs) if programs else np.zeros(0))
+
+
+def restitution_indices(system) -> list[int]:
+    """Where each contact's restitution sits in the parameter vector ``p``."""
+    kernel = system.kernel
+    entries = kernel.compiled.layout.entries
+    out = []
+    for contact in kernel.topology.contacts:
+        key = getattr(contact, "restitution_key", f"{contact.name}.restitution")
+        if key not in entries:
+            raise ModelError(contact, f"its restitution ({key!r}) is not a parameter: it cannot be exported")
+        out.append(entries[key][0])
+    return out
+
+
+def wrapper_source(system, formulation, table: Table, guid: str) -> str:
+    """The ``#define``s, tables and the FMI wrapper (``c/fmu2.c`` with its header inlined)."""
+    kernel = system.kernel
+    y0 = [v.start for v in table.variables[:table.ny]]
+    p0 = [v.start for v in table.variables[table.vr_par:table.vr_in]]
+    spec, data, speed_p, programs = dae_rows(system, formulation)
+    alpha, beta = getattr(formulation, "baumgarte", (0.0, 0.0))
+    settings = {name: start for name, start, _, _ in SETTINGS}
+    defines = {
+        "FMU_NY": table.ny, "FMU_NV": kernel.nv, "FMU_NP": len(p0), "FMU_NU": len(table.input_speeds),
+        "FMU_NK": len(kernel.topology.contacts), "FMU_NR0": len(spec),
+        "FMU_VR_STATE": 0, "FMU_VR_DER": table.vr_der, "FMU_VR_PAR": table.vr_par, "FMU_VR_IN": table.vr_in,
+        "FMU_VR_RTOL": table.vr_settings, "FMU_VR_ATOL": table.vr_settings + 1,
+        "FMU_VR_REST": table.vr_settings + 2, "FMU_VR_MAXSTEP": table.vr_settings + 3,
+        "FMU_ALPHA": repr(float(alpha)), "FMU_BETA": repr(float(beta)),
+        "FMU_SCHUR_SCALE": repr(float(getattr(formulation, "schur_scale", 0.0))),
+        "FMU_SINGULAR_TOL": repr(float(getattr(formulation, "singular_tolerance", tolerances.RANK_TOLERANCE))),
+        "FMU_GAP_TOL": repr(GAP_TOLERANCE), "FMU_GAP_XTOL": repr(tolerances.EVENT_GAP_XTOL),
+        "FMU_FORCE_XTOL": repr(tolerances.EVENT_FORCE_XTOL),
+        "FMU_RTOL0": repr(settings["mbcomp.rtol"]), "FMU_ATOL0": repr(settings["mbcomp.atol"]),
+        "FMU_REST0": repr(settings["mbcomp.rest_speed"]),
+        "FMU_SPEC_LONGS": SPEC_LONGS, "FMU_DATA_DOUBLES": DATA_DOUBLES, "FMU_ROW_CONTACT": ROW_CONTACT,
+    }
+    text = [f'#define FMU_GUID "{guid}"\n'] + [f"#define {k} {v}\n" for k, v in defines.items()]
+    text += [_table("double", "fmu_y_start", y0), _table("double", "fmu_p_start", p0),
+             _table("int", "fmu_input_speed", table.input_speeds),
+             _table("int", "fmu_restitution", restitution_indices(system)),
+             _table("long", "fmu_spec0", spec.reshape(-1)), _table("double", "fmu_data0", data.reshape(-1)),
+             _table("int", "fmu_motor_speed_p", speed_p), _table("double", "fmu_programs", programs)]
+    header = c_text.raw("mbcomp.face.fmu", "fmi2_decl.h")
+    wrapper = _INCLUDE.sub(lambda _: header.rstrip("\n"), c_text.raw("mbcomp.face.fmu", "fmu2.c"))
+    return "\n/* ---- the FMI 2.0 interface (mbcomp face/fmu) ---- */\n" + "".join(text) + wrapper
+
+
+def fmu_units(system, formulation, table: Table, guid: str) -> list[tuple[str, str]]:
+    """The FMU's translation units ``[(file stem, text)]``: the model's library sources with
+    the wrapper appended to the templates."""
+    units = []
+    for name, text in system.kernel.compiled.export_sources():
+        if name == "templates":
+            text = text + wrapper_source(system, formulation, table, guid)
+        units.append((name, text))
+    return units
