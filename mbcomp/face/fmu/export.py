@@ -17,6 +17,7 @@ import uuid
 import zipfile
 from pathlib import Path
 
+from mbcomp.codegen import cache
 from mbcomp.codegen.backend import C_FLAGS, COLD_FLAGS, CBuild, c_compiler
 from mbcomp.core.errors import CompileError, ModelError
 from mbcomp.core.writing import write_file
@@ -86,8 +87,10 @@ def export_fmu(system, formulation, path, kind: str = "cs", inputs=(), outputs=N
     build = CBuild(compiler)
     try:
         for name, text in units:
-            flags = (COLD_FLAGS if name == "sizes" else C_FLAGS) + FMU_FLAGS
-            build.add(name, text, flags, statements=text.count(";"))
+            flags = (COLD_FLAGS if name in ("sizes", "fmu_tables") else C_FLAGS) + FMU_FLAGS
+            # the templates with the wrapper depend only on the kind of model: cached, shared
+            shared = cache.toolchain(compiler, flags) if name == "templates" else None
+            build.add(name, text, flags, statements=text.count(";"), shared=shared)
     except BaseException:
         build.cancel()
         raise

@@ -25,7 +25,7 @@ def _table(ctype: str, name: str, values) -> str:
         body = ", ".join(repr(float(v)) for v in values)
     else:
         body = ", ".join(str(int(v)) for v in values)
-    return f"static const {ctype} {name}[{len(values) + 1}] = {{{body}{', ' if values else ''}0}};\n"
+    return f"{_HIDDEN} const {ctype} {name}[{len(values) + 1}] = {{{body}{', ' if values else ''}0}};\n"
 
 
 def dae_rows(system, formulation) -> tuple[np.ndarray, np.ndarray, list[int], np.ndarray]:
@@ -81,46 +81,68 @@ def restitution_indices(system) -> list[int]:
     return out
 
 
-def wrapper_source(system, formulation, table: Table, guid: str) -> str:
-    """The ``#define``s, tables and the FMI wrapper (``c/fmu2.c`` with its header inlined)."""
-    kernel = system.kernel
-    y0 = [v.start for v in table.variables[:table.ny]]
-    p0 = [v.start for v in table.variables[table.vr_par:table.vr_in]]
-    spec, data, speed_p, programs = dae_rows(system, formulation)
-    alpha, beta = getattr(formulation, "baumgarte", (0.0, 0.0))
+#: The constants the wrapper reads, defined per model in the unit ``fmu_tables``:
+#: (C type, name); ``FMU_<NAME>`` in the C is ``fmu_<NAME>``.
+SCALARS = (("int", "NY"), ("int", "NV"), ("int", "NP"), ("int", "NU"), ("int", "NK"), ("int", "NR0"),
+           ("int", "VR_STATE"), ("int", "VR_DER"), ("int", "VR_PAR"), ("int", "VR_IN"), ("int", "VR_RTOL"),
+           ("int", "VR_ATOL"), ("int", "VR_REST"), ("int", "VR_MAXSTEP"), ("double", "ALPHA"), ("double", "BETA"),
+           ("double", "SCHUR_SCALE"), ("double", "SINGULAR_TOL"))
+TABLES = (("double", "fmu_y_start"), ("double", "fmu_p_start"), ("int", "fmu_input_speed"),
+          ("int", "fmu_restitution"), ("long", "fmu_spec0"), ("double", "fmu_data0"), ("int", "fmu_motor_speed_p"),
+          ("double", "fmu_programs"))
+_HIDDEN = '__attribute__((visibility("hidden")))'
+
+
+def wrapper_source() -> str:
+    """The FMI wrapper (``c/fmu2.c``, its header inlined) after the package's constants and
+    the declarations of the model's (``SCALARS``, ``TABLES``, ``fmu_guid``): the same text
+    for every model of one kind."""
     settings = {name: start for name, start, _, _ in SETTINGS}
-    defines = {
-        "FMU_NY": table.ny, "FMU_NV": kernel.nv, "FMU_NP": len(p0), "FMU_NU": len(table.input_speeds),
-        "FMU_NK": len(kernel.topology.contacts), "FMU_NR0": len(spec),
-        "FMU_VR_STATE": 0, "FMU_VR_DER": table.vr_der, "FMU_VR_PAR": table.vr_par, "FMU_VR_IN": table.vr_in,
-        "FMU_VR_RTOL": table.vr_settings, "FMU_VR_ATOL": table.vr_settings + 1,
-        "FMU_VR_REST": table.vr_settings + 2, "FMU_VR_MAXSTEP": table.vr_settings + 3,
-        "FMU_ALPHA": repr(float(alpha)), "FMU_BETA": repr(float(beta)),
-        "FMU_SCHUR_SCALE": repr(float(getattr(formulation, "schur_scale", 0.0))),
-        "FMU_SINGULAR_TOL": repr(float(getattr(formulation, "singular_tolerance", tolerances.RANK_TOLERANCE))),
-        "FMU_GAP_TOL": repr(GAP_TOLERANCE), "FMU_GAP_XTOL": repr(tolerances.EVENT_GAP_XTOL),
-        "FMU_FORCE_XTOL": repr(tolerances.EVENT_FORCE_XTOL),
-        "FMU_RTOL0": repr(settings["mbcomp.rtol"]), "FMU_ATOL0": repr(settings["mbcomp.atol"]),
-        "FMU_REST0": repr(settings["mbcomp.rest_speed"]),
-        "FMU_SPEC_LONGS": SPEC_LONGS, "FMU_DATA_DOUBLES": DATA_DOUBLES, "FMU_ROW_CONTACT": ROW_CONTACT,
-    }
-    text = [f'#define FMU_GUID "{guid}"\n'] + [f"#define {k} {v}\n" for k, v in defines.items()]
-    text += [_table("double", "fmu_y_start", y0), _table("double", "fmu_p_start", p0),
-             _table("int", "fmu_input_speed", table.input_speeds),
-             _table("int", "fmu_restitution", restitution_indices(system)),
-             _table("long", "fmu_spec0", spec.reshape(-1)), _table("double", "fmu_data0", data.reshape(-1)),
-             _table("int", "fmu_motor_speed_p", speed_p), _table("double", "fmu_programs", programs)]
+    defines = {"FMU_GAP_TOL": repr(GAP_TOLERANCE), "FMU_GAP_XTOL": repr(tolerances.EVENT_GAP_XTOL),
+               "FMU_FORCE_XTOL": repr(tolerances.EVENT_FORCE_XTOL),
+               "FMU_RTOL0": repr(settings["mbcomp.rtol"]), "FMU_ATOL0": repr(settings["mbcomp.atol"]),
+               "FMU_REST0": repr(settings["mbcomp.rest_speed"]),
+               "FMU_SPEC_LONGS": SPEC_LONGS, "FMU_DATA_DOUBLES": DATA_DOUBLES, "FMU_ROW_CONTACT": ROW_CONTACT}
+    text = [f"#define {k} {v}\n" for k, v in defines.items()]
+    for ctype, name in SCALARS:
+        text.append(f"extern const {ctype} fmu_{name} {_HIDDEN};\n#define FMU_{name} fmu_{name}\n")
+    text += [f"extern const {ctype} {name}[] {_HIDDEN};\n" for ctype, name in TABLES]
+    text.append(f"extern const char fmu_guid[] {_HIDDEN};\n#define FMU_GUID fmu_guid\n")
     header = c_text.raw("mbcomp.face.fmu", "fmi2_decl.h")
     wrapper = _INCLUDE.sub(lambda _: header.rstrip("\n"), c_text.raw("mbcomp.face.fmu", "fmu2.c"))
     return "\n/* ---- the FMI 2.0 interface (mbcomp face/fmu) ---- */\n" + "".join(text) + wrapper
 
 
+def tables_source(system, formulation, table: Table, guid: str) -> str:
+    """The unit defining the model's constants that the wrapper declares."""
+    kernel = system.kernel
+    y0 = [v.start for v in table.variables[:table.ny]]
+    p0 = [v.start for v in table.variables[table.vr_par:table.vr_in]]
+    spec, data, speed_p, programs = dae_rows(system, formulation)
+    alpha, beta = getattr(formulation, "baumgarte", (0.0, 0.0))
+    values = {"NY": table.ny, "NV": kernel.nv, "NP": len(p0), "NU": len(table.input_speeds),
+              "NK": len(kernel.topology.contacts), "NR0": len(spec), "VR_STATE": 0, "VR_DER": table.vr_der,
+              "VR_PAR": table.vr_par, "VR_IN": table.vr_in, "VR_RTOL": table.vr_settings,
+              "VR_ATOL": table.vr_settings + 1, "VR_REST": table.vr_settings + 2,
+              "VR_MAXSTEP": table.vr_settings + 3, "ALPHA": float(alpha), "BETA": float(beta),
+              "SCHUR_SCALE": float(getattr(formulation, "schur_scale", 0.0)),
+              "SINGULAR_TOL": float(getattr(formulation, "singular_tolerance", tolerances.RANK_TOLERANCE))}
+    text = [f"{_HIDDEN} const {ctype} fmu_{name} = {values[name]!r};\n" for ctype, name in SCALARS]
+    arrays = {"fmu_y_start": y0, "fmu_p_start": p0, "fmu_input_speed": table.input_speeds,
+              "fmu_restitution": restitution_indices(system), "fmu_spec0": spec.reshape(-1),
+              "fmu_data0": data.reshape(-1), "fmu_motor_speed_p": speed_p, "fmu_programs": programs}
+    text += [_table(ctype, name, arrays[name]) for ctype, name in TABLES]
+    text.append(f'{_HIDDEN} const char fmu_guid[] = "{guid}";\n')
+    return "".join(text)
+
+
 def fmu_units(system, formulation, table: Table, guid: str) -> list[tuple[str, str]]:
     """The FMU's translation units ``[(file stem, text)]``: the model's library sources with
-    the wrapper appended to the templates."""
+    the wrapper appended to the templates, and the model's constants (``fmu_tables``)."""
     units = []
     for name, text in system.kernel.compiled.export_sources():
         if name == "templates":
-            text = text + wrapper_source(system, formulation, table, guid)
+            text = text + wrapper_source()
         units.append((name, text))
+    units.append(("fmu_tables", tables_source(system, formulation, table, guid)))
     return units

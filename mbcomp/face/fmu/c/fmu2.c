@@ -1,8 +1,11 @@
 /* The FMI 2.0 interface of an exported mbcomp model (face/fmu): model exchange and
    co-simulation in one library.  Appended to the model's own template unit (the tree and
-   KKT solves, DOP853, the dae formulation's rows), after the #defines and tables that
-   face/fmu/sources.py writes (FMU_*, fmu_*), so it calls the same static functions the
-   compiled simulate runs: rhs, dop853_run, dae_project, dae_rows_eval.
+   KKT solves, DOP853, the dae formulation's rows), so it calls the same static functions
+   the compiled simulate runs: rhs, dop853_run, dae_project, dae_rows_eval.  Like the
+   templates it depends only on the kind of model: the model's sizes, value references,
+   start values and rows (FMU_*, fmu_*) are constants that face/fmu/sources.py declares
+   before this text and defines in a unit of their own, so this unit's object is cached
+   and shared by the FMUs of every model of one kind.
 
    State y = [q (NCOORD), v (NV), z (NZ)], the compiled loop's.  Constraints (loops, motors)
    and held contacts are rows of the dae formulation's KKT solve with Baumgarte gains
@@ -84,11 +87,7 @@ static double fmu_no_input[1];
 
 /* Contacts' gaps, Jacobian rows and bias at y (into I->kc). */
 static void fmu_contacts(fmu_t *I, const double *y) {
-#if FMU_NK > 0
-    contacts(y, y + NCOORD, I->p, fmu_no_input, I->kc);
-#else
-    (void)I; (void)y;
-#endif
+    if (FMU_NK > 0) contacts(y, y + NCOORD, I->p, fmu_no_input, I->kc);
 }
 
 static double fmu_gap(fmu_t *I, int k) { return I->kc[CONTACTS_GAP_OFF + k]; }
@@ -211,7 +210,7 @@ static int fmu_impact_solve(fmu_t *I, double t, double *y, int *involved, const 
    leaving slower than the rest speed are held closed from now on (a plastic impact on
    them).  Returns 1 when the speeds changed, 0 when nothing closes, -1 on failure. */
 static int fmu_impact(fmu_t *I, double t, double *y) {
-#if FMU_ROWS && FMU_NK > 0
+#if FMU_ROWS
     int active[FMU_NK + 1], involved[FMU_NK + 1], plastic[FMU_NK + 1], any = 0;
     double qd_before[FMU_NV + 1];
     fmu_contacts(I, y);
@@ -295,7 +294,7 @@ static int fmu_start_contacts(fmu_t *I) {
 }
 
 /* ---- co-simulation: contact events on a step ----------------------------------------- */
-#if FMU_ROWS && FMU_NK > 0
+#if FMU_ROWS
 struct fmu_root_ctx { fmu_t *I; double t_old, h; const double *y_old, *F; int k; };
 
 static double fmu_gap_fn(double s, void *c) {
@@ -748,7 +747,7 @@ FMI2_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
         I->fresh = 0;
         I->h = state[1];
         if (status == 0) { I->t = target; break; }
-#if FMU_ROWS && FMU_NK > 0
+#if FMU_ROWS
         if (status == LOOP_EVENT) {
             I->t = state[0];
             if (++events > 100000 || fmu_event(I, state[0])) {
