@@ -112,7 +112,7 @@ static int fmu_contact_forces(fmu_t *I, double t, const double *y, double *force
     if (status) return status;
     for (int r = FMU_NR0; r < I->nr; ++r) forces[I->spec[FMU_SPEC_LONGS * r + 1]] = dae_lam[r];
 #else
-    (void)t; (void)y;
+    (void)I; (void)t; (void)y;
 #endif
     return 0;
 }
@@ -523,7 +523,7 @@ FMI2_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[
     fmu_t *I = c;
     if (!I) return fmi2Error;
     for (mb_size_t i = 0; i < n; ++i) {
-        const unsigned int r = vr[i];
+        const long r = (long)vr[i];
         if (r < FMU_VR_DER) value[i] = I->y[r - FMU_VR_STATE];
         else if (r < FMU_VR_PAR) {
             if (I->phase == FMU_INSTANTIATED || fmu_derivatives(I)) return fmi2Error;
@@ -544,7 +544,7 @@ FMI2_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[
     if (!I) return fmi2Error;
     const int before = I->phase == FMU_INSTANTIATED || I->phase == FMU_INITIALISING;
     for (mb_size_t i = 0; i < n; ++i) {
-        const unsigned int r = vr[i];
+        const long r = (long)vr[i];
         if (r < FMU_VR_DER) {
             if (!before) { fmu_log(I, fmi2Error, "logStatusError", "coordinates and speeds are set before initialisation"); return fmi2Error; }
             I->y[r - FMU_VR_STATE] = value[i];
@@ -667,7 +667,7 @@ FMI2_EXPORT fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
 
 FMI2_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], mb_size_t nx) {
     fmu_t *I = c;
-    if (!I || nx != FMU_NY) return fmi2Error;
+    if (!I || nx != (mb_size_t)FMU_NY) return fmi2Error;
     mb_copy(I->y, x, sizeof(double) * FMU_NY);
     I->der_ok = 0;
     return fmi2OK;
@@ -675,14 +675,14 @@ FMI2_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x
 
 FMI2_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], mb_size_t nx) {
     fmu_t *I = c;
-    if (!I || nx != FMU_NY) return fmi2Error;
+    if (!I || nx != (mb_size_t)FMU_NY) return fmi2Error;
     mb_copy(x, I->y, sizeof(double) * FMU_NY);
     return fmi2OK;
 }
 
 FMI2_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], mb_size_t nx) {
     fmu_t *I = c;
-    if (!I || nx != FMU_NY) return fmi2Error;
+    if (!I || nx != (mb_size_t)FMU_NY) return fmi2Error;
     if (fmu_derivatives(I)) return fmi2Error;
     mb_copy(dx, I->der, sizeof(double) * FMU_NY);
     return fmi2OK;
@@ -692,7 +692,7 @@ FMI2_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], mb_siz
 FMI2_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], mb_size_t nz) {
     fmu_t *I = c;
     double forces[FMU_NK + 1];
-    if (!I || nz != FMU_NK) return fmi2Error;
+    if (!I || nz != (mb_size_t)FMU_NK) return fmi2Error;
     if (nz == 0) return fmi2OK;
     fmu_tau(I);
     fmu_configure(I, 0);
@@ -705,7 +705,7 @@ FMI2_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], mb_
 }
 
 FMI2_EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x[], mb_size_t nx) {
-    if (!c || nx != FMU_NY) return fmi2Error;
+    if (!c || nx != (mb_size_t)FMU_NY) return fmi2Error;
     for (mb_size_t i = 0; i < nx; ++i) x[i] = 1.0;
     return fmi2OK;
 }
@@ -738,7 +738,9 @@ FMI2_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
         if (fmu_rate(I, I->t, I->y, I->f)) { I->phase = FMU_FAILED; return fmi2Error; }
     }
     I->f_stale = 0;
+#if FMU_ROWS
     int events = 0;
+#endif
     while (I->t < target) {
         double state[2] = {I->t, I->fresh ? 0.0 : I->h};
         i_out = 0;
