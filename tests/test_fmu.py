@@ -14,7 +14,7 @@ import pytest
 
 import mbcomp as mb
 
-fmpy = pytest.importorskip("fmpy")
+fmpy = pytest.importorskip("fmpy", exc_type=ImportError)
 from fmpy import read_model_description, simulate_fmu  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
