@@ -55,6 +55,7 @@ class CompiledModel:
         ``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"``; with ``formulation`` (its
         name) the automatic choice (``recursive.choose``)."""
         self.c_snippets = tuple(c_snippets)
+        self.use_cache = cache  #: whether this model's code goes through the code cache
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
         self.flat_model = model
@@ -235,8 +236,20 @@ class CompiledModel:
         sizes = self._c_sizes()
         functions = {f: outs for f, outs in self._functions().items() if f not in OUTPUT_FUNCTIONS}
         templates = codegen.c_prototypes(functions) + self._c_templates(sizes, lazy_dense=False, reduced_loop=False)
-        return [("templates", templates), ("model", codegen.c_source(self.program, functions)),
-                ("sizes", sizes.unit())]
+        return [("templates", templates), ("model", self._export_model_source(functions)), ("sizes", sizes.unit())]
+
+    def _export_model_source(self, functions: dict) -> str:
+        """The generated C of ``functions`` in one unit: printed from the program when it is in
+        memory (this compile generated the code), else from the code cache (an earlier export
+        of this model), else generated (sympy) and then cached, where the compile used the cache."""
+        tools = cache.toolchain()
+        key = cache.entry_key(self.description + "\nexport sources", self.key + codegen.generator_text(), tools)
+        text = cache.read_text(key, ".c", tools) if self._program is None and self.use_cache else None
+        if text is None:
+            text = codegen.c_source(self.program, functions)
+            if self.use_cache:
+                cache.store(key, ".c", text.encode(), tools)
+        return text
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()

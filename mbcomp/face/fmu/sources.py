@@ -81,6 +81,9 @@ def restitution_indices(system) -> list[int]:
     return out
 
 
+#: Co-simulation without inputs or contacts: how many communication points one run of the loop
+#: past the current one may fill from its dense output (``fmu_step_ahead`` in ``c/fmu2.c``).
+AHEAD = 64
 #: The constants the wrapper reads, defined per model in the unit ``fmu_tables``:
 #: (C type, name); ``FMU_<NAME>`` in the C is ``fmu_<NAME>``.
 SCALARS = (("int", "NY"), ("int", "NV"), ("int", "NP"), ("int", "NU"), ("int", "NK"), ("int", "NR0"),
@@ -102,7 +105,7 @@ def wrapper_source() -> str:
                "FMU_FORCE_XTOL": repr(tolerances.EVENT_FORCE_XTOL),
                "FMU_RTOL0": repr(settings["mbcomp.rtol"]), "FMU_ATOL0": repr(settings["mbcomp.atol"]),
                "FMU_REST0": repr(settings["mbcomp.rest_speed"]),
-               "FMU_SPEC_LONGS": SPEC_LONGS, "FMU_DATA_DOUBLES": DATA_DOUBLES, "FMU_ROW_CONTACT": ROW_CONTACT}
+               "FMU_AHEAD": AHEAD, "FMU_SPEC_LONGS": SPEC_LONGS, "FMU_DATA_DOUBLES": DATA_DOUBLES, "FMU_ROW_CONTACT": ROW_CONTACT}
     text = [f"#define {k} {v}\n" for k, v in defines.items()]
     for ctype, name in SCALARS:
         text.append(f"extern const {ctype} fmu_{name} {_HIDDEN};\n#define FMU_{name} fmu_{name}\n")

@@ -45,6 +45,13 @@ typedef struct {
     int f_stale;      /* f is not the rate at y (an input changed) */
     int der_ok;
     long events;
+    /* Look-ahead (co-simulation without inputs or contacts): the loop steps on past the
+       communication point at its own pace, its dense output gives the values at the next
+       points (t, t + h, t + 2h, ...), kept in `ahead` (FMU_AHEAD rows) for the next calls;
+       yi, fi, ti: the loop's own state, ahead of the visible one (t, y). */
+    int look;
+    double *yi, *fi, ti, stop, *ahead, ahead_t[FMU_AHEAD];
+    int n_ahead, i_ahead;
 } fmu_t;
 
 static void fmu_log(fmu_t *I, fmi2Status status, const char *category, const char *message) {
@@ -393,12 +400,14 @@ static void fmu_defaults(fmu_t *I) {
     I->rtol = FMU_RTOL0; I->atol = FMU_ATOL0; I->rest_speed = FMU_REST0; I->max_step = INFINITY;
     I->phase = FMU_INSTANTIATED;
     I->fresh = 1; I->f_stale = 1; I->der_ok = 0; I->events = 0;
+    I->look = 0; I->n_ahead = I->i_ahead = 0; I->ti = 0.0; I->stop = INFINITY;
 }
 
 static void fmu_free(fmu_t *I) {
     if (!I) return;
     free(I->y); free(I->f); free(I->der); free(I->p); free(I->u); free(I->tau); free(I->work); free(I->ev);
     free(I->scratch); free(I->kc); free(I->spec); free(I->data); free(I->held); free(I->gaps);
+    free(I->yi); free(I->fi); free(I->ahead);
     free(I);
 }
 
@@ -436,7 +445,9 @@ FMI2_EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type kind, fmi2St
     I->spec = calloc(FMU_SPEC_LONGS * (FMU_NR0 + FMU_NK + 1), sizeof(long));
     I->data = calloc(FMU_DATA_DOUBLES * (FMU_NR0 + FMU_NK + 1), sizeof(double));
     I->held = calloc(FMU_NK + 1, sizeof(long)); I->gaps = calloc(FMU_NK + 1, sizeof(double));
-    if (!I->y || !I->f || !I->der || !I->p || !I->u || !I->tau || !I->work || !I->ev || !I->scratch || !I->kc
+    I->yi = calloc(FMU_NY + 1, sizeof(double)); I->fi = calloc(FMU_NY + 1, sizeof(double));
+    I->ahead = calloc((mb_size_t)FMU_AHEAD * (FMU_NY + 1), sizeof(double));
+    if (!I->yi || !I->fi || !I->ahead || !I->y || !I->f || !I->der || !I->p || !I->u || !I->tau || !I->work || !I->ev || !I->scratch || !I->kc
         || !I->spec || !I->data || !I->held || !I->gaps) {
         fmu_free(I);
         return 0;
@@ -452,9 +463,9 @@ FMI2_EXPORT void fmi2FreeInstance(fmi2Component c) {
 FMI2_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                            fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     fmu_t *I = c;
-    (void)stopTimeDefined; (void)stopTime;
     if (!I) return fmi2Error;
     I->t = startTime;
+    I->stop = stopTimeDefined ? stopTime : INFINITY;
     if (toleranceDefined && tolerance > 0 && I->kind == fmi2CoSimulation) I->rtol = tolerance;
     return fmi2OK;
 }
@@ -723,6 +734,61 @@ FMI2_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2V
     return n ? fmi2Error : fmi2OK;
 }
 
+static const char *fmu_loop_failure(int status) {
+    return status == -1 ? "DOP853: the step size fell below its minimum"
+        : status == -3 ? "DOP853: the state is not finite"
+        : "DOP853: the accelerations cannot be computed (a singular mass matrix or constraint Jacobian)";
+}
+
+/* fmi2DoStep without inputs or contacts: the value at t + h from the look-ahead rows when it
+   is one of them, else from the loop run on past t + h at its own step size, its dense output
+   giving the rows of t + h, t + 2h, ... as far as it went (as simulate's t_eval). */
+static fmi2Status fmu_step_ahead(fmu_t *I, double target, double h) {
+    const double tol = 1e-9 * (fabs(h) > 1e-300 ? fabs(h) : 1.0);
+    for (; I->i_ahead < I->n_ahead; ++I->i_ahead) {
+        if (I->ahead_t[I->i_ahead] > target + tol) break;
+        if (fabs(I->ahead_t[I->i_ahead] - target) <= tol) {
+            mb_copy(I->y, I->ahead + (mb_size_t)I->i_ahead * FMU_NY, sizeof(double) * FMU_NY);
+            I->t = target;
+            ++I->i_ahead;
+            return fmi2OK;
+        }
+    }
+    if (!I->look || I->ti > target) {  /* start, or a point the rows miss: the loop from the visible state */
+        mb_copy(I->yi, I->y, sizeof(double) * FMU_NY);
+        I->ti = I->t;
+        I->fresh = !I->look || I->fresh;
+        if (!I->fresh && fmu_rate(I, I->ti, I->yi, I->fi)) { I->phase = FMU_FAILED; return fmi2Error; }
+        I->look = 1;
+    }
+    double t_end = I->fresh ? target : I->ti + I->h;
+    if (t_end < target) t_end = target;
+    if (t_end > I->stop && I->stop >= target) t_end = I->stop;
+    int n = 0;
+    for (; n < FMU_AHEAD; ++n) {
+        const double tk = target + n * h;
+        if (tk > t_end + tol || (n && !(h > 0))) break;
+        I->ahead_t[n] = tk < t_end ? tk : t_end;
+    }
+    long counts[3] = {0, 0, 0}, n_steps = 0, i_out = 0;
+    double state[2] = {I->ti, I->fresh ? 0.0 : I->h};
+    const int status = dop853_run(I->p, I->tau, state, I->yi, I->fi, t_end, I->rtol, I->atol, I->max_step, I->ahead_t,
+                                  n, &i_out, I->ahead, 0, 0, 0, &n_steps, counts);
+    I->fresh = 0;
+    I->h = state[1];
+    I->ti = state[0];
+    if (status != 0) {
+        fmu_log(I, fmi2Error, "logStatusError", fmu_loop_failure(status));
+        I->phase = FMU_FAILED;
+        return fmi2Error;
+    }
+    I->n_ahead = (int)i_out;
+    I->i_ahead = 1;
+    mb_copy(I->y, I->ahead, sizeof(double) * FMU_NY);
+    I->t = target;
+    return fmi2OK;
+}
+
 /* DOP853 from the current time to t + h (the loop's own step control, its step carried
    from call to call), contact events located and applied inside the step. */
 FMI2_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
@@ -730,6 +796,13 @@ FMI2_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!I || I->phase != FMU_STEPPING) return fmi2Error;
     const double target = t + h;
+    if (FMU_NU == 0 && FMU_NK == 0) {
+        fmu_tau(I);
+        fmu_configure(I, 0);
+        const fmi2Status status = fmu_step_ahead(I, target, h);
+        I->der_ok = 0;
+        return status;
+    }
     long counts[3] = {0, 0, 0}, n_steps = 0, i_out = 0;
     double t_out[1] = {target};
     fmu_tau(I);
@@ -762,9 +835,7 @@ FMI2_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
         }
 #endif
         I->t = state[0];
-        fmu_log(I, fmi2Error, "logStatusError", status == -1 ? "DOP853: the step size fell below its minimum"
-                : status == -3 ? "DOP853: the state is not finite" : "DOP853: the accelerations cannot be computed "
-                "(a singular mass matrix or constraint Jacobian)");
+        fmu_log(I, fmi2Error, "logStatusError", fmu_loop_failure(status));
         I->phase = FMU_FAILED;
         return fmi2Error;
     }
