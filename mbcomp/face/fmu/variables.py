@@ -10,6 +10,7 @@ in ``ModelVariables`` is ``k + 1``.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,18 +65,33 @@ def _joint_units(topology) -> tuple[dict, dict]:
     return q_units, v_units
 
 
+#: A unit name the FMU declares: SI symbols, products (space), powers (^), quotients (/).
+_UNIT = re.compile(r"^[A-Za-z][A-Za-z0-9^]*(?:[ /][A-Za-z][A-Za-z0-9^]*)*$")
+_WORDS = {"or", "per", "output", "measured", "error", "q"}
+
+
 def parameter_unit(compiled, key: str) -> str:
-    """The unit of parameter ``key`` where its specification gives one ("" otherwise; the
-    unit of a joint's coordinate where it says ``"q"``)."""
+    """The unit of parameter ``key`` where its specification gives one: ``"q"`` (the unit of
+    the joint's coordinate) and ``"N m or N"`` (by the joint's kind) resolved through the
+    component's joint; "" where there is none or it is not a unit (``"output per error"``)."""
     found = compiled.parameter_spec(key)
     if found is None:
         return ""
     owner, spec = found
-    unit = spec.unit or ""
-    if unit == "q":
+    unit = re.sub(r"\s*\(.*\)\s*$", "", spec.unit or "").strip()
+    if unit == "q" or " or " in unit:
         joint = getattr(owner, "joint", None)
         joint = compiled.topology.components.get(getattr(joint, "name", joint))
-        unit = joint.coord_units[0] if joint is not None and getattr(joint, "coord_units", None) else ""
+        units = getattr(joint, "coord_units", None) if joint is not None else None
+        if not units or units[0] not in ("rad", "m"):
+            return ""
+        if unit == "q":
+            unit = units[0]
+        else:
+            choices = unit.split(" or ")
+            unit = choices[0] if units[0] == "rad" or len(choices) < 2 else choices[1]
+    if not _UNIT.match(unit) or _WORDS & set(re.split(r"[ /]", unit)):
+        return ""
     return unit
 
 
