@@ -88,6 +88,8 @@ def test_contents_and_variables(exported):
             for i, v in enumerate(value):
                 assert float(variables[f"{key}[{i + 1}]"].start) == pytest.approx(v)
     assert variables["bar1.mass"].causality == "parameter" and variables["bar1.mass"].unit == "kg"
+    for name in ("g", "L", "width", "thickness", "rho", "m", "I"):  # the file's [parameters]
+        assert float(variables[name].start) == pytest.approx(system.parameters[name])
     assert len(md.derivatives) == 4 and md.numberOfEventIndicators == 0
     ball = read_model_description(str(exported["bouncing_ball"][2]["me"]))
     assert ball.numberOfEventIndicators == 1
@@ -111,15 +113,26 @@ def test_fmpy_matches_mbcomp(exported, name, kind):
         assert len(ref.events) == 2
 
 
+#: (System parameters, the same as FMU start values): component values (a vector by its
+#: elements); model parameters of the file's [parameters], whose component values follow
+#: (L: lengths, masses and inertias; rho through the derived m), a component value set with
+#: them winning (as in with_parameters), a derived parameter set on its own.
+CHANGES = [({"bar2.mass": 0.3, "gravity": (9.0, 1.0, 0.0)}, {"bar2.mass": 0.3, "gravity[1]": 9.0, "gravity[2]": 1.0}),
+           ({"L": 0.7}, {"L": 0.7}),
+           ({"rho": 1000.0, "bar2.mass": 0.3}, {"rho": 1000.0, "bar2.mass": 0.3}),
+           ({"m": 0.2, "g": 5.0}, {"m": 0.2, "g": 5.0})]
+
+
 @pytest.mark.parametrize("kind", ["cs", "me"])
-def test_parameter_start_values_take_effect(exported, kind):
+@pytest.mark.parametrize("change", range(len(CHANGES)))
+def test_parameter_start_values_take_effect(exported, kind, change):
     model, system, paths = exported["double_pendulum"]
-    changed = {"bar2.mass": 0.3, "gravity": (9.0, 1.0, 0.0)}
+    parameters, start = CHANGES[change]
     q0, qd0 = start_state(model, system)
-    ref = system.simulate(1.0, q0, qd0, t_eval=times(1.0), rtol=RTOL, atol=ATOL, parameters=changed)
+    ref = system.simulate(1.0, q0, qd0, t_eval=times(1.0), rtol=RTOL, atol=ATOL, parameters=parameters)
     base = system.simulate(1.0, q0, qd0, t_eval=times(1.0), rtol=RTOL, atol=ATOL)
     assert np.abs(ref.q - base.q).max() > 1e-2  # the change matters
-    got = run_fmu(paths[kind], kind, 1.0, start_values={"bar2.mass": 0.3, "gravity[1]": 9.0, "gravity[2]": 1.0})
+    got = run_fmu(paths[kind], kind, 1.0, start_values=start)
     assert np.abs(got["phi1"] - ref.q[:, 0]).max() < 1e-6
     assert np.abs(got["theta2"] - ref.q[:, 1]).max() < 1e-6
 
@@ -243,3 +256,16 @@ def test_drive_states_are_states_of_the_fmu(tmp_path):
     for i, name in enumerate(system.extra_states):
         assert np.abs(got[name] - ref.z[:, i]).max() < 1e-6 * max(1.0, np.abs(ref.z[:, i]).max()), name
     assert np.abs(got["elbow.angle"] - ref.q[:, 1]).max() < 1e-6
+
+
+def test_parameter_programs_evaluate_as_expressions():
+    """The programs the FMU evaluates for derived parameters (face/fmu/derived.py) give what
+    the expressions give in Python, every operation included."""
+    from mbcomp.face.fmu.derived import program, run
+    from mbcomp.spec.components import expr
+    a, b = expr.Expr.parameter("a", 0.7), expr.Expr.parameter("b", 2.5)
+    e = (-(a * b) + abs(a - b) / b) ** 2 + expr.sqrt(b) * expr.sin(a) - expr.cos(b) + a.tan() \
+        + a.exp() / b.log()
+    index = {"a": 0, "b": 1}
+    for env in ({"a": 0.7, "b": 2.5}, {"a": -1.3, "b": 0.4}):
+        assert run(program(e, index), [env["a"], env["b"]]) == pytest.approx(e.evaluate(env), rel=1e-15)

@@ -21,6 +21,7 @@ from mbcomp.codegen import cache
 from mbcomp.codegen.backend import C_FLAGS, COLD_FLAGS, CBuild, c_compiler
 from mbcomp.core.errors import CompileError, ModelError
 from mbcomp.core.writing import write_file
+from mbcomp.face.fmu.derived import derived_parameters
 from mbcomp.face.fmu.description import model_description
 from mbcomp.face.fmu.sources import fmu_units
 from mbcomp.face.fmu.variables import build_table
@@ -79,11 +80,12 @@ def export_fmu(system, formulation, path, kind: str = "cs", inputs=(), outputs=N
     compiler = c_compiler()
     if compiler is None:
         raise ModelError("export_fmu", "an FMU is compiled C: no C compiler was found (set $CC)")
-    table = build_table(system, kind, tuple(inputs), None if outputs is None else tuple(outputs))
+    derived = derived_parameters(system)
+    table = build_table(system, kind, tuple(inputs), None if outputs is None else tuple(outputs), derived)
     ident = identifier(system.name)
     digest = hashlib.sha256("\n".join([system.kernel.compiled.description, kind, repr(table)]).encode()).digest()
     guid = "{" + str(uuid.UUID(bytes=digest[:16])) + "}"
-    units = fmu_units(system, formulation, table, guid)
+    units = fmu_units(system, formulation, table, guid, derived)
     build = CBuild(compiler)
     try:
         for name, text in units:

@@ -88,11 +88,14 @@ AHEAD = 64
 #: (C type, name); ``FMU_<NAME>`` in the C is ``fmu_<NAME>``.
 SCALARS = (("int", "NY"), ("int", "NV"), ("int", "NP"), ("int", "NU"), ("int", "NK"), ("int", "NR0"),
            ("int", "VR_STATE"), ("int", "VR_DER"), ("int", "VR_PAR"), ("int", "VR_IN"), ("int", "VR_RTOL"),
-           ("int", "VR_ATOL"), ("int", "VR_REST"), ("int", "VR_MAXSTEP"), ("double", "ALPHA"), ("double", "BETA"),
+           ("int", "VR_ATOL"), ("int", "VR_REST"), ("int", "VR_MAXSTEP"), ("int", "VR_ENV"),
+           ("int", "NE"), ("int", "NX"), ("int", "ND"), ("double", "ALPHA"), ("double", "BETA"),
            ("double", "SCHUR_SCALE"), ("double", "SINGULAR_TOL"))
 TABLES = (("double", "fmu_y_start"), ("double", "fmu_p_start"), ("int", "fmu_input_speed"),
           ("int", "fmu_restitution"), ("long", "fmu_spec0"), ("double", "fmu_data0"), ("int", "fmu_motor_speed_p"),
-          ("double", "fmu_programs"))
+          ("double", "fmu_programs"), ("double", "fmu_env_start"), ("int", "fmu_env_exported"),
+          ("int", "fmu_env_binding"), ("int", "fmu_derived_p"), ("int", "fmu_derived_prog"),
+          ("double", "fmu_derive_programs"))
 _HIDDEN = '__attribute__((visibility("hidden")))'
 
 
@@ -116,30 +119,34 @@ def wrapper_source() -> str:
     return "\n/* ---- the FMI 2.0 interface (mbcomp face/fmu) ---- */\n" + "".join(text) + wrapper
 
 
-def tables_source(system, formulation, table: Table, guid: str) -> str:
+def tables_source(system, formulation, table: Table, guid: str, derived) -> str:
     """The unit defining the model's constants that the wrapper declares."""
     kernel = system.kernel
     y0 = [v.start for v in table.variables[:table.ny]]
-    p0 = [v.start for v in table.variables[table.vr_par:table.vr_in]]
+    p0 = [v.start for v in table.variables[table.vr_par:table.vr_env]]
     spec, data, speed_p, programs = dae_rows(system, formulation)
     alpha, beta = getattr(formulation, "baumgarte", (0.0, 0.0))
     values = {"NY": table.ny, "NV": kernel.nv, "NP": len(p0), "NU": len(table.input_speeds),
               "NK": len(kernel.topology.contacts), "NR0": len(spec), "VR_STATE": 0, "VR_DER": table.vr_der,
               "VR_PAR": table.vr_par, "VR_IN": table.vr_in, "VR_RTOL": table.vr_settings,
               "VR_ATOL": table.vr_settings + 1, "VR_REST": table.vr_settings + 2,
-              "VR_MAXSTEP": table.vr_settings + 3, "ALPHA": float(alpha), "BETA": float(beta),
+              "VR_MAXSTEP": table.vr_settings + 3, "VR_ENV": table.vr_env, "NE": len(derived.env),
+              "NX": len(derived.exported), "ND": len(derived.entries), "ALPHA": float(alpha), "BETA": float(beta),
               "SCHUR_SCALE": float(getattr(formulation, "schur_scale", 0.0)),
               "SINGULAR_TOL": float(getattr(formulation, "singular_tolerance", tolerances.RANK_TOLERANCE))}
     text = [f"{_HIDDEN} const {ctype} fmu_{name} = {values[name]!r};\n" for ctype, name in SCALARS]
     arrays = {"fmu_y_start": y0, "fmu_p_start": p0, "fmu_input_speed": table.input_speeds,
               "fmu_restitution": restitution_indices(system), "fmu_spec0": spec.reshape(-1),
-              "fmu_data0": data.reshape(-1), "fmu_motor_speed_p": speed_p, "fmu_programs": programs}
+              "fmu_data0": data.reshape(-1), "fmu_motor_speed_p": speed_p, "fmu_programs": programs,
+              "fmu_env_start": derived.env, "fmu_env_exported": derived.exported, "fmu_env_binding": derived.bindings,
+              "fmu_derived_p": [i for i, _ in derived.entries], "fmu_derived_prog": [o for _, o in derived.entries],
+              "fmu_derive_programs": derived.programs}
     text += [_table(ctype, name, arrays[name]) for ctype, name in TABLES]
     text.append(f'{_HIDDEN} const char fmu_guid[] = "{guid}";\n')
     return "".join(text)
 
 
-def fmu_units(system, formulation, table: Table, guid: str) -> list[tuple[str, str]]:
+def fmu_units(system, formulation, table: Table, guid: str, derived) -> list[tuple[str, str]]:
     """The FMU's translation units ``[(file stem, text)]``: the model's library sources with
     the wrapper appended to the templates, and the model's constants (``fmu_tables``)."""
     units = []
@@ -147,5 +154,5 @@ def fmu_units(system, formulation, table: Table, guid: str) -> list[tuple[str, s
         if name == "templates":
             text = text + wrapper_source()
         units.append((name, text))
-    units.append(("fmu_tables", tables_source(system, formulation, table, guid)))
+    units.append(("fmu_tables", tables_source(system, formulation, table, guid, derived)))
     return units

@@ -50,6 +50,7 @@ class Table:
     vr_in: int
     vr_settings: int
     input_speeds: tuple = field(default=())  #: speed index driven by each input
+    vr_env: int = 0                          #: the model parameters (``derived.py``) start here
 
     @property
     def outputs(self) -> list[int]:
@@ -95,11 +96,14 @@ def parameter_unit(compiled, key: str) -> str:
     return unit
 
 
-def build_table(system, kind: str, inputs=(), outputs=None) -> Table:
+def build_table(system, kind: str, inputs=(), outputs=None, derived=None) -> Table:
     """The variables of ``system``'s FMU of ``kind`` ("cs" or "me"): ``inputs`` names joints
     that get an input (their generalised force: N m on a rotation, N on a translation);
     ``outputs`` names the coordinates, speed columns and drive states that are outputs (None:
-    all of them; the others are local variables)."""
+    all of them; the others are local variables); ``derived``: the model parameters
+    (``derived.derived_parameters``; None: none)."""
+    from mbcomp.face.fmu.derived import Derived
+    derived = derived if derived is not None else Derived()
     kernel = system.kernel
     compiled, topology = kernel.compiled, kernel.topology
     state_map = topology.state_map
@@ -145,6 +149,12 @@ def build_table(system, kind: str, inputs=(), outputs=None) -> Table:
             for i in range(shape[0]):
                 variables.append(Variable(f"{key}[{i + 1}]", "parameter", "fixed", float(p[start + i]), unit,
                                           "parameter"))
+    vr_env = len(variables)
+    for name, value, unit in zip(derived.names, derived.values, derived.units):
+        unit = re.sub(r"\s*\(.*\)\s*$", "", unit).strip()
+        unit = unit if _UNIT.match(unit) and not _WORDS & set(re.split(r"[ /]", unit)) else ""
+        variables.append(Variable(name, "parameter", "fixed", float(value), unit,
+                                  "model parameter (the component values computed from it follow)"))
     vr_in = len(variables)
     speeds = []
     for joint_name in inputs:
@@ -168,11 +178,4 @@ def build_table(system, kind: str, inputs=(), outputs=None) -> Table:
     clashes = sorted({n for n in names if names.count(n) > 1})
     if clashes:
         raise ModelError("export_fmu", f"variable names {clashes} are used twice (rename the joint or parameter)")
-    return Table(tuple(variables), ny, ny if kind == "me" else ny, vr_par, vr_in, vr_settings, tuple(speeds))
-
-
-def start_vectors(table: Table) -> tuple[np.ndarray, np.ndarray]:
-    """The start values of the states and of the parameter vector, in their C order."""
-    y = np.array([v.start for v in table.variables[:table.ny]], dtype=float)
-    p = np.array([v.start for v in table.variables[table.vr_par:table.vr_in]], dtype=float)
-    return y, p
+    return Table(tuple(variables), ny, ny, vr_par, vr_in, vr_settings, tuple(speeds), vr_env)

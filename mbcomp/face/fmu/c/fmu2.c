@@ -20,6 +20,7 @@
 mb_size_t strlen(const char *);
 char *strncpy(char *, const char *, mb_size_t);
 int strcmp(const char *, const char *);
+double tan(double);
 
 #ifndef DAE_LOOP
 #define FMU_ROWS 0
@@ -52,6 +53,10 @@ typedef struct {
     int look;
     double *yi, *fi, ti, stop, *ahead, ahead_t[FMU_AHEAD];
     int n_ahead, i_ahead;
+    /* Model parameters (face/fmu/derived.py): env (FMU_NE), which of them and which entries
+       of p the importer set (those keep their value; the others follow their expressions). */
+    double *env;
+    int *env_set, *p_set, any_env_set;
 } fmu_t;
 
 static void fmu_log(fmu_t *I, fmi2Status status, const char *category, const char *message) {
@@ -401,13 +406,55 @@ static void fmu_defaults(fmu_t *I) {
     I->phase = FMU_INSTANTIATED;
     I->fresh = 1; I->f_stale = 1; I->der_ok = 0; I->events = 0;
     I->look = 0; I->n_ahead = I->i_ahead = 0; I->ti = 0.0; I->stop = INFINITY;
+    for (int k = 0; k < FMU_NE; ++k) { I->env[k] = fmu_env_start[k]; I->env_set[k] = 0; }
+    for (int i = 0; i < FMU_NP; ++i) I->p_set[i] = 0;
+    I->any_env_set = 0;
+}
+
+/* A program of face/fmu/derived.py over the model parameters env (the operations of
+   spec/components/expr.py's Expr.evaluate, in its order; NaN where Python raises). */
+static double fmu_eval(const double *pc, const double *env) {
+    const long n = (long)pc[0];
+    double st[64];
+    int sp = -1;
+    for (long k = 0; k < n; ++k) {
+        const int op = (int)pc[1 + 2 * k];
+        const double arg = pc[2 + 2 * k];
+        if (op <= 1) {
+            if (sp >= 63) return NAN;
+            st[++sp] = op == 0 ? arg : env[(long)arg];
+        } else if (op <= 9) {
+            const double x = st[sp];
+            st[sp] = op == 2 ? -x : op == 3 ? fabs(x) : op == 4 ? (x < 0.0 ? NAN : sqrt(x)) : op == 5 ? sin(x)
+                : op == 6 ? cos(x) : op == 7 ? tan(x) : op == 8 ? exp(x) : (x <= 0.0 ? NAN : log(x));
+        } else {
+            const double b = st[sp--], a = st[sp];
+            st[sp] = op == 10 ? a + b : op == 11 ? a - b : op == 12 ? a * b : op == 13 ? (b == 0.0 ? NAN : a / b)
+                : pow(a, b);
+        }
+    }
+    return sp == 0 ? st[0] : NAN;
+}
+
+/* The model parameters the importer changed reach p: followers of an expression and the
+   derived entries of p are evaluated again (a value set by the importer wins). */
+static int fmu_derive(fmu_t *I) {
+    if (!I->any_env_set) return 0;
+    for (int k = 0; k < FMU_NE; ++k)
+        if (!I->env_set[k] && fmu_env_binding[k] >= 0) I->env[k] = fmu_eval(fmu_derive_programs + fmu_env_binding[k], I->env);
+    for (int j = 0; j < FMU_ND; ++j) {
+        const int i = fmu_derived_p[j];
+        if (!I->p_set[i]) I->p[i] = fmu_eval(fmu_derive_programs + fmu_derived_prog[j], I->env);
+    }
+    for (int i = 0; i < FMU_NP; ++i) if (!isfinite(I->p[i])) return -1;
+    return 0;
 }
 
 static void fmu_free(fmu_t *I) {
     if (!I) return;
     free(I->y); free(I->f); free(I->der); free(I->p); free(I->u); free(I->tau); free(I->work); free(I->ev);
     free(I->scratch); free(I->kc); free(I->spec); free(I->data); free(I->held); free(I->gaps);
-    free(I->yi); free(I->fi); free(I->ahead);
+    free(I->yi); free(I->fi); free(I->ahead); free(I->env); free(I->env_set); free(I->p_set);
     free(I);
 }
 
@@ -447,7 +494,9 @@ FMI2_EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type kind, fmi2St
     I->held = calloc(FMU_NK + 1, sizeof(long)); I->gaps = calloc(FMU_NK + 1, sizeof(double));
     I->yi = calloc(FMU_NY + 1, sizeof(double)); I->fi = calloc(FMU_NY + 1, sizeof(double));
     I->ahead = calloc((mb_size_t)FMU_AHEAD * (FMU_NY + 1), sizeof(double));
-    if (!I->yi || !I->fi || !I->ahead || !I->y || !I->f || !I->der || !I->p || !I->u || !I->tau || !I->work || !I->ev || !I->scratch || !I->kc
+    I->env = calloc(FMU_NE + 1, sizeof(double)); I->env_set = calloc(FMU_NE + 1, sizeof(int));
+    I->p_set = calloc(FMU_NP + 1, sizeof(int));
+    if (!I->env || !I->env_set || !I->p_set || !I->yi || !I->fi || !I->ahead || !I->y || !I->f || !I->der || !I->p || !I->u || !I->tau || !I->work || !I->ev || !I->scratch || !I->kc
         || !I->spec || !I->data || !I->held || !I->gaps) {
         fmu_free(I);
         return 0;
@@ -482,6 +531,11 @@ FMI2_EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 FMI2_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     fmu_t *I = c;
     if (!I) return fmi2Error;
+    if (fmu_derive(I)) {
+        fmu_log(I, fmi2Error, "logStatusError", "a parameter computed from the model parameters is not finite");
+        I->phase = FMU_FAILED;
+        return fmi2Error;
+    }
     for (int r = 0; r < FMU_NR0; ++r)  /* a speed motor: its speed (a parameter, or fixed), its start */
         if (fmu_motor_speed_p[r] > -2) {
             const double speed = fmu_motor_speed_p[r] >= 0 ? I->p[fmu_motor_speed_p[r]] : fmu_data0[FMU_DATA_DOUBLES * r];
@@ -539,7 +593,8 @@ FMI2_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[
         else if (r < FMU_VR_PAR) {
             if (I->phase == FMU_INSTANTIATED || fmu_derivatives(I)) return fmi2Error;
             value[i] = I->der[r - FMU_VR_DER];
-        } else if (r < FMU_VR_IN) value[i] = I->p[r - FMU_VR_PAR];
+        } else if (r < FMU_VR_ENV) value[i] = I->p[r - FMU_VR_PAR];
+        else if (r < FMU_VR_IN) value[i] = I->env[fmu_env_exported[r - FMU_VR_ENV]];
         else if (r < FMU_VR_RTOL) value[i] = I->u[r - FMU_VR_IN];
         else if (r == FMU_VR_RTOL) value[i] = I->rtol;
         else if (r == FMU_VR_ATOL) value[i] = I->atol;
@@ -563,7 +618,15 @@ FMI2_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[
             return fmi2Error;
         } else if (r < FMU_VR_IN) {
             if (!before) { fmu_log(I, fmi2Error, "logStatusError", "parameters are set before initialisation"); return fmi2Error; }
-            I->p[r - FMU_VR_PAR] = value[i];
+            if (r < FMU_VR_ENV) {
+                I->p[r - FMU_VR_PAR] = value[i];
+                I->p_set[r - FMU_VR_PAR] = 1;
+            } else {
+                const int k = fmu_env_exported[r - FMU_VR_ENV];
+                I->env[k] = value[i];
+                I->env_set[k] = 1;
+                I->any_env_set = 1;
+            }
         } else if (r < FMU_VR_RTOL) {
             I->u[r - FMU_VR_IN] = value[i];
             I->f_stale = 1;
