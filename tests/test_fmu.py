@@ -269,3 +269,21 @@ def test_parameter_programs_evaluate_as_expressions():
     index = {"a": 0, "b": 1}
     for env in ({"a": 0.7, "b": 2.5}, {"a": -1.3, "b": 0.4}):
         assert run(program(e, index), [env["a"], env["b"]]) == pytest.approx(e.evaluate(env), rel=1e-15)
+
+
+def test_a_position_motor_drives_the_fmu(tmp_path):
+    """A motor prescribing phi1(t) = amplitude sin(2 pi frequency t) (a KKT row whose position
+    runs as a program in C) through both kinds; its parameters are compiled into the motion,
+    so they are not variables of the FMU (mbcomp refuses to change them at run time too)."""
+    model = mb.load("double_pendulum_motor")
+    system = model.compile()
+    for kind in ("cs", "me"):
+        path = system.export_fmu(tmp_path / f"motor_{kind}.fmu", kind=kind)
+        assert validate_fmu(str(path)) == []
+        names = {v.name for v in read_model_description(str(path)).modelVariables}
+        assert "L" in names and "amplitude" not in names and "frequency" not in names
+        q0, qd0 = start_state(model, system)
+        ref = system.simulate(1.0, q0, qd0, t_eval=times(1.0), rtol=RTOL, atol=ATOL)
+        got = run_fmu(path, kind, 1.0)
+        assert np.abs(got["phi1"] - 0.5 * np.sin(2 * np.pi * times(1.0))).max() < 1e-6
+        assert np.abs(got["theta2"] - ref.q[:, 1]).max() < 1e-6
