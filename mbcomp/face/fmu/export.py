@@ -91,7 +91,8 @@ def export_fmu(system, formulation, path, kind: str = "cs", inputs=(), outputs=N
         for name, text in units:
             flags = (COLD_FLAGS if name in ("sizes", "fmu_tables") else C_FLAGS) + FMU_FLAGS
             # the templates with the wrapper depend only on the kind of model: cached, shared
-            shared = cache.toolchain(compiler, flags) if name == "templates" else None
+            use_cache = getattr(system.kernel.compiled, "use_cache", True)
+            shared = cache.toolchain(compiler, flags) if name == "templates" and use_cache else None
             build.add(name, text, flags, statements=text.count(";"), shared=shared)
     except BaseException:
         build.cancel()
