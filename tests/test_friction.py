@@ -285,3 +285,24 @@ def test_impact_by_hand_with_friction():
     impact = system.impact([0.1, 0.0, 0.0], [-1.0, 1.0, 0.0])
     assert impact.impulses == {"floor": pytest.approx(1.5, rel=1e-12)}
     np.testing.assert_allclose(impact.qd, [0.0, 5 / 7, 50 / 7], rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_ball_on_a_free_joint_slides_straight_then_rolls(formulation):
+    """In 3D (Free joint) with any spin: the slip u = v + w x (-r n) keeps its direction
+    (friction -mu m g u/|u| changes v by -mu g and the slip by -7/2 mu g along u), so the
+    ball rolls from t = 2 |u0| / (7 mu g) on, with v = v0 - mu g t u0/|u0|; the spin about
+    the normal does not matter."""
+    mu, r, mass = 0.3, 0.1, 1.5
+    m = mb.Model("ball3d", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=mass, inertia=(0.4 * mass * r * r,) * 3))
+    m.add(mb.Free("free", m.ground, ball))
+    m.add(mb.Contact("floor", ball, (0, 0, 0), normal=(0, 0, 1), friction=mu, radius=r))
+    v0, w0 = np.array([2.0, 0.5, 0.0]), np.array([3.0, -4.0, 7.0])   # (body = world frame at the start)
+    res = m.compile(formulation=formulation).simulate(0.3, [0, 0, r, 1, 0, 0, 0], np.concatenate((v0, w0)),
+                                                      rtol=1e-10, atol=1e-12)
+    u0 = (v0 + np.cross(w0, [0.0, 0.0, -r]))[:2]
+    t_roll = 2 * np.linalg.norm(u0) / (7 * mu * G)
+    assert [e.kind for e in res.events] == ["stick"]
+    assert res.events[0].time == pytest.approx(t_roll, rel=1e-7)
+    np.testing.assert_allclose(res.qd[-1, :2], v0[:2] - mu * G * t_roll * u0 / np.linalg.norm(u0), rtol=1e-7)

@@ -149,7 +149,7 @@ def test_shapes_in_a_submodel_survive_save_and_load(tmp_path):
 
 
 @pytest.mark.parametrize("shape, where, expected", [
-    ('{ type = "cone", radius = 1 }', "shape", "type must be one of box, cylinder, sphere, mesh"),
+    ('{ type = "cone", radius = 1 }', "shape", "type must be one of box, cylinder, sphere, capsule, plane, mesh"),
     ('[{ type = "box", size = [1, 1, -1] }]', "shape[0]", "size must be positive"),
     ('{ type = "sphere", radius = 0.1, size = [1, 1, 1] }', "shape", "unknown key 'size' for a sphere"),
     ('{ type = "cylinder", radius = 0.1 }', "shape", "a cylinder needs length"),

@@ -75,6 +75,9 @@ class ShapeEntry:
 
 @dataclass(frozen=True)
 class ShapePair:
+    """Two collision shapes that may touch: their entries, and where their features sit
+    among the contact rows."""
+
     a: int           #: entries' indices
     b: int
     first: int       #: index of its first feature among all contact rows

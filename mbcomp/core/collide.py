@@ -88,19 +88,6 @@ def bounding_sphere(shape: tuple) -> tuple[np.ndarray, float]:
     return shape[1], np.inf
 
 
-def thickness(shape: tuple) -> float:
-    """Half the thinnest dimension of a finite shape (m): the depth a point can reach before
-    it is nearer to the far side (what a step may move without passing through unseen)."""
-    kind = shape[0]
-    if kind == "sphere":
-        return float(shape[2])
-    if kind == "capsule":
-        return float(shape[3])
-    if kind == "box":
-        return float(np.min(shape[3]))
-    return np.inf
-
-
 # -- narrow phase ---------------------------------------------------------------------------------
 def _line(pa: np.ndarray, pb: np.ndarray, ra: float, rb: float, fallback: np.ndarray) -> Feature:
     """Two rounded features: points pa, pb with radii ra, rb."""

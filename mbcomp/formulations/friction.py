@@ -126,16 +126,17 @@ def friction_of(kernel, index: int) -> float:
     return float(kernel.parameters.get(getattr(contact, "friction_key", f"{contact.name}.friction"), 0.0))
 
 
-def plane_contact_rows(kernel, q: np.ndarray, qd: np.ndarray, indices) -> ContactRows:
+def plane_contact_rows(kernel, q: np.ndarray, qd: np.ndarray, indices, normal_rows: bool = True) -> ContactRows:
     """Rows of ``Contact`` components (body point or sphere on a world-fixed plane) from the
     compiled kinematics.  The touching point is ``c = p - r n``; its velocity is
     ``v0 + w x c`` (so a rolling ball's includes ``w x (-r n)``), its rate's bias
     ``a0 + alpha x c + w x v_p`` (``n`` is fixed, ``c`` moves with ``p``).  A contact that
-    is not a point on a plane (a joint limit) gets zero tangential rows and ``mu = 0``."""
+    is not a point on a plane (a joint limit) gets zero tangential rows and ``mu = 0``.
+    ``normal_rows=False`` leaves ``normal`` zero (for callers that have the gap rows)."""
     topology = kernel.topology
     indices = list(indices)
     k, nv = len(indices), kernel.nv
-    normal = kernel.contacts(q, qd).J[indices] if k else np.zeros((0, nv))
+    normal = kernel.contacts(q, qd).J[indices] if k and normal_rows else np.zeros((k, nv))
     tangent = np.zeros((k, 2, nv))
     bias = np.zeros((k, 2))
     basis = np.zeros((k, 3, 3))
@@ -217,7 +218,7 @@ def solve_sliding(Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: np.ndarra
             raise SimulationError(f"Painleve's paradox at t = {t:g}: the sliding contact {where} has no "
                                   f"consistent normal force (its effective inverse mass with friction, "
                                   f"{A[k, k]:.3g}, is not positive); lower the friction coefficient")
-    lam, *_ = np.linalg.lstsq(A, b, rcond=1e-10)
+    lam = np.linalg.lstsq(A, b, rcond=1e-10)[0]  # (least norm: redundant rows share the load)
     residual = float(np.abs(A @ lam - b).max(initial=0.0))
     if residual > 1e-6 * max(1.0, float(np.abs(b).max(initial=0.0))):
         raise SimulationError(f"the contact and constraint forces at t = {t:g} are inconsistent ({where}): "
@@ -236,7 +237,7 @@ def friction_solve(kernel, Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: 
     """
     indices = list(closed)
     nb = J.shape[0] - len(indices)
-    rows = plane_contact_rows(kernel, q, qd, indices)
+    rows = plane_contact_rows(kernel, q, qd, indices, normal_rows=False)
     W = J.copy()
     extra_J, extra_rhs, sliding, stick_rows = [], [], [], []
     slide_dirs = {}
