@@ -512,18 +512,12 @@ class System:
         ``atol``, ``max_step``, ``rest_speed`` and ``integrator`` do not apply to it.
         """
         from mbcomp.run.simulate import simulate
-        from mbcomp.run.timestepping import check_mode, simulate_timestepping
-        dt = check_mode(contact_mode, dt, t_end)
         system = self.with_parameters(parameters)
         q0, qd0 = system.state_vector(q0, "q0"), system._velocity(qd0)
-        if contact_mode == "timestepping":
-            result = simulate_timestepping(system._kernel, system._formulation, t_end, q0, qd0, dt=dt, tau=tau,
-                                           t_eval=t_eval, max_samples=max_samples)
-            return result.with_system(system)
         result = simulate(system._kernel, system._formulation, t_end, q0, qd0, method=method, rtol=rtol,
                           atol=atol, t_eval=t_eval, tau=tau, progress=progress, max_step=max_step,
                           rest_speed=rest_speed, integrator=integrator, dt=dt, z0=system.extra_state_vector(x0),
-                          max_samples=max_samples)
+                          max_samples=max_samples, contact_mode=contact_mode)
         return result.with_system(system)
 
     def export_fmu(self, path: Any, kind: str = "cs", inputs: Any = (), outputs: Any = None) -> Any:

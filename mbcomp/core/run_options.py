@@ -19,6 +19,9 @@ from mbcomp.core.errors import ModelError
 
 #: What ``integrator=`` accepts: choose (compiled when the model allows it), or insist.
 INTEGRATORS = ("auto", "compiled", "scipy")
+#: What ``contact_mode=`` accepts: contact events located and applied exactly (the default),
+#: or Moreau-Jean time stepping with step ``dt`` for dense contact (``run/timestepping.py``).
+CONTACT_MODES = ("events", "timestepping")
 #: The loops compiled with every model (``codegen/integrators.py``).
 COMPILED_METHODS = ("DOP853", "RK4")
 
@@ -32,7 +35,8 @@ class RunOptions:
     ``t_eval`` the output times (s, increasing within [0, t_end]) or None for every step (at
     most ``max_samples`` of them); ``max_step`` (s); ``rest_speed`` (m/s) below which a
     closing contact stays closed; ``integrator`` ``"auto"``, ``"compiled"`` or ``"scipy"``;
-    ``progress`` False, True or a delay (s) before a progress bar shows."""
+    ``progress`` False, True or a delay (s) before a progress bar shows; ``contact_mode``
+    ``"events"`` or ``"timestepping"`` (Moreau-Jean steps of ``dt``: docs/contacts.md)."""
 
     t_end: float
     method: Any = "DOP853"
@@ -45,6 +49,7 @@ class RunOptions:
     dt: float | None = None
     progress: bool | float = False
     max_samples: int | None = None
+    contact_mode: str = "events"
 
     @classmethod
     def checked(cls, t_end: float, **settings: Any) -> "RunOptions":
@@ -57,6 +62,14 @@ class RunOptions:
         checks.number(settings.get("rest_speed", cls.rest_speed), "rest_speed", nonnegative=True)
         dt = settings.pop("dt", None)
         dt = None if dt is None else checks.number(dt, "dt", positive=True)
+        contact_mode = settings.get("contact_mode", cls.contact_mode)
+        if contact_mode not in CONTACT_MODES:
+            raise ModelError("simulate", f"contact_mode must be one of {CONTACT_MODES}, got {contact_mode!r}")
+        if contact_mode == "timestepping":
+            if dt is None:
+                raise ModelError("simulate", "contact_mode='timestepping' needs a step dt (s), e.g. dt=1e-3")
+            if dt > t_end:
+                raise ModelError("simulate", f"dt = {dt:g} s must not exceed t_end = {t_end:g} s")
         t_eval = settings.pop("t_eval", None)
         t_eval = None if t_eval is None else checks.time_grid(t_eval, t_end)
         integrator = settings.get("integrator", cls.integrator)

@@ -158,14 +158,15 @@ class _Recorder:
 def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: Any = "DOP853", rtol: float = 1e-8,
              atol: float = 1e-10, t_eval: Any = None, tau: Any = None, progress: bool = False,
              max_step: float = np.inf, rest_speed: float = 1e-4, integrator: str = "auto",
-             dt: float | None = None, z0: np.ndarray | None = None, max_samples: int | None = None) -> Result:
+             dt: float | None = None, z0: np.ndarray | None = None, max_samples: int | None = None,
+             contact_mode: str = "events") -> Result:
     """Integrate from ``(q0, qd0)`` (checked arrays of nq coordinates and nv speeds; ``z0`` the
     drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
     ``System.simulate``.  The Result carries no System (the caller binds one).  With
     ``t_eval=None`` at most ``max_samples`` steps are kept (``checks.StepBudget``)."""
     options = RunOptions.checked(t_end, method=method, rtol=rtol, atol=atol, t_eval=t_eval, max_step=max_step,
                                  rest_speed=rest_speed, integrator=integrator, dt=dt, progress=progress,
-                                 max_samples=max_samples)
+                                 max_samples=max_samples, contact_mode=contact_mode)
     return run(kernel, formulation, options, q0, qd0, tau=tau, z0=z0)
 
 
@@ -174,7 +175,11 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
     """The driver: checks what the options and inputs ask for, chooses the stepping
     (``paths.choose_path``) and runs ``run_steps`` with it.  A compiled run that meets a singular
     position of the constraints (``RankLost``) is run again in scipy's stepping, which
-    handles it, unless the options insist on compiled code."""
+    handles it, unless the options insist on compiled code.  ``contact_mode="timestepping"``
+    runs ``timestepping.simulate_timestepping`` instead."""
+    if options.contact_mode == "timestepping":
+        from mbcomp.run.timestepping import simulate_timestepping
+        return simulate_timestepping(kernel, formulation, options, q0, qd0, tau=tau, z0=z0)
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     columns = len(q0) + len(qd0) + len(z0)
     budget = checks.StepBudget(options.max_samples, columns + 1, options.t_end)  # (a row: t and the state)

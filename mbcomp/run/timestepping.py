@@ -33,31 +33,15 @@ from mbcomp.compiled.collision_kernel import with_collisions
 from mbcomp.core import checks
 from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.core.result import Result
+from mbcomp.core.run_options import RunOptions
 from mbcomp.formulations.cone_sweeps import cone_sweeps
 from mbcomp.formulations.friction import plane_contact_rows
+from mbcomp.run.stats import Counts, run_stats
 from mbcomp.formulations.impact import GAP_TOLERANCE, restitution_of
 
 #: Below this many speeds the mass matrix and contact rows stay dense arrays (sparse
 #: matrices cost more than they save on small models).
 DENSE_SPEEDS = 60
-
-#: What ``contact_mode=`` accepts.
-CONTACT_MODES = ("events", "timestepping")
-
-
-def check_mode(contact_mode: str, dt, t_end) -> float | None:
-    """``dt`` checked for the mode (``ModelError`` naming ``contact_mode`` or ``dt``)."""
-    if contact_mode not in CONTACT_MODES:
-        raise ModelError("simulate", f"contact_mode must be one of {CONTACT_MODES}, got {contact_mode!r}")
-    if contact_mode != "timestepping":
-        return dt
-    if dt is None:
-        raise ModelError("simulate", "contact_mode='timestepping' needs a step dt (s), e.g. dt=1e-3")
-    dt = checks.number(dt, "dt", positive=True)
-    if dt > float(t_end):
-        raise ModelError("simulate", f"dt = {dt:g} s must not exceed t_end = {float(t_end):g} s")
-    return dt
-
 
 class BlockInverse:
     """``M^-1`` of a tree's mass matrix, one dense inverse per independent block (a branch
@@ -95,13 +79,12 @@ class BlockInverse:
         return sparse.csr_matrix((np.concatenate(values), (self.rows, self.cols)), shape=(self.n, self.n))
 
 
-def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, dt: float,
-                          tau=None, t_eval=None, max_samples: int | None = None) -> Result:
-    """Moreau-Jean steps of ``dt`` (s) from ``(q0, qd0)`` at t = 0 to ``t_end`` (module
-    docstring).  Samples: every step, or the step nearest each of ``t_eval``.  Trees only
-    (``ModelError`` for loop constraints, motors or drive elements)."""
-    t_end = checks.number(t_end, "t_end", positive=True)
-    dt = check_mode("timestepping", dt, t_end)
+def simulate_timestepping(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray, *,
+                          tau=None, z0=None) -> Result:
+    """Moreau-Jean steps of ``options.dt`` (s) from ``(q0, qd0)`` at t = 0 to ``options.t_end``
+    (module docstring).  Samples: every step, or the step nearest each of ``options.t_eval``.
+    Trees only (``ModelError`` for loop constraints, motors or drive elements)."""
+    t_end, dt, t_eval, max_samples = options.t_end, options.dt, options.t_eval, options.max_samples
     if kernel.compiled.drives.elements:
         raise ModelError("simulate", "contact_mode='timestepping' does not run drive elements; use the events mode")
     offsets = formulation.motor_offsets(q0, 0.0)
@@ -111,7 +94,6 @@ def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0
                          f"{bilateral.J.shape[0]} constraint rows: loops or motors); use the events mode")
     n_steps = int(np.ceil(t_end / dt - 1e-9))
     if t_eval is not None:
-        t_eval = checks.time_grid(t_eval, t_end)
         keep = np.unique(np.clip(np.rint(t_eval / dt).astype(int), 0, n_steps))
     else:
         checks.output_size(n_steps + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
@@ -126,7 +108,7 @@ def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0
     warm: dict = {}
     times, qs, vs = [], [], []
     wanted = set(keep.tolist())
-    stats = {"steps": n_steps, "contact_solves": 0, "sweeps": 0, "unconverged": 0, "max_active": 0}
+    counts = {"contact_solves": 0, "sweeps": 0, "unconverged": 0, "max_active": 0}
     started = time.perf_counter()
     t = 0.0
     for step in range(n_steps + 1):
@@ -160,10 +142,10 @@ def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0
             solution = cone_sweeps(Js, X, v_free, bias, rows.mu, P0)
             warm = {int(i): solution.P[3 * r:3 * r + 3] for r, i in enumerate(active)}
             v_new = solution.v
-            stats["contact_solves"] += 1
-            stats["sweeps"] += solution.sweeps
-            stats["unconverged"] += int(not solution.converged)
-            stats["max_active"] = max(stats["max_active"], k)
+            counts["contact_solves"] += 1
+            counts["sweeps"] += solution.sweeps
+            counts["unconverged"] += int(not solution.converged)
+            counts["max_active"] = max(counts["max_active"], k)
         else:
             warm = {}
             v_new = v_free
@@ -173,10 +155,10 @@ def simulate_timestepping(kernel, formulation, t_end: float, q0: np.ndarray, qd0
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             raise SimulationError(f"time stepping reached a non-finite state at t = {t:g} s (dt = {dt:g} s "
                                   "may be too large for the model's stiffness)")
-    stats.update({"method": "Moreau-Jean", "integrator": "timestepping", "path": "timestepping", "dt": dt,
-                  "wall_time": time.perf_counter() - started, "success": True, "status": 0,
-                  "message": "The time stepping reached the end of the interval.", "formulation": formulation.name,
-                  "nfev": n_steps, "njev": 0, "nlu": 0, "restarts": 0})
+    stats = run_stats(options, formulation.name, Counts(nfev=n_steps, steps=n_steps, rejected=0),
+                      time.perf_counter() - started, integrator="timestepping", method="Moreau-Jean",
+                      path="timestepping", message="The time stepping reached the end of the interval.")
+    stats.update(counts, dt=dt)
     topology = kernel.topology
     return Result(system=None, t=np.array(times), q=np.array(qs), qd=np.array(vs), stats=stats, tau=tau,
                   offsets=offsets, coords=tuple(topology.coords), speeds=tuple(topology.speeds),
