@@ -404,6 +404,18 @@ class TestExpressions:
         with pytest.raises(ExpressionError):
             parse_expression(text, {"m": 3.0}, allow_t=True)
 
+    def test_a_parameter_may_be_named_like_a_python_keyword(self):
+        """The bicycle papers call the head angle ``lambda``: a declared parameter of that name
+        is usable in expressions; the keyword itself (a lambda expression) stays rejected."""
+        names = {"lambda": 0.3, "lambda_": 2.0, "m": 3.0}
+        node = parse_expression("sin(lambda)*lambda_ + m*lambda", names, allow_t=False)
+        assert evaluate(node) == pytest.approx(math.sin(0.3) * 2.0 + 3.0 * 0.3, rel=1e-15)
+        for text in ("lambda: 1", "lambda x: x", "m if lambda else 1"):
+            with pytest.raises(ExpressionError):
+                parse_expression(text, names, allow_t=False)
+        with pytest.raises(ExpressionError, match="invalid syntax"):
+            parse_expression("sin(lambda)", {"m": 1.0}, allow_t=False)   # not declared: still a keyword
+
     def test_deep_nesting_is_rejected_not_crashing(self):
         with pytest.raises(ExpressionError):
             parse_expression("(" * 400 + "1" + ")" * 400, {}, allow_t=False)
