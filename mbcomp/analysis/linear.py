@@ -131,9 +131,9 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
     if chart.constrained:
         q, v0 = system.assemble(q, v0, t)
         chart = Chart(system, q, t, independent)
-    k = chart.k
+    k, kq = chart.k, chart.kq
     names = speed_names(system)
-    ind = chart.ind
+    ind, qind = chart.ind, chart.qind
     v0i = v0[ind]
     input_idx = [] if inputs is None else joint_speed_indices(system, inputs, "inputs")
 
@@ -147,24 +147,24 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
         w0 = drive_state_vector(system, states)
 
     def derivative(z: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
-        qz, x = chart.position(z[:k])
-        v = chart.velocity(qz, z[k:2 * k])
+        qz, x = chart.position(z[:kq])
+        v = chart.velocity(qz, z[kq:kq + k])
         extra = force_vector(system, tau, t, qz, v)
         if u is not None:
             extra = u if extra is None else extra + u
         if not extra_names:
             a = system.accelerations(qz, v, t, tau=extra)
-            return np.concatenate((chart.rate(qz, x, v)[ind], a[ind]))
-        w = z[2 * k:]
+            return np.concatenate((chart.rate(qz, x, v)[qind], a[ind]))
+        w = z[kq + k:]
         a = system.accelerations(qz, v, t, tau=extra, states=w)
-        return np.concatenate((chart.rate(qz, x, v)[ind], a[ind], system.drive_outputs(t, qz, v, w)[1]))
+        return np.concatenate((chart.rate(qz, x, v)[qind], a[ind], system.drive_outputs(t, qz, v, w)[1]))
 
-    z0 = np.concatenate((np.zeros(k), v0i, w0))
+    z0 = np.concatenate((np.zeros(kq), v0i, w0))
     f0 = derivative(z0)
-    steps = np.concatenate((np.full(k, step), step * np.maximum(1.0, np.abs(v0i)),
+    steps = np.concatenate((np.full(kq, step), step * np.maximum(1.0, np.abs(v0i)),
                             step * np.maximum(1.0, np.abs(w0))))
     A = _central(derivative, z0, steps)
-    if len(names) == len(system.coords):  # speeds are coordinate rates: dx/dt = v exactly
+    if len(names) == len(system.coords) and qind is ind:  # speeds are coordinate rates: dx/dt = v exactly
         A[:k] = 0.0
         A[:k, k:2 * k] = np.eye(k)
     B = np.zeros((len(z0), len(input_idx)))
@@ -175,7 +175,8 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
     if not np.all(np.isfinite(A)) or not np.all(np.isfinite(B)):
         raise SimulationError(f"the linearisation is not finite at q = {format_state(q)}")
     ind_names = tuple(names[i] for i in ind)
-    return Linearization(A=A, B=B, states=ind_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
+    coordinate_names = tuple(names[i] for i in qind)
+    return Linearization(A=A, B=B, states=coordinate_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
                          inputs=tuple(names[i] for i in input_idx), independent=ind_names,
                          basis=chart.basis(q), q=q, qd=v0, t=float(t), state_derivative=f0,
                          operating_states=w0)

@@ -535,6 +535,13 @@ class System:
         return self._formulation.constraint_values(self._kernel, t, q, qd, offsets)
 
     @property
+    def velocity_rows(self) -> np.ndarray:
+        """Which rows of ``constraint_values`` constrain speeds only (rolling and no-slip rows,
+        non-holonomic: their ``g`` is NaN), as a boolean mask."""
+        cs = self._formulation.constraints
+        return np.zeros(0, dtype=bool) if cs is None else cs.velocity_rows.copy()
+
+    @property
     def constraint_rows(self) -> list[str]:
         """The constraint owning each row of ``constraint_values`` (by name)."""
         cs = self._formulation.constraints
