@@ -338,6 +338,28 @@ def check_pid_arm(model, system):
     assert abs(later["shoulder.angle"][-1] - 0.3) < 2e-3
 
 
+
+def check_whipple_bicycle(model, system):
+    # Riding straight ahead, upright at 5 m/s is a steady motion: it stays upright and straight,
+    # the rear contact point moves at 5 m/s and the wheels roll at -v/r; between the weave and
+    # capsize speeds it is stable: the lean/steer block of the linearisation has the paper's
+    # eigenvalues at 5 m/s (Meijaard et al. 2007, table 2; tests/test_bicycle.py does the rest).
+    p = model.named_parameters
+    result = simulate(model, system, 1.0, n=11)
+    assert_energy_conserved(result, rtol=1e-9)
+    np.testing.assert_allclose(result["x"], 5.0 * result.t, atol=1e-7)
+    for name in ("y", "yaw", "lean", "steer", "pitch"):
+        assert np.abs(result[name]).max() < 1e-9, name
+    np.testing.assert_allclose(result["rear_wheel_angle"], -5.0 / p["rR"] * result.t, atol=1e-7)
+    q, qd = initial_state(model, system)
+    lin = system.linearize(q, qd)
+    states = list(lin.states)
+    rows = [states.index(s) for s in ("lean", "steer", "lean_dot", "steer_dot")]
+    eigenvalues = np.sort_complex(np.linalg.eigvals(lin.A[np.ix_(rows, rows)]))
+    published = np.sort_complex([-14.07838969279822, -0.32286642900409,
+                                 -0.77534188219585 - 4.46486771378823j, -0.77534188219585 + 4.46486771378823j])
+    np.testing.assert_allclose(eigenvalues, published, rtol=0, atol=1e-8)
+
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
 
 
