@@ -10,6 +10,10 @@ from mbcomp.core.errors import SimulationError, format_state
 from mbcomp.analysis.space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
 from mbcomp.analysis.space import drive_state_vector
 
+#: An entry of ``A`` below this fraction of its row's largest (or of 1) is the differences'
+#: noise, and is set to zero (ignorable coordinates then give exact zero eigenvalues).
+IGNORABLE = 1e-9
+
 #: Relative step of the central differences (fourth order: truncation ~ h^4, rounding ~ eps/h).
 STEP = 1e-3
 
@@ -164,6 +168,12 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
     steps = np.concatenate((np.full(kq, step), step * np.maximum(1.0, np.abs(v0i)),
                             step * np.maximum(1.0, np.abs(w0))))
     A = _central(derivative, z0, steps)
+    # Entries below the differences' noise (~1e-11 of their row's scale) are zero: a coordinate
+    # the rates do not depend on (an ignorable one: position and heading on the ground, a
+    # wheel's angle) would otherwise split the repeated zero eigenvalues it brings by the
+    # noise's square root (~1e-6), as a defective eigenvalue does.
+    rows_scale = np.maximum(1.0, np.max(np.abs(A), axis=1, initial=0.0))
+    A[np.abs(A) < IGNORABLE * rows_scale[:, None]] = 0.0
     if len(names) == len(system.coords) and qind is ind:  # speeds are coordinate rates: dx/dt = v exactly
         A[:k] = 0.0
         A[:k, k:2 * k] = np.eye(k)

@@ -196,12 +196,14 @@ class Chart:
         if not len(self.qdep):
             return q, x
         residual = np.inf
+        polished = False
         for _ in range(40):
             cv = self._values(q)
             g = cv.g[self.prows]
             residual = float(np.max(np.abs(g)))
-            if residual < CHART_TOLERANCE:
+            if residual < CHART_TOLERANCE and polished:
                 return q, x
+            polished = residual < CHART_TOLERANCE  # one more step: the linearisation divides by small steps
             try:
                 x[self.qdep] -= np.linalg.solve(cv.J[np.ix_(self.prows, self.qdep)], g)
             except np.linalg.LinAlgError:

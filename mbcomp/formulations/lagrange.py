@@ -246,8 +246,6 @@ class LagrangeFormulation(Formulation):
             return str(exc)
         if not getattr(self.compiled, "reduced_loop", False):
             return "the compiled library has no reduced loop for this model"
-        if self.has_velocity_rows:
-            return "the lagrange formulation steps velocity (rolling, no-slip) constraints in Python"
         if self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
