@@ -113,7 +113,9 @@ def derive() -> Derived:
     dependent = [u[0], u[1], u[2], u[4], u[7]]
     kane = me.KanesMethod(N, q_ind=list(q), u_ind=independent, u_dependent=dependent,
                           kd_eqs=[qi.diff() - ui for qi, ui in zip(q, u)],
-                          velocity_constraints=velocity_constraints)
+                          velocity_constraints=velocity_constraints,
+                          # Cramer's rule: LU's symbolic pivots are zero when upright (NaN there)
+                          constraint_solver="CRAMER")
     kane.kanes_equations(bodies, loads)
     # the rows and columns of the speeds are in KanesMethod's order (independent, then dependent)
     return Derived(list(q), list(kane.u), list(p), kane.mass_matrix_full, kane.forcing_full,
