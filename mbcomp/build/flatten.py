@@ -165,7 +165,8 @@ def flatten_instances(model) -> tuple[dict, "Derivation"]:
         if comp.expression_args is not None:
             expressions.append((full, comp))
     registry = model.registry
-    return components, Derivation(dict(registry.parameters), expressions)
+    return components, Derivation(dict(registry.parameters), expressions, getattr(model, "gravity_binding", None),
+                                  getattr(model, "frozen_parameters", None))
 
 
 class Derivation:
@@ -174,9 +175,14 @@ class Derivation:
     parameter expressions, rebuilt with new numbers on a run-time change (their
     constructors validate the values, and their structure must not change)."""
 
-    def __init__(self, parameters: dict, components: list):
+    def __init__(self, parameters: dict, components: list, gravity: tuple | None = None,
+                 frozen: dict | None = None):
         self.parameters = parameters
         self.components = [(full, comp, _dependencies(comp)) for full, comp in components]
+        #: gravity's components as expressions of parameters (``Model.set_gravity``), or None
+        self.gravity = gravity
+        #: parameters whose numbers are compiled into code (``{name: where}``): not changeable
+        self.frozen = dict(frozen or {})
 
     def values(self) -> dict[str, float]:
         """``{parameter path: value}`` as instantiated."""
@@ -201,6 +207,10 @@ class Derivation:
             else:
                 env[path] = float(current[path])
         touched = {p for p, v in env.items() if v != current.get(p)}
+        stuck = sorted(touched & set(self.frozen))
+        if stuck:
+            raise ModelError(f"parameter {stuck[0]!r}", f"is compiled with its value into {self.frozen[stuck[0]]} "
+                             "(an expression of t): change it in the model and compile again")
         updates: dict[str, Any] = dict(env)
         for full, comp, deps in self.components:
             if not deps & touched:
@@ -215,6 +225,8 @@ class Derivation:
                                  f"({comp.structure()} -> {new.structure()}); build and compile the model again")
             for attr, value in new.parameter_values().items():
                 updates[f"{full}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
+        if self.gravity is not None:
+            updates["gravity"] = tuple(substitute(self.gravity, env))
         return updates
 
 

@@ -26,6 +26,7 @@ from mbcomp.core.errors import ModelError, describe
 from mbcomp.core.expressions import (RESERVED, Expression, ExpressionError, TimeVector, evaluate, names_in, parse_expression,
                           uses_t)
 from mbcomp.core.params import ParameterError, ParameterSpec, axis_name, spd_inertia, unit_vector, validate
+from mbcomp.spec.components.expr import Expr
 from mbcomp.spec.shapes import shape_from_table, shape_table
 
 __all__ = ["BAD", "Reader", "read_component", "component_table", "SECTIONS", "TYPED_SECTIONS", "toml_key",
@@ -81,6 +82,10 @@ class Reader:
         #: Sub-model instances that failed to read (their problems are recorded): a reference
         #: to one of their bodies or ports is not reported again.
         self.failed: set[str] = set()
+        #: Model parameters (a file's top-level ``[parameters]``) whose values an expression
+        #: of t compiled with its numbers (a motor position): ``{name: where}``.  A run-time
+        #: change of one is refused (``Derivation.frozen``) rather than silently not reaching it.
+        self.frozen: dict[str, str] = {}
 
     # -- reporting ------------------------------------------------------------------------
     def problem(self, table: str | None, key: str | None, message: str) -> _Bad:
@@ -117,9 +122,14 @@ class Reader:
             except ExpressionError as exc:
                 return self.problem(table, key, str(exc))
             if time and uses_t(node):
-                frozen = sorted(n for n in names_in(parse_expression(value, self.parameters, allow_t=True,
-                                                                     keep_names=True))
-                                if not isinstance(self.parameters[n], (int, float)))
+                used = names_in(parse_expression(value, self.parameters, allow_t=True, keep_names=True))
+                model_level = {n for n in used if is_model_parameter(self.parameters[n])}
+                frozen = sorted(n for n in used if n not in model_level and not isinstance(self.parameters[n], (int, float)))
+                if model_level and not frozen:   # compiled with their numbers; a change is refused
+                    for n in model_level:
+                        self.frozen.setdefault(n, f"[{table}] {key}")
+                    node = parse_expression(value, {**self.parameters, **{n: float(self.parameters[n]) for n in model_level}},
+                                            allow_t=True)
                 if frozen:
                     return self.problem(table, key, f"the part's parameter(s) {', '.join(map(repr, frozen))} cannot "
                                         f"be used in an expression of t here: it would keep its build-time value "
@@ -258,6 +268,12 @@ def read_rotation(r: Reader, label: str, key: str, value: Any) -> Any:
         return rotation_matrix(rows, label, key)
     except ModelError as exc:
         return r.problem(label, key, str(exc))
+
+
+def is_model_parameter(value: Any) -> bool:
+    """True for the expression standing for a model-level parameter (``Model.parameter``: a
+    leaf named without a dot), as a file's top-level ``[parameters]`` are."""
+    return isinstance(value, Expr) and value.op == "param" and "." not in value.args[0]
 
 
 def read_time_input(r: Reader, label: str, key: str, value: Any, owner: str, *, vector: bool) -> Any:

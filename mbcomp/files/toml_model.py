@@ -156,18 +156,16 @@ def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
         r.problem(None, "description", f"must be a string, got {type_name(description)}")
         description = ""
 
-    _read_parameters(r, data.get("parameters", {}))
-    gravity = (0.0, 0.0, -9.81)
+    name = name.strip() if isinstance(name, str) else "model"
+    model = Model(name)
+    _read_parameters(r, data.get("parameters", {}), model)
     if "gravity" in data:
         g = r.vector("", "gravity", data["gravity"])
-        gravity = g if g is not BAD else gravity
-
-    name = name.strip() if isinstance(name, str) else "model"
-    try:
-        model = Model(name, gravity=gravity)
-    except ModelError as exc:   # e.g. a magnitude that would overflow: located at its key
-        r.problem(None, "gravity", getattr(exc, "detail", str(exc)))
-        model = Model(name)
+        try:
+            if g is not BAD:
+                model.set_gravity(g)
+        except ModelError as exc:   # e.g. a magnitude that would overflow: located at its key
+            r.problem(None, "gravity", getattr(exc, "detail", str(exc)))
     sections = _sections(r, data, ("initial", "simulation"))
     bodies: dict[str, Any] = {"ground": model.ground}
     external, exposed = _read_ports(r, data.get("ports", {}))
@@ -184,6 +182,7 @@ def _read_model(r: Reader, data: dict, path: Path, files: "_Files") -> Model:
     model.description = description
     # the file's own [parameters] (instances' parameters, seen by their paths, are the System's)
     model.named_parameters = {k: float(v) for k, v in r.parameters.items() if "." not in k}
+    model.frozen_parameters = dict(r.frozen)
     # With a broken joint the coordinate names are incomplete: check the values only.
     model.initial = _read_initial(r, sections["initial"], coords_seen, getattr(r, "speeds_seen", {}))
     model.simulation = _read_simulation(r, sections["simulation"])
@@ -691,7 +690,10 @@ def _add_component(r: Reader, model: Model, component: Any, label: str) -> None:
         r.problem(label, None, str(exc))
 
 
-def _read_parameters(r: Reader, table: Any) -> None:
+def _read_parameters(r: Reader, table: Any, model: Model) -> None:
+    """The file's own ``[parameters]`` (a number, an expression of earlier ones, or a table
+    {value, unit, min, max, doc}): run-time parameters of ``model`` (``Model.parameter``),
+    which the file's expressions name and follow."""
     if not isinstance(table, dict):
         r.problem(None, "parameters", f"must be a table [parameters], got {type_name(table)}")
         return
@@ -700,14 +702,20 @@ def _read_parameters(r: Reader, table: Any) -> None:
             why = "is reserved" if key in RESERVED else "is not a valid name (letters, digits, _)"
             r.problem("parameters", key, f"{key!r} {why}")
             continue
+        spec: dict = {}
         if isinstance(value, dict):   # {value = ..., unit, min, max, doc} as part files declare them
             r.keys(f"parameters.{key}", value, ("value", "unit", "min", "max", "doc"), ("value",))
-            value = value.get("value", BAD)
+            spec, value = value, value.get("value", BAD)
             if value is BAD:
                 continue
         x = r.number("parameters", key, value)
-        if x is not BAD:
-            r.parameters[key] = x
+        if x is BAD:
+            continue
+        try:
+            r.parameters[key] = model.parameter(key, x, unit=spec.get("unit"), min=spec.get("min"),
+                                                max=spec.get("max"), doc=str(spec.get("doc", "")))
+        except ModelError as exc:
+            r.problem("parameters", key, getattr(exc, "detail", str(exc)))
 
 
 def _read_initial(r: Reader, table: dict, coords: dict | None, speeds: dict | None = None) -> dict:
@@ -732,7 +740,7 @@ def _read_initial(r: Reader, table: dict, coords: dict | None, speeds: dict | No
                 continue
             x = r.number(label, coord, value)
             if x is not BAD:
-                initial[which][coord] = x
+                initial[which][coord] = float(x)   # a start value, not a link to the parameters
     return initial
 
 
@@ -754,7 +762,7 @@ def _read_simulation(r: Reader, table: dict) -> dict:
         else:
             continue  # reported as an unknown key
         if x is not BAD:
-            out[key] = x
+            out[key] = float(x) if key in ("t_end", "rtol", "atol") else x
     return out
 
 
@@ -768,11 +776,19 @@ def dumps(model: Model) -> str:
     if description:
         lines.append(f"description = {toml_value(description)}")
     lines.append(f"name = {toml_value(model.name)}")
-    lines.append(f"gravity = {toml_value(floats(model.gravity))}")
+    binding = getattr(model, "gravity_binding", None)
+    texts = [_expr_text(g, "") for g in binding] if binding is not None else None
+    if texts is not None and all(t is not None for t in texts):   # follows model parameters
+        lines.append(f"gravity = {toml_value([t if isinstance(g, Expr) else float(g) for t, g in zip(texts, binding)])}")
+    else:
+        lines.append(f"gravity = {toml_value(floats(model.gravity))}")
     if model.ground.shape:
         lines.append(f"ground_shape = {toml_value([shape_table(s) for s in model.ground.shape])}")
+    declared = {p: e for p, e in (model.registry.parameters.items() if model.registry is not None else ()) if "." not in p}
     parameters = getattr(model, "named_parameters", None) or {}
-    if parameters:
+    if declared:   # model-level run-time parameters (Model.parameter), with their bindings
+        lines += ["", "[parameters]"] + [_parameter_line(name, entry, "") for name, entry in declared.items()]
+    elif parameters:
         lines += ["", "[parameters]"] + [f"{toml_key(k)} = {toml_value(float(v))}" for k, v in parameters.items()]
     if model.registry is not None:
         lines += _part_lines(model, model.entries, "", "")
@@ -824,6 +840,8 @@ def _expr_text(expr: Any, scope: str) -> str | None:
         if scope and path.startswith(scope + ".") and path[len(scope) + 1:].isidentifier():
             return path[len(scope) + 1:]
         parts = path.split(".")
+        if len(parts) == 1 and not scope:   # a model-level parameter (Model.parameter), seen from the top
+            return path if path.isidentifier() and not keyword.iskeyword(path) and path not in RESERVED else None
         if len(parts) < 2 or not all(p.isidentifier() and not keyword.iskeyword(p) for p in parts):
             return None
         return path
@@ -928,24 +946,28 @@ def _parameter_lines(model: Model, item: Submodel, outer_scope: str, head: str) 
     declared = item.declared_parameters()
     if not declared:
         return []
-    lines = ["", f"[{head}.parameters]"]
-    for key, spec in declared.items():
-        entry = model.registry.parameters[f"{item.path}.{key}"]
-        value: Any = float(entry.value)
-        if isinstance(entry.binding, Expr):
-            text = _expr_text(entry.binding, outer_scope)
-            if text is None:
-                lines.append(f"# {key}: the value of {entry.binding!r}, which a file cannot write as an expression")
-            else:
-                value = text
-        extra = {k: v for k, v in (("unit", spec.unit), ("min", spec.min), ("max", spec.max), ("doc", spec.doc))
-                 if v not in (None, "")}
-        if extra:
-            table = {"value": value, **{k: (float(v) if k in ("min", "max") else str(v)) for k, v in extra.items()}}
-            lines.append(f"{toml_key(key)} = {toml_value(table)}")
+    return ["", f"[{head}.parameters]"] + [_parameter_line(key, model.registry.parameters[f"{item.path}.{key}"],
+                                                                   outer_scope) for key in declared]
+
+
+def _parameter_line(key: str, entry: Any, outer_scope: str) -> str:
+    """One line of a ``[parameters]`` table: a parameter's number, or (bound to others) its
+    expression seen from ``outer_scope``, with its unit, bounds and doc when declared."""
+    spec = entry.spec
+    value: Any = float(entry.value)
+    comment = ""
+    if isinstance(entry.binding, Expr):
+        text = _expr_text(entry.binding, outer_scope)
+        if text is None:
+            comment = f"# {key}: the value of {entry.binding!r}, which a file cannot write as an expression\n"
         else:
-            lines.append(f"{toml_key(key)} = {toml_value(value)}")
-    return lines
+            value = text
+    extra = {k: v for k, v in (("unit", spec.unit), ("min", spec.min), ("max", spec.max), ("doc", spec.doc))
+             if v not in (None, "")}
+    if extra:
+        table = {"value": value, **{k: (float(v) if k in ("min", "max") else str(v)) for k, v in extra.items()}}
+        return f"{comment}{toml_key(key)} = {toml_value(table)}"
+    return f"{comment}{toml_key(key)} = {toml_value(value)}"
 
 
 def _part_lines(model: Model, members: list, scope: str, prefix: str) -> list[str]:

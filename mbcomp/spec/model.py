@@ -28,7 +28,8 @@ class Model:
         if not isinstance(name, str) or not name:
             raise ModelError("Model", f"name must be a non-empty string, got {name!r}")
         self.name = name
-        self.gravity = vector3(gravity, f"Model {name!r}", "gravity")
+        self.gravity_binding = None               # gravity as expressions of model parameters
+        self.set_gravity(gravity)
         self.ground = Ground("ground")
         self._components: dict[str, Component] = {"ground": self.ground}
         self._instances: dict[str, Any] = {}      # top-level sub-model instances by name
@@ -36,6 +37,47 @@ class Model:
         self._registry = None                     # what the instances produced (mbcomp.spec.compose)
         #: On a flattened model: how component values follow sub-model parameters.
         self.derivation = None
+
+    # -- parameters -----------------------------------------------------------
+    def parameter(self, name: str, value: Any, unit: str | None = None, min: float | None = None,
+                  max: float | None = None, doc: str = "") -> Any:
+        """Declare a model-level run-time parameter and return the expression standing for it.
+
+        Components, sub-model modifiers, gravity and later parameters built from the returned
+        value follow it: ``sys.parameters[name]`` is changeable at run time
+        (``simulate(parameters=)``, ``with_parameters``, ``sweep``) with the numbers a fresh
+        build gives, without compiling again.  ``value`` is a number or an expression of
+        earlier parameters (a derived parameter: it follows them unless set on its own).
+        The top-level ``[parameters]`` of a model file are declared this way.
+        """
+        from mbcomp.spec.compose import Parameter, ParameterEntry, Registry
+        from mbcomp.spec.components.expr import Expr
+        where = f"Model {self.name!r}"
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ModelError(where, f"parameter name must be an identifier (letters, digits, _), got {name!r}")
+        if self._registry is None:
+            self._registry = Registry(names={id(self.ground): "ground"})
+        if name in self._registry.parameters:
+            raise ModelError(where, f"parameter {name!r} is declared twice")
+        try:
+            spec = Parameter(float(value) if isinstance(value, Expr) else value, unit=unit, min=min, max=max, doc=doc)
+        except ModelError as exc:
+            raise ModelError(where, f"parameter {name!r}: {getattr(exc, 'detail', exc)}") from None
+        spec.__set_name__(Model, name)
+        number = spec.check(value, f"parameter {name!r}")
+        self._registry.parameters[name] = ParameterEntry(name, spec, value if isinstance(value, Expr) else number,
+                                                         number)
+        return Expr.parameter(name, number)
+
+    def set_gravity(self, gravity: Any) -> None:
+        """Set the uniform gravity field (m/s^2, world frame); its components may be
+        expressions of model parameters (``(0, 0, -g)``), which it then follows."""
+        from mbcomp.spec.components.expr import Expr
+        items = tuple(gravity) if isinstance(gravity, (tuple, list)) else None
+        linked = items is not None and any(isinstance(g, Expr) for g in items)
+        self.gravity = vector3(tuple(float(g) if isinstance(g, Expr) else g for g in items) if linked else gravity,
+                               f"Model {self.name!r}", "gravity")
+        self.gravity_binding = items if linked else None
 
     # -- composition ----------------------------------------------------------
     def add(self, *components: Component) -> Component:
@@ -91,13 +133,14 @@ class Model:
         dotted names, joints oriented along the spanning tree (the model itself when
         nothing changes).  The user's components are never modified."""
         components, derivation = self._components, self.derivation
-        if self._instances:  # the build layer implements both steps (mbcomp.build.flatten)
+        if self._registry is not None:  # the build layer implements both steps (mbcomp.build.flatten)
             components, derivation = service("flatten_instances")(self)
         components = service("orient_joints")(components, self.ground.name)
         if components is self._components:
             return self
         flat = Model.__new__(Model)
         flat.name, flat.gravity, flat.ground = self.name, self.gravity, self.ground
+        flat.gravity_binding = self.gravity_binding
         flat._components, flat._instances, flat._entries, flat._registry = components, {}, list(components.values())[1:], None
         flat.derivation = derivation
         return flat
