@@ -180,3 +180,16 @@ def test_bad_arguments_name_the_component():
         mb.RollingDisc("roll", "disc", radius=-1.0)
     with pytest.raises(mb.ModelError, match="blade"):
         mb.NoSlip("blade", "b", direction=(0, 0, 0))
+
+
+def test_linearize_with_chosen_independent_speeds(systems):
+    """Choosing other independent speeds (the centre's forward speed instead of the spin)
+    changes the state, not the eigenvalues; the named speeds' coordinates stay independent."""
+    omega = 3.0
+    q, qd = [0, 0, R, 0, 0, 0], [R * omega, 0, 0, 0, 0, omega]
+    default = systems["lagrange"].linearize(q, qd)
+    chosen = systems["lagrange"].linearize(q, qd, independent=["x", "yaw", "lean"])
+    assert chosen.independent == ("x", "yaw", "lean") and "lean" in chosen.states[:5]
+    key = lambda z: (round(z.imag, 9), round(z.real, 9))
+    np.testing.assert_allclose(sorted(np.linalg.eigvals(chosen.A), key=key),
+                               sorted(np.linalg.eigvals(default.A), key=key), atol=1e-8)

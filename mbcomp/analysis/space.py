@@ -178,6 +178,15 @@ class Chart:
             positions = np.flatnonzero(self.position_mask)
             self.prows = positions[independent_rows(cv.J[positions])] if positions.size else np.arange(0)
             self.qdep, self.qind = partition(cv.J[self.prows]) if self.prows.size else (np.arange(0), np.arange(self.n))
+            if independent is not None and self.prows.size:
+                # the named speeds' coordinates stay independent: the dependent ones come from the others
+                others = np.setdiff1d(np.arange(self.n), self.ind)
+                block = cv.J[np.ix_(self.prows, others)]
+                if np.linalg.matrix_rank(block) < len(self.prows):
+                    raise ModelError("independent", f"{list(independent)} cannot be chosen independent here: the "
+                                                    f"other coordinates do not determine the position constraints")
+                self.qdep = np.sort(others[partition(block)[0]])
+                self.qind = np.setdiff1d(np.arange(self.n), self.qdep)
         self.k = len(self.ind)
         self.kq = len(self.qind)
 
