@@ -162,3 +162,25 @@ def test_falls_at_3_m_per_s(system):
     lean = np.abs(res["lean"])
     assert lean[res.t > 2.0].max() > 10 * lean[res.t < 0.5].max()
     assert_energy_conserved(res, rtol=1e-7)
+
+
+@pytest.mark.parametrize("change", [{"mB": 90.0, "xB": 0.35, "IBxz": 2.0}, {"rF": 0.4, "c": 0.1, "w": 1.1},
+                                    {"g": 5.0, "IFyy": 0.26, "zH": -0.75}])
+def test_another_bicycle_without_recompiling(system, change):
+    """The paper's parameters are the model's run-time parameters: a changed bicycle (heavier
+    rider, larger front wheel, the moon...) linearises to the benchmark formulas with the
+    same changes, from the same compiled code."""
+    other = system.with_parameters(change)
+    p = dict(bb.BENCHMARK, **change)
+    v = 5.0
+    qd = dict.fromkeys(other.speeds, 0.0)
+    qd.update(x=v, rear_wheel_angle=-v / p["rR"], front_wheel_angle=-v / p["rF"])
+    lin = other.linearize(np.zeros(len(other.coords)), np.array([qd[s] for s in other.speeds]))
+    np.testing.assert_allclose(lean_steer_block(lin), bb.state_matrix(v, p), rtol=0, atol=1e-8)
+    assert np.abs(lean_steer_block(lin) - bb.state_matrix(v)).max() > 1e-3     # it is another bicycle
+
+
+def test_head_angle_is_structure(system):
+    """``lambda`` turns the steer axis, which is structure: changing it asks for a new compile."""
+    with pytest.raises(mb.ModelError, match="lambda"):
+        system.with_parameters({"lambda": 0.35})
