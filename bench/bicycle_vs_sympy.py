@@ -16,8 +16,9 @@ dies out). Both models are validated first: their accelerations agree at the sta
 Error of a run: max |q_i(10 s) - q_ref,i(10 s)| over the angles lean, steer, yaw and pitch
 (rad; the positions x, y grow to 46 m and the wheel angles to 150 rad, whose last digits
 no run resolves). Reference: mbcomp's lagrange at 1e-13, cross-checked against sympy's run
-at 1e-13 (their spread is the resolution; levels below 3x it are not reported). Times: medians over interleaved rounds
-(timing.py), wall and process CPU time (the machine may be shared), per-run setup included, model building excluded; the time at an error level is
+at 1e-13 (their spread is the resolution; levels below 3x it are not reported). Times:
+medians over interleaved rounds (timing.py), wall and process CPU time (the machine may be
+shared), per-run setup included, model building excluded; the time at an error level is
 interpolated along each tool's Pareto front. Ratio = mbcomp / sympy (below 1: mbcomp faster).
 
 Usage: python bench/bicycle_vs_sympy.py [--rounds 3] [--quick]

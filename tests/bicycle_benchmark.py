@@ -112,7 +112,8 @@ def state_matrix(v: float, p: dict[str, float] | None = None) -> np.ndarray:
 
 
 def eigenvalues(v: float, p: dict[str, float] | None = None) -> np.ndarray:
-    """The four eigenvalues (1/s) of the lean-steer motion at forward speed ``v``, sorted by real then imaginary part."""
+    """The four eigenvalues (1/s) of the lean-steer motion at forward speed ``v``, sorted by
+    real then imaginary part."""
     lam = np.linalg.eigvals(state_matrix(v, p))
     return lam[np.lexsort((lam.imag, lam.real))]
 
