@@ -26,7 +26,10 @@ class Linearization:
     other than ``Ball`` these are the coordinates themselves) then their speeds, named
     ``"<speed>_dot"``, then the states of drive elements (``"component.state"``).  ``inputs``: the speeds whose generalised forces are inputs (N or N m).
     ``basis`` (n, k) maps independent speed (or position) deviations to all speeds, so a
-    deviation of all coordinates is ``basis @ z[:k]``.  ``q``, ``qd``, ``t``: the operating point;
+    deviation of all coordinates is ``basis @ z[:k]``.  With velocity constraints (rolling,
+    no-slip) the independent coordinates (from the position rows) outnumber the independent
+    speeds ``independent`` (from all rows): the states are those coordinates, then the speeds,
+    and ``basis`` maps the independent speeds only.  ``q``, ``qd``, ``t``: the operating point;
     ``operating_states``: the drive states there (``system.extra_states`` order).
     """
 
