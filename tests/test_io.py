@@ -198,6 +198,17 @@ class TestRoundTrip:
         assert again.description == model.description
         assert dumps(again) == path.read_text(encoding="utf-8"), "saving is not idempotent"
 
+    def test_a_normalised_axis_keeps_its_parameter_expression(self, tmp_path):
+        """A joint axis written with parameters (the bicycle's head axis, from ``lambda``) is
+        normalised by the joint: saving writes the expressions given, not the derived
+        numbers, so the reloaded model still refuses a change of ``lambda`` (structure)."""
+        model = load(MODELS["whipple_bicycle"])
+        save(model, tmp_path / "bike.toml")
+        text = (tmp_path / "bike.toml").read_text(encoding="utf-8")
+        assert 'axis = ["sin(lambda)", 0.0, "(-cos(lambda))"]' in text and "derived from" not in text
+        with pytest.raises(mb.ModelError, match="lambda"):
+            load(tmp_path / "bike.toml").compile().with_parameters({"lambda": 0.35})
+
     @pytest.mark.parametrize("name", ["arm3d", "double_pendulum_spring"])
     def test_same_coordinates_and_accelerations(self, tmp_path, name):
         model = load(MODELS[name])
