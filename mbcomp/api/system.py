@@ -498,6 +498,28 @@ class System:
                           max_samples=max_samples)
         return result.with_system(system)
 
+    def export_fmu(self, path: Any, kind: str = "cs", inputs: Any = (), outputs: Any = None) -> Any:
+        """Write this System as an FMI 2.0 FMU at ``path`` (returns the path).
+
+        ``kind``: ``"cs"`` (co-simulation: mbcomp's compiled DOP853 inside ``fmi2DoStep``,
+        contact events and impacts handled within a step, tolerances as the parameters
+        ``mbcomp.rtol``/``mbcomp.atol``) or ``"me"`` (model exchange: the states ``[q, v, z]``,
+        their derivatives and one event indicator per contact for the importer's solver).
+        Constraints run as in the ``dae`` formulation (Baumgarte stabilisation) whichever
+        formulation this System uses.  ``inputs``: joint names, each one real input (the
+        generalised force on the joint, added to ``tau``); ``outputs``: the coordinates,
+        speed columns and drive states that are outputs (None: all).  The FMU needs neither
+        Python nor mbcomp (docs/fmu.md)."""
+        from mbcomp.core import services
+        system = self
+        if self._formulation.name != "dae" and (self._formulation.constraints is not None or self.topology.contacts):
+            model, _, options, backend = self._compiled.recipe
+            system = compile_model(model, formulation="dae", backend=backend,
+                                   dynamics=options.get("dynamics", "auto")).with_parameters(self._parameters)
+            system._compiled.initial = getattr(self._compiled, "initial", None)
+        return services.service("export_fmu")(system, system._formulation, path, kind=kind, inputs=inputs,
+                                              outputs=outputs)
+
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every
         contact that is closed and closing), consistent with every other constraint.
@@ -634,6 +656,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from mbcomp.formulations import FORMULATIONS, get_formulation
     from mbcomp.formulations.analysis_cache import cached_analyse
     formulation_class = get_formulation(formulation)
+    initial = getattr(model, "initial", None)  # a model file's [initial] (the start values of an exported FMU)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     # The library carries every registered formulation's C code: one library serves them all.
     snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
@@ -646,6 +669,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
                        {**options, "dynamics": dynamics}, backend)
     compiled.derivation = derivation
+    compiled.initial = initial
     parameters = dict(compiled.default_parameters)
     if derivation is not None:
         parameters.update(derivation.values())  # sub-model parameters, by path
