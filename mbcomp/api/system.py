@@ -139,12 +139,16 @@ class System:
                 raise ModelError("x0", f"{key!r} must be finite, got {value!r}")
         return z
 
-    def integration_path(self, method: str = "DOP853", tau: Any = None) -> str:
-        """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
-        ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
-        from mbcomp.codegen.integrators import why_not_compiled
-        reason = why_not_compiled(self._kernel, self._formulation, method, tau)
-        return "compiled" if reason is None else f"python: {reason}"
+    def integration_path(self, method: Any = "DOP853", tau: Any = None, integrator: str = "auto") -> str:
+        """Which stepping ``simulate`` takes with these arguments: ``"compiled"`` (the loop
+        compiled with the model: no Python between steps), else ``"scipy: <why>"``, scipy's
+        stepping of the compiled right-hand side, and the reason (a scipy method asked for,
+        a Python callable in the model or in ``tau``, ``integrator="scipy"``, a formulation
+        option that steps in Python, no C compiler).  ``Result.stats["path"]`` records it."""
+        from mbcomp.core.run_options import RunOptions
+        from mbcomp.run.paths import choose_path
+        options = RunOptions(1.0, method=method, integrator=integrator)
+        return str(choose_path(self._kernel, self._formulation, options, tau))
 
     @property
     def has_drives(self) -> bool:

@@ -62,7 +62,7 @@ class ContactWatch:
 
             if gap(t_old) <= 0.0:
                 te = t_old
-            elif hasattr(self.locator, "gap_root"):  # Brent's method in compiled code (events_c.py)
+            elif self.locator is not None:  # on the compiled loop's event step (Brent's method in C for dae)
                 te = self.locator.gap_root(i, t_old, t_new, EVENT_GAP_XTOL, 4 * np.finfo(float).eps)
             else:
                 from scipy.optimize import brentq
@@ -97,7 +97,7 @@ class ContactWatch:
         contact = self.persistent[k]
         if force(t_old) <= 0.0:
             return t_old, contact
-        if hasattr(self.locator, "force_root"):  # Brent's method in compiled code (events_c.py)
+        if self.locator is not None:  # on the compiled loop's event step (Brent's method in C for dae)
             return self.locator.force_root(k, t_old, t_new, EVENT_FORCE_XTOL, 4 * np.finfo(float).eps), contact
         from scipy.optimize import brentq
         return brentq(force, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=4 * np.finfo(float).eps), contact
