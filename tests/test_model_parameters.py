@@ -115,3 +115,33 @@ def test_a_parameter_compiled_into_an_expression_of_t_is_refused_at_change():
     with pytest.raises(mb.ModelError, match=r"'amplitude'.*\[constraints.motor\] position"):
         sys.with_parameters({"amplitude": 0.3})
     assert sys.with_parameters({"L": 0.6}).parameters["L"] == 0.6   # the others still change
+
+
+@pytest.mark.xfail(strict=True, reason="known bug: a joint's parent_rotation written with a model parameter "
+                   "keeps its built value when the parameter changes at run time (neither followed nor refused)")
+def test_a_joint_rotation_follows_or_refuses_its_parameter(tmp_path):
+    """A file's joint frame turned by a parameter ``a``: changing ``a`` at run time must either
+    turn the frame as a fresh build does or be refused as structure (as a joint axis is);
+    today it silently keeps the old rotation."""
+    path = tmp_path / "turned.toml"
+    path.write_text('''name = "turned"
+[parameters]
+a = 0.3
+[bodies.b]
+mass = 1.0
+com = [0.0, 0.0, -1.0]
+inertia = [0.01, 0.01, 0.01]
+[joints.j]
+type = "revolute"
+parent = "ground"
+child = "b"
+axis = "x"
+parent_rotation = [["cos(a)", 0.0, "sin(a)"], [0.0, 1.0, 0.0], ["-sin(a)", 0.0, "cos(a)"]]
+''')
+    system = mb.load(path).compile()
+    try:
+        changed = system.with_parameters({"a": 0.6})
+    except mb.ModelError:
+        return   # refused as structure: fine
+    rotated = changed.body_state("b", [0.0]).rotation      # a fresh build with a = 0.6: R_y(0.6)
+    assert abs(rotated[0, 2] - np.sin(0.6)) < 1e-12, rotated

@@ -4,6 +4,7 @@ from mbcomp.spec.components.body import Body, Ground
 from mbcomp.spec.components.constraints import Motor, Slider
 from mbcomp.spec.components.collision import Collision
 from mbcomp.spec.components.contacts import Contact
+from mbcomp.spec.components.rolling import NoSlip, RollingBall, RollingDisc
 from mbcomp.spec.components.drivetrain import DCMotor, Drive, JointFriction, JointLimit
 from mbcomp.spec.components.forces import Damper, Force, JointTorque, Spring, TorsionSpring
 from mbcomp.spec.components.joints import Ball, Cylindrical, Fixed, Free, Joint, Planar, Prismatic, Revolute, Spherical, Universal
@@ -12,4 +13,5 @@ __all__ = [
     "Component", "Constraint", "ForceElement", "Body", "Ground", "Joint", "Revolute", "Prismatic",
     "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
     "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "Collision", "Drive", "DCMotor", "JointFriction", "JointLimit",
+    "RollingDisc", "RollingBall", "NoSlip",
 ]
