@@ -244,7 +244,8 @@ def test_bad_collisions_are_named():
 
 def test_integration_path_says_collisions_step_in_python():
     system = _two_spheres().compile()
-    assert system.integration_path().startswith("python: the model has collisions")
+    path = system.integration_path()
+    assert path != "compiled" and "the model has collisions" in path
 
 
 def test_collisions_are_saved_and_read_back(tmp_path):
