@@ -127,6 +127,7 @@ def load(path: str | os.PathLike) -> Model:
     data = _parse_toml(path, label)
     reader = Reader(label)
     files = _Files(path, data)
+    reader.frozen = files.frozen
     try:
         files.check_limits(label)   # before anything is built: milliseconds even for 2**29 instances
         model = _read_model(reader, data, path, files)
@@ -454,6 +455,8 @@ class _Files:
     def __init__(self, path: Path, data: dict):
         self.top = path
         self.data: dict[Path, Any] = {path.resolve(): data}
+        #: parameters compiled with their numbers, across every file of the load (Reader.frozen)
+        self.frozen: dict[str, str] = {}
 
     def data_of(self, path: Path, label: str) -> dict:
         """The parsed data of ``path`` (read once; a file that failed fails again)."""
@@ -615,6 +618,7 @@ def _part_class(path: Path, context: _FileContext) -> type:
 
     def build(self, **ports: Any) -> None:
         reader = Reader(label)
+        reader.frozen = context.files.frozen
         reader.parameters = {key: getattr(self, key) for key in declared}
         reader.ports = set(ports)
         bodies: dict[str, Any] = {"ground": "ground", **ports}
@@ -667,6 +671,7 @@ def _inline_class(r: Reader, label: str, table: dict, bodies: dict, context: _Fi
 
     def build(self) -> None:
         reader = Reader(where)
+        reader.frozen = r.frozen
         reader.parameters = {**r.parameters, **{key: getattr(self, key) for key in declared}}
         _see_instance_parameters(reader, self)
         _read_parts(reader, table, self, dict(outer), context, {})
