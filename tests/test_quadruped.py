@@ -21,6 +21,7 @@ _spec.loader.exec_module(solo)
 if solo.urdf_path() is None:
     pytest.skip("example-robot-data is not installed", allow_module_level=True)
 
+pytestmark = pytest.mark.slow   # compiling the 18-speed robot takes ~20 s per formulation
 G = 9.81
 FORMULATIONS = ("lagrange", "dae")
 
