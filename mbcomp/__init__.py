@@ -49,6 +49,7 @@ _services.provide("constraint_violation", _post.constraint_violation)
 _services.provide("plot", _on_first_use("mbcomp.face.plotting", "plot_result"))
 _services.provide("animate", _on_first_use("mbcomp.face.plotting", "animate_result"))
 _services.provide("view", _on_first_use("mbcomp.face.viewer", "view"))
+_services.provide("export_fmu", _on_first_use("mbcomp.face.fmu", "export_fmu"))
 
 #: Public names defined in modules imported on first use (PEP 562).
 _LAZY = {"sweep": "mbcomp.run.batch"}

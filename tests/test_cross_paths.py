@@ -98,6 +98,26 @@ def test_both_formulations_give_the_same_motion(name):
     assert_same_motion(run(name, dae), run(name, lagrange), TRAJ, f"{name}: dae against lagrange")
 
 
+#: Library models that genuinely need Python stepping (none today): name -> reason.
+NEEDS_PYTHON: dict[str, str] = {}
+
+
+@pytest.mark.parametrize("formulation", ["lagrange", "dae"])
+@pytest.mark.parametrize("name", NAMES)
+def test_every_model_runs_in_compiled_code(name, formulation):
+    """No library model leaves the compiled loop, in either formulation, unless the user asks
+    for scipy's stepping (``System.integration_path`` and ``Result.stats["path"]`` say so)."""
+    if name in NEEDS_PYTHON:
+        pytest.skip(NEEDS_PYTHON[name])
+    system = system_of(name, formulation)
+    if system.backend != "c":
+        pytest.skip("no C compiler")
+    assert system.integration_path() == "compiled", f"{name} ({formulation})"
+    assert system.integration_path("Radau") == "scipy: scipy method 'Radau' requested (compiled loops: DOP853, RK4)"
+    res = run(name, system)
+    assert res.stats["integrator"] == "compiled" and res.stats["path"] == "compiled"
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_both_backends_give_the_same_numbers(name):
     c, python = system_of(name, "lagrange"), system_of(name, "lagrange", "python")

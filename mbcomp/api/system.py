@@ -139,12 +139,16 @@ class System:
                 raise ModelError("x0", f"{key!r} must be finite, got {value!r}")
         return z
 
-    def integration_path(self, method: str = "DOP853", tau: Any = None) -> str:
-        """``"compiled"`` when ``simulate`` runs entirely in compiled code, else
-        ``"python: <why>"`` (Python callables, contacts, scipy-only methods, ...)."""
-        from mbcomp.codegen.integrators import why_not_compiled
-        reason = why_not_compiled(self._kernel, self._formulation, method, tau)
-        return "compiled" if reason is None else f"python: {reason}"
+    def integration_path(self, method: Any = "DOP853", tau: Any = None, integrator: str = "auto") -> str:
+        """Which stepping ``simulate`` takes with these arguments: ``"compiled"`` (the loop
+        compiled with the model: no Python between steps), else ``"scipy: <why>"``, scipy's
+        stepping of the compiled right-hand side, and the reason (a scipy method asked for,
+        a Python callable in the model or in ``tau``, ``integrator="scipy"``, a formulation
+        option that steps in Python, no C compiler).  ``Result.stats["path"]`` records it."""
+        from mbcomp.core.run_options import RunOptions
+        from mbcomp.run.paths import choose_path
+        options = RunOptions(1.0, method=method, integrator=integrator)
+        return str(choose_path(self._kernel, self._formulation, options, tau))
 
     @property
     def has_drives(self) -> bool:
@@ -509,6 +513,28 @@ class System:
                           max_samples=max_samples)
         return result.with_system(system)
 
+    def export_fmu(self, path: Any, kind: str = "cs", inputs: Any = (), outputs: Any = None) -> Any:
+        """Write this System as an FMI 2.0 FMU at ``path`` (returns the path).
+
+        ``kind``: ``"cs"`` (co-simulation: mbcomp's compiled DOP853 inside ``fmi2DoStep``,
+        contact events and impacts handled within a step, tolerances as the parameters
+        ``mbcomp.rtol``/``mbcomp.atol``) or ``"me"`` (model exchange: the states ``[q, v, z]``,
+        their derivatives and one event indicator per contact for the importer's solver).
+        Constraints run as in the ``dae`` formulation (Baumgarte stabilisation) whichever
+        formulation this System uses.  ``inputs``: joint names, each one real input (the
+        generalised force on the joint, added to ``tau``); ``outputs``: the coordinates,
+        speed columns and drive states that are outputs (None: all).  The FMU needs neither
+        Python nor mbcomp (docs/fmu.md)."""
+        from mbcomp.core import services
+        system = self
+        if self._formulation.name != "dae" and (self._formulation.constraints is not None or self.topology.contacts):
+            model, _, options, backend = self._compiled.recipe
+            system = compile_model(model, formulation="dae", backend=backend,
+                                   dynamics=options.get("dynamics", "auto")).with_parameters(self._parameters)
+            system._compiled.initial = getattr(self._compiled, "initial", None)
+        return services.service("export_fmu")(system, system._formulation, path, kind=kind, inputs=inputs,
+                                              outputs=outputs)
+
     def impact(self, q: Any, qd: Any, contacts: Any = None, restitution: float | None = None, t: float = 0.0):
         """Newton's impact law with ``contacts`` active (names or objects; default: every
         contact that is closed and closing), consistent with every other constraint.
@@ -637,6 +663,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     from mbcomp.formulations import FORMULATIONS, get_formulation
     from mbcomp.formulations.analysis_cache import cached_analyse
     formulation_class = get_formulation(formulation)
+    initial = getattr(model, "initial", None)  # a model file's [initial] (the start values of an exported FMU)
     model = model.flat()  # sub-models expanded, joints oriented along the tree
     # The library carries every registered formulation's C code: one library serves them all.
     snippets = tuple(cls.c_source for cls in FORMULATIONS.values())
@@ -649,6 +676,7 @@ def compile_model(model, *, formulation: Any = "lagrange", cache: bool = True, b
     compiled.recipe = (compiled.flat_model if derivation is None else copy.deepcopy(model), formulation,
                        {**options, "dynamics": dynamics}, backend)
     compiled.derivation = derivation
+    compiled.initial = initial
     parameters = dict(compiled.default_parameters)
     if derivation is not None:
         parameters.update(derivation.values())  # sub-model parameters, by path

@@ -115,33 +115,47 @@ from typing import Callable, Iterator  # noqa: E402
 
 from mbcomp.core.errors import ModelError, SimulationError  # noqa: E402
 
-COMPILED_METHODS = ("DOP853", "RK4")
+from mbcomp.core.run_options import COMPILED_METHODS, RunOptions  # noqa: E402,F401  (COMPILED_METHODS: re-exported)
 
 
-def why_not_compiled(kernel, formulation, method, tau) -> str | None:
-    """Why the compiled loop cannot run this simulation (None when it can); the formulation
-    says whether its way of handling constraints runs in compiled code."""
-    topology = kernel.topology
-    if method not in COMPILED_METHODS:
-        return f"method {method!r} has no compiled loop (compiled: {', '.join(COMPILED_METHODS)})"
-    if kernel.backend != "c":
-        return "the model was compiled without a C compiler (backend 'python')"
-    reason = formulation.compiled_loop()
-    if reason is not None:
-        return reason
-    if method not in getattr(formulation, "compiled_methods", COMPILED_METHODS):
-        return f"the {formulation.name} formulation of this model has no compiled {method} loop"
-    if topology.contacts and not getattr(formulation, "compiled_contacts", False):
-        return "the model has contacts"
-    if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in topology.contacts):
-        return "contacts with friction step in Python (the compiled loops have no friction law)"
-    if kernel.n_inputs:
-        return "the model has callable forces or torques"
-    if kernel.compiled.drives.callables:
-        return "the model's drives or signals use Python callables"
-    if callable(tau):
-        return "tau is a callable"
-    return None
+class LoopSession:
+    """The Python side of a formulation's compiled loop for one stretch of a run: the hook
+    point between ``dop853_segment`` and a formulation whose stepping needs more than the
+    plain DOP853 loop on ``[q, v, z]`` (``Formulation.compiled_session`` and
+    ``Formulation.contact_run`` return one; ``formulations/lagrange_compiled.ReducedRun``,
+    ``formulations/dae_compiled.DaeRun``).  The defaults here are the plain loop's.
+
+    ``y0``: the loop's initial state; ``ni``: independent speeds (0: nothing to integrate);
+    ``restarts``: restarts the stretch made (new partitions, retreats), counted as Python
+    stepping counts them."""
+
+    #: The loop's state is the full ``[q, qd]`` (a failure is diagnosed from it); otherwise
+    #: from ``accepted()``.
+    full_state_loop = False
+    restarts = 0
+
+    def loop(self, lib):
+        """The compiled loop this session steps (bound): ``dop853_run`` on the tree state."""
+        return bind_dop853(lib)
+
+    def resume(self, status: int, state: np.ndarray, y: np.ndarray, f: np.ndarray, counts: np.ndarray):
+        """After the loop returned PAUSED or TRIAL_FAILED: ``(y, f)`` to go on from."""
+        raise SimulationError(f"the compiled loop returned status {status}, which this run cannot resume")
+
+    def accepted(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(t, q, qd)`` of the last accepted state (read where a loop on a reduced state failed)."""
+        raise NotImplementedError
+
+    def drive_states(self, z: np.ndarray) -> None:
+        """The drive elements' states at the start (a session that keeps them copies them)."""
+
+    def prescribed(self, t_end: float, t_eval, max_step: float):
+        """No degree of freedom (``ni == 0``): ``(times, rows, counts)`` at the output times."""
+        raise NotImplementedError
+
+    def failure_hint(self, status: int) -> str | None:
+        """What to add to the message of a failed loop (None: nothing)."""
+        return None
 
 
 # -- the step hook: Ctrl-C, stop requests and progress inside compiled loops -------------------
@@ -457,93 +471,37 @@ class RankLost(Exception):
     """The compiled dae path met a singular position: the caller falls back to Python stepping."""
 
 
-def run_compiled(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray, *, method: str, rtol: float,
-                 atol: float, t_eval, tau, max_step: float, dt: float | None, z0: np.ndarray | None = None,
-                 budget=None):
-    """Integrate a model whose formulation runs in compiled code (``compiled_loop()`` is None)
-    entirely in compiled code; returns ``(t, y, stats, wall)``.  ``budget``: the
-    ``checks.StepBudget`` of a run that keeps every step."""
-    lib = kernel.compiled.functions.lib
-    with formulation.compiled_setup(lib, kernel=kernel, q0=q0):  # e.g. the dae rows and gains, for this thread only
-        tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
-        session = formulation.compiled_session(kernel, lib, q0, qd0, tau_arr)  # e.g. lagrange's reduced loop
-        try:
-            if session is None:
-                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
-                            budget=budget)
-            with session:
-                return _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0, session,
-                            budget=budget)
-        except SimulationError:
-            formulation.explain_compiled_failure(lib)  # raises the cause when it knows one (a motor's law)
-            raise
-
-
-def _run(kernel, lib, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None, session=None,
-         budget=None):
-    hook = _Hook()
-    hook.install(lib)
-    try:
-        return _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0,
-                           session, budget)
-    finally:
-        hook.remove(lib)
-
-
-def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, tau, max_step, dt, z0=None,
-                session=None, budget=None):
-    """The compiled loops.  With a ``session`` (a formulation stepping its own reduced state,
-    ``Formulation.compiled_session``) the DOP853 loop is ``dop853_reduced_run``: it starts from
-    ``session.y0``, writes full ``[q, qd]`` rows, and hands PAUSED and TRIAL_FAILED returns to
-    ``session.resume``."""
-    run, rk4 = _bind(lib)
+def run_loops(kernel, lib, hook: "_Hook", options: RunOptions, q0: np.ndarray, qd0: np.ndarray, z0: np.ndarray,
+              tau_ptr, session: LoopSession | None = None, budget=None):
+    """The compiled loops over the whole run from the consistent state ``(q0, qd0, z0)`` at
+    t = 0 (``options``: method, t_end, rtol, atol, max_step, dt, t_eval; ``tau_ptr``: the
+    address of constant generalised forces, or None).  With a ``session`` (a formulation
+    stepping its own reduced state, ``Formulation.compiled_session``) the DOP853 loop is the
+    session's: it starts from ``session.y0``, writes full ``[q, qd, z]`` rows, and hands PAUSED
+    and TRIAL_FAILED returns to ``session.resume``.  Returns ``(times, rows, counts)``:
+    ``counts`` holds ``nfev``, ``steps``, ``rejected`` and, with a session, ``restarts`` and
+    possibly ``method`` (``"prescribed"``)."""
+    method, t_end, t_eval, dt = options.method, options.t_end, options.t_eval, options.dt
     p = kernel.p
-    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
-    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else np.asarray(z0, dtype=float)
     y = np.ascontiguousarray(np.concatenate((q0, qd0, z0)), dtype=float)
     ny = y.size  # the output rows
-    started = time.perf_counter()
+    run = bind_dop853(lib)
     if session is not None:
         if method != "DOP853":
             raise ModelError("simulate", f"method {method!r} has no compiled loop for this formulation")
         if session.ni == 0 and not kernel.compiled.drives.nz:  # nothing to integrate: the motion follows from the constraints
             if t_eval is None:
                 from mbcomp.core.checks import prescribed_times
-                t_eval = prescribed_times(t_end, max_step, budget)
-            times, values, stats = session.prescribed(t_end, t_eval, max_step)
-            return times, values, stats, time.perf_counter() - started
-        run = bind_reduced(lib)
+                t_eval = prescribed_times(t_end, options.max_step, budget)
+            return session.prescribed(t_end, t_eval, options.max_step)
+        run = session.loop(lib)
         full0, y = y, np.ascontiguousarray(np.concatenate((session.y0, z0)), dtype=float)  # [q_i, qd_i, z]
         if z0.size:
             session.drive_states(z0)  # (the accepted state's, where a retreat goes back to)
     else:
         full0 = y.copy()  # (the loop advances y in place)
     if method == "RK4":
-        if dt is None:
-            raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
-        steps = int(round(t_end / dt))
-        if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
-            raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
-        counts = np.zeros(3, dtype=np.int64)
-        if t_eval is None:  # every step
-            if budget is not None:
-                budget.check_rows(steps + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
-            out = np.empty((steps + 1, ny))
-            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
-                         counts.ctypes.data)
-            t = np.arange(steps + 1) * dt
-        else:  # only at the requested times (Hermite between the steps around each)
-            t = np.ascontiguousarray(t_eval, dtype=float)
-            out = np.empty((len(t), ny))
-            status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, t.ctypes.data, len(t),
-                         out.ctypes.data, counts.ctypes.data)
-        if status == STOPPED:
-            hook.stopped(counts[1] * dt, method)
-        if status:
-            _fail(kernel, status, counts[1] * dt, y, method)
-        stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
-        return t, out, stats, time.perf_counter() - started
+        return _rk4(kernel, lib, hook, options, y, tau_ptr, budget)
     state = np.array([0.0, 0.0])
     counts = np.zeros(3, dtype=np.int64)
     if t_eval is not None:
@@ -553,31 +511,66 @@ def _run_hooked(kernel, lib, hook, t_end, q0, qd0, method, rtol, atol, t_eval, t
         if len(t_out) and t_out[0] == 0.0:
             y_out[0] = full0
             i_out[0] = 1
-        dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end, rtol, atol, max_step,
-                       tau_ptr, counts, t_out, i_out, y_out)
+        dop853_segment(kernel, run, hook, session, options, state, y, np.empty(y.size), tau_ptr, counts, t_out, i_out,
+                       y_out)
         times, values = t_out, y_out
     else:
-        _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, method, state, y, np.empty(y.size), t_end,
-                                                   rtol, atol, max_step, tau_ptr, counts, budget=budget, stored=1)
+        _, steps_t, steps_y, _, _ = dop853_segment(kernel, run, hook, session, options, state, y, np.empty(y.size),
+                                                   tau_ptr, counts, budget=budget, stored=1)
         times, values = np.concatenate(([0.0], steps_t)), np.concatenate((full0[None, :], steps_y))
     stats = {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": int(counts[2])}
     if session is not None:
         stats["restarts"] = session.restarts
-    return times, values, stats, time.perf_counter() - started
+    return times, values, stats
 
 
-def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol, atol, max_step, tau_ptr, counts,
-                   t_out=None, i_out=None, y_out=None, budget=None, stored=0):
-    """Run a compiled DOP853 loop (``run``: ``dop853_run`` or ``dop853_reduced_run``) from
+def _rk4(kernel, lib, hook: "_Hook", options: RunOptions, y: np.ndarray, tau_ptr, budget=None):
+    """The fixed-step RK4 loop (step ``options.dt``) from ``y`` at t = 0: every step, or the
+    rows at ``options.t_eval`` (Hermite between the steps around each)."""
+    _, rk4 = _bind(lib)
+    method, t_end, dt, t_eval = options.method, options.t_end, options.dt, options.t_eval
+    p = kernel.p
+    if dt is None:
+        raise ModelError("simulate", "method 'RK4' is fixed-step: give dt (s)")
+    steps = int(round(t_end / dt))
+    if steps < 1 or abs(steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
+        raise ModelError("simulate", f"t_end = {t_end} must be a whole number of steps dt = {dt}")
+    counts = np.zeros(3, dtype=np.int64)
+    ny = y.size
+    if t_eval is None:  # every step
+        if budget is not None:
+            budget.check_rows(steps + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
+        out = np.empty((steps + 1, ny))
+        status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, None, 0, out.ctypes.data,
+                     counts.ctypes.data)
+        t = np.arange(steps + 1) * dt
+    else:  # only at the requested times
+        t = np.ascontiguousarray(t_eval, dtype=float)
+        out = np.empty((len(t), ny))
+        status = rk4(p.ctypes.data, tau_ptr, 0.0, y.ctypes.data, float(dt), steps, t.ctypes.data, len(t),
+                     out.ctypes.data, counts.ctypes.data)
+    if status == STOPPED:
+        hook.stopped(counts[1] * dt, method)
+    if status:
+        _fail(kernel, status, counts[1] * dt, y, method)
+    return t, out, {"nfev": int(counts[0]), "steps": int(counts[1]), "rejected": 0}
+
+
+def dop853_segment(kernel, run, hook: "_Hook", session: LoopSession | None, options: RunOptions, state: np.ndarray,
+                   y: np.ndarray, f: np.ndarray, tau_ptr, counts: np.ndarray, t_out=None, i_out=None, y_out=None,
+                   budget=None, stored: int = 0):
+    """Run a compiled DOP853 loop (``run``: ``dop853_run`` or a session's loop) from
     ``state = [t, h]`` (h <= 0: a first step is chosen and ``f`` computed) and ``y`` to
-    ``t_end`` or to a step the loop stops at (EVENT).  Output rows at ``t_out`` from index
-    ``i_out[0]`` into ``y_out``, or (``t_out`` None) every accepted step.  PAUSED and
-    TRIAL_FAILED returns go to ``session.resume``; failures raise ``SimulationError``, and so
-    does keeping every step beyond ``budget.rows`` rows in all (``stored`` of them kept before):
-    the step buffers never hold more than one row past the budget.
+    ``options.t_end`` or to a step the loop stops at (EVENT), with ``options``' rtol, atol
+    and max_step.  Output rows at ``t_out`` from index ``i_out[0]`` into ``y_out``, or
+    (``t_out`` None) every accepted step.  PAUSED and TRIAL_FAILED returns go to
+    ``session.resume``; failures raise ``SimulationError``, and so does keeping every step
+    beyond ``budget.rows`` rows in all (``stored`` of them kept before): the step buffers
+    never hold more than one row past the budget.
     Returns ``(status, step times, step rows, y, f)`` (status FINISHED or EVENT; ``y``,
     ``f``: the state the loop stopped at, which a restart may have replaced)."""
     p = kernel.p
+    t_end, rtol, atol, max_step, method = float(options.t_end), options.rtol, options.atol, options.max_step, options.method
     n_steps = np.zeros(1, dtype=np.int64)
     if i_out is None:
         i_out = np.zeros(1, dtype=np.int64)
@@ -591,7 +584,7 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
                 cap = max(min(cap, budget.rows - kept + 1), 1)
             t_steps, y_steps = np.empty(cap), np.empty((cap, chunks_y[0].shape[1]))
             n_steps[0] = 0
-            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, t_end,
                          rtol, atol, max_step, None, 0, i_out.ctypes.data, None, t_steps.ctypes.data,
                          y_steps.ctypes.data, cap, n_steps.ctypes.data, counts.ctypes.data)
             chunks_t.append(t_steps[: n_steps[0]])
@@ -600,7 +593,7 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
             if budget is not None and kept > budget.rows:
                 raise budget.exceeded(float(state[0]))
         else:
-            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, float(t_end),
+            status = run(p.ctypes.data, tau_ptr, state.ctypes.data, y.ctypes.data, f.ctypes.data, t_end,
                          rtol, atol, max_step, t_out.ctypes.data, len(t_out), i_out.ctypes.data, y_out.ctypes.data,
                          None, None, 0, n_steps.ctypes.data, counts.ctypes.data)
         if status == BUFFER_FULL:
@@ -613,14 +606,12 @@ def dop853_segment(kernel, run, hook, session, method, state, y, f, t_end, rtol,
             return status, np.concatenate(chunks_t), np.concatenate(chunks_y), y, f
         if status == STOPPED:
             hook.stopped(state[0], method)
-        full = session is None or getattr(session, "full_state_loop", False)  # (the loop's y is [q, qd])
+        full = session is None or session.full_state_loop  # (the loop's y is [q, qd])
         try:
             _fail(kernel, status, state[0], y if full else np.concatenate(session.accepted()[1:]), method,
                   steps=int(counts[1]), t_end=t_end)
         except SimulationError as exc:
-            hint = getattr(session, "failure_hint", None)
-            extra = hint(status) if hint is not None else None
+            extra = None if session is None else session.failure_hint(status)
             if extra:
                 raise SimulationError(f"{exc}; {extra}") from None
             raise
-

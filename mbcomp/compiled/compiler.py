@@ -55,6 +55,7 @@ class CompiledModel:
         ``dynamics``: ``"auto"``, ``"dense"`` or ``"recursive"``; with ``formulation`` (its
         name) the automatic choice (``recursive.choose``)."""
         self.c_snippets = tuple(c_snippets)
+        self.use_cache = cache  #: whether this model's code goes through the code cache
         model = flatten(model)  # a frozen copy: compiling never changes or keeps the user's objects
         self.model_name = model.name
         self.flat_model = model
@@ -202,7 +203,7 @@ class CompiledModel:
         return CSizes.of(self.output_layout, nq=nv, ng=ng, state_map=self.topology.state_map, nz=self.drives.nz,
                          drives=bool(self.drives.elements), aba=aba, aba_parents=parents)
 
-    def _c_templates(self, sizes: CSizes) -> str:
+    def _c_templates(self, sizes: CSizes, lazy_dense: bool | None = None, reduced_loop: bool | None = None) -> str:
         """The hand-written C linked into every model: the tree accelerations, the
         formulations' code and the integrators.  Its text depends on the kind of model
         (``sizes.flags``; the formulations; dense or recursive), not on its sizes, which
@@ -213,15 +214,42 @@ class CompiledModel:
         tree = codegen.c_accelerations()
         if self.dynamics == "recursive":  # the tree solve, and the dae KKT solve, by the recursive program
             tree = recursive.c_accelerations(nv, self.n_inputs, tree, factors=bool(ng))
-        reduced = "#define REDUCED_LOOP 1\n" if self.reduced_loop else ""
+        lazy_dense = self.lazy_dense if lazy_dense is None else lazy_dense
+        reduced_loop = self.reduced_loop if reduced_loop is None else reduced_loop
+        reduced = "#define REDUCED_LOOP 1\n" if reduced_loop else ""
         if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
-        return (reduced + sizes.header() + (codegen.c_dense_stub() if self.lazy_dense else "")
+        return (reduced + sizes.header() + (codegen.c_dense_stub() if lazy_dense else "")
                 + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
                 + c_integrators())
+
+    def export_sources(self) -> list[tuple[str, str]]:
+        """The C of this model's library as whole translation units ``[(name, text)]`` for
+        building it elsewhere (an FMU, ``face/fmu``): the hand-written templates (with the
+        dense dynamics built in, without the lagrange formulation's reduced loop, which needs
+        Python to choose its partition), the generated functions (but the output functions,
+        whose stubs write NaN) and the model's sizes.  The same text the library is compiled
+        from: the program is generated again (sympy) when the code came from the cache."""
+        sizes = self._c_sizes()
+        functions = {f: outs for f, outs in self._functions().items() if f not in OUTPUT_FUNCTIONS}
+        templates = codegen.c_prototypes(functions) + self._c_templates(sizes, lazy_dense=False, reduced_loop=False)
+        return [("templates", templates), ("model", self._export_model_source(functions)), ("sizes", sizes.unit())]
+
+    def _export_model_source(self, functions: dict) -> str:
+        """The generated C of ``functions`` in one unit: printed from the program when it is in
+        memory (this compile generated the code), else from the code cache (an earlier export
+        of this model), else generated (sympy) and then cached, where the compile used the cache."""
+        tools = cache.toolchain()
+        key = cache.entry_key(self.description + "\nexport sources", self.key + codegen.generator_text(), tools)
+        text = cache.read_text(key, ".c", tools) if self._program is None and self.use_cache else None
+        if text is None:
+            text = codegen.c_source(self.program, functions)
+            if self.use_cache:
+                cache.store(key, ".c", text.encode(), tools)
+        return text
 
     def _load_c(self, use_cache: bool):
         compiler = c_compiler()

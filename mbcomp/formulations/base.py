@@ -92,6 +92,14 @@ class Workspace:
     def after_step(self, t, y):
         return None
 
+    def span(self, t_end: float, y_end: np.ndarray) -> None:
+        """Before samples are taken inside the accepted step ending at ``(t_end, y_end)``:
+        a workspace that predicts from the step's ends (lagrange's Newton predictor) notes
+        them; ``end_span`` afterwards.  Nothing here."""
+
+    def end_span(self) -> None:
+        """After the samples inside a step (see ``span``)."""
+
     def retreat(self):
         """``(t, y)`` of the last accepted state, to retry a step from after a
         ``TrialStateError``; a workspace that raises one overrides this."""
@@ -420,6 +428,20 @@ class Formulation:
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
 
+    #: Whether the compiled loop can watch this model's contacts (``contact_run`` gives the
+    #: stretches between events); False: a model with contacts steps in scipy.
+    compiled_contacts: bool = False
+
+    def contact_run(self, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0, contacts: tuple = (),
+                    offsets: dict | None = None):
+        """One compiled stretch of a run with contacts, from the consistent ``(q0, qd0)`` at
+        ``t0`` with the closed (held) ``contacts`` and the run's speed-motor ``offsets``: a
+        context manager and ``integrators.LoopSession`` that also arms the loop's contact
+        watch (``compiled_watch.ContactWatching``: ``watch_contacts``, ``event_step``,
+        ``locator``, ``sync``, ``workspace``, ``gaps``).  Only called when
+        ``compiled_contacts`` is true."""
+        raise NotImplementedError(f"the {self.name} formulation has no compiled contact loop")
+
     def compiled_session(self, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau):
         """For a formulation whose integration state is not ``[q, v, z]``: the object that drives
         its compiled loop for one run from ``(q0, qd0)`` (``y0``, ``resume``, ``close``; see
@@ -455,7 +477,7 @@ def _check_drivers(formulation, J: np.ndarray, g_t: np.ndarray, rows: np.ndarray
         names = []
         for i in involved:
             comp = constraints.groups_by_row(i)
-            kind = "loop closure" if type(comp).__name__ == "LoopClosure" else type(comp).__name__
+            kind = comp.noun or type(comp).__name__
             label = f"{kind} {constraints.owner[i]!r}"
             if label not in names:
                 names.append(label)

@@ -13,6 +13,8 @@ import ctypes
 
 import numpy as np
 
+from mbcomp.codegen.integrators import LoopSession
+
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
 
@@ -21,7 +23,7 @@ def pointer(array: np.ndarray) -> int:
     return array.__array_interface__["data"][0]
 
 
-class ContactWatching:
+class ContactWatching(LoopSession):
     """Mixin of a compiled run (``lib``, ``n`` reduced/full coordinates, ``contacts`` held):
     arming the loop's watch and reading back the step it stopped at.  ``WATCH`` names the C
     function of the formulation (``dae_watch``, ``lagrange_watch``)."""
@@ -71,3 +73,22 @@ class EventStepFunctions:
         self.args = (self.t_old, self.h, pointer(self.y_old), pointer(self.F), ny)
         self.p = pointer(run.kernel.p)
         self.tau = None if run.tau is None else pointer(run.tau)
+
+    def gap(self, s: float, i: int) -> float:
+        """Contact ``i``'s gap (m) at time ``s`` on the step (a formulation's locator defines it)."""
+        raise NotImplementedError
+
+    def force(self, s: float, k: int) -> float:
+        """Held contact ``k``'s normal force (N) at time ``s`` on the step."""
+        raise NotImplementedError
+
+    def gap_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where contact ``i``'s gap crosses 0 in [a, b] (s): Brent's method on ``gap``
+        (a locator with Brent's method in C overrides it)."""
+        from scipy.optimize import brentq
+        return brentq(lambda s: self.gap(s, i), a, b, xtol=xtol, rtol=rtol)
+
+    def force_root(self, k: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where held contact ``k``'s force crosses 0 in [a, b] (s): Brent's method on ``force``."""
+        from scipy.optimize import brentq
+        return brentq(lambda s: self.force(s, k), a, b, xtol=xtol, rtol=rtol)

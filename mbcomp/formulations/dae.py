@@ -92,8 +92,9 @@ class DaeFormulation(Formulation):
         """Contacts run in the compiled loop (events handled between compiled stretches)."""
         return self.compiled_loop() is None
 
-    #: The compiled stretch between contact events (``simulate._compiled_contacts``).
-    contact_run = DaeRun
+    def contact_run(self, kernel, lib, q0, qd0, tau, t0=0.0, contacts=(), offsets=None) -> DaeRun:
+        """The compiled stretch between contact events (``Formulation.contact_run``)."""
+        return DaeRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
 
     def explain_compiled_failure(self, lib) -> None:
         """A position motor whose law was not finite in C (``dae_motor_failure``): the

@@ -4,8 +4,8 @@
 motor rows (speed motors; position motors whose position is a file expression, run as
 postfix programs, ``expressions_c``) and the gaps of contacts held closed.
 
-``DaeRun`` is one compiled stretch of a run with contacts (``simulate._compiled_contacts``):
-the loop steps the full state ``[q, qd]`` and checks every accepted step for a contact
+``DaeRun`` is one compiled stretch of a run with contacts (``Formulation.contact_run``,
+stepped by ``run/stepping.CompiledStepping``): the loop steps the full state ``[q, qd]`` and checks every accepted step for a contact
 event (a free contact closing, a held contact's force pulling); at one it stops with the
 step's end and dense output, Python locates the event with the gaps and forces evaluated
 in C (``locator``), applies the impact law (``events.ContactWatch``) and starts the next
@@ -115,7 +115,7 @@ class DaeRows:
 
 class DaeRun(ContactWatching):
     """One compiled stretch of a dae run with contacts, from ``(q0, qd0)`` at ``t0`` with the
-    held contacts ``contacts``; the interface ``simulate._compiled_contacts`` steps
+    held contacts ``contacts``; the interface ``run/stepping.CompiledStepping`` steps
     (``y0``, ``ni``, ``watch_contacts``, ``event_step``, ``locator``, ``sync``, ``workspace``)."""
 
     WATCH = "dae_watch"

@@ -214,12 +214,7 @@ def solve_sliding(Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: np.ndarra
             raise SimulationError(f"Painleve's paradox at t = {t:g}: the sliding contact {where} has no "
                                   f"consistent normal force (its effective inverse mass with friction, "
                                   f"{A[k, k]:.3g}, is not positive); lower the friction coefficient")
-    try:  # independent rows (the common case): a plain solve; redundant ones: least norm
-        if np.linalg.cond(A) > 1e10:
-            raise np.linalg.LinAlgError
-        lam = np.linalg.solve(A, b)
-    except np.linalg.LinAlgError:
-        lam = np.linalg.lstsq(A, b, rcond=1e-10)[0]
+    lam = np.linalg.lstsq(A, b, rcond=1e-10)[0]  # (least norm: redundant rows share the load)
     residual = float(np.abs(A @ lam - b).max(initial=0.0))
     if residual > 1e-6 * max(1.0, float(np.abs(b).max(initial=0.0))):
         raise SimulationError(f"the contact and constraint forces at t = {t:g} are inconsistent ({where}): "

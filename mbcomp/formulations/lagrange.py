@@ -216,7 +216,7 @@ class LagrangeFormulation(Formulation):
     def compiled_contacts(self) -> bool:
         """Whether the compiled loop can watch this model's contacts (the reduced loop is
         compiled in and the constraints, if any, run in it)."""
-        return bool(getattr(self.compiled, "reduced_loop", False)) and self.compiled_loop() is None
+        return bool(self.compiled.reduced_loop) and self.compiled_loop() is None
 
     def compiled_loop(self) -> str | None:
         if self.constraints is None:
@@ -230,11 +230,16 @@ class LagrangeFormulation(Formulation):
             motor_programs(self.constraints)  # positions given as expressions of t run in C
         except NotCompilable as exc:
             return str(exc)
-        if not getattr(self.compiled, "reduced_loop", False):
+        if not self.compiled.reduced_loop:
             return "the compiled library has no reduced loop for this model"
         if self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
+
+    def contact_run(self, kernel, lib, q0, qd0, tau, t0=0.0, contacts=(), offsets=None):
+        """The compiled stretch between contact events: the reduced loop (``Formulation.contact_run``)."""
+        from mbcomp.formulations.lagrange_compiled import ReducedRun
+        return ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
 
     def compiled_session(self, kernel, lib, q0, qd0, tau):
         """The Python side of the compiled reduced loop (None without constraints)."""

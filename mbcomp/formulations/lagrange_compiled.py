@@ -28,7 +28,7 @@ import numpy as np
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.statemap import Chart
 from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
-from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED
+from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, bind_reduced
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
@@ -134,6 +134,10 @@ class ReducedRun(ContactWatching):
         drives = lib.lagrange_drives
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
         drives(int(bool(kernel.compiled.drives.elements)))  # (their states follow [q_i, qd_i] in y)
+
+    def loop(self, lib):
+        """The reduced loop (``dop853_reduced_run``): it steps ``[q_i, qd_i, z]``."""
+        return bind_reduced(lib)
 
     def locator(self, t_old: float, y_old: np.ndarray) -> "_Locator":
         """The gaps and held contacts' forces on the event step the loop stopped at, in C

@@ -155,7 +155,7 @@ class ContactWatch:
 
             if gap(t_old) <= 0.0:
                 te = t_old
-            elif hasattr(self.locator, "gap_root"):  # Brent's method in compiled code (events_c.py)
+            elif self.locator is not None:  # on the compiled loop's event step (Brent's method in C for dae)
                 te = self.locator.gap_root(i, t_old, t_new, EVENT_GAP_XTOL, 4 * np.finfo(float).eps)
             else:
                 from scipy.optimize import brentq
@@ -213,9 +213,12 @@ class ContactWatch:
             v = rows.basis[0, 1:].T @ (rows.tangent[0] @ qd_old)
             speed = float(np.linalg.norm(v))
             direction = v / speed if speed > 1e-12 else closed.slip[i]
-            # A contact sliding at zero speed (at the cone's edge while the others hold the
-            # body: redundant contacts) has nothing to stop; only a slip that reverses is an event.
-            if self.slip_speed(q_new, qd_new, i, direction) > -STOP_SPEED:
+            along_new = self.slip_speed(q_new, qd_new, i, direction)
+            if along_new > 0.0:
+                continue
+            # A contact sliding at zero speed from the step's start to its end at the cone's
+            # edge while sticking ones hold the body (redundant contacts) has nothing to stop.
+            if closed.stick and speed <= STOP_SPEED and along_new >= -STOP_SPEED:
                 continue
 
             def along(s, i=i, direction=direction):
@@ -242,7 +245,7 @@ class ContactWatch:
         contact = self.persistent[k]
         if force(t_old) <= 0.0:
             return t_old, contact
-        if hasattr(self.locator, "force_root"):  # Brent's method in compiled code (events_c.py)
+        if self.locator is not None:  # on the compiled loop's event step (Brent's method in C for dae)
             return self.locator.force_root(k, t_old, t_new, EVENT_FORCE_XTOL, 4 * np.finfo(float).eps), contact
         from scipy.optimize import brentq
         return brentq(force, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=4 * np.finfo(float).eps), contact

@@ -1,4 +1,13 @@
-"""Solver backend: step scipy's integrators, with restarts for projections and partitions."""
+"""The one simulate driver: check the options, choose the stepping, one loop over accepted
+steps (events and output), one stats builder.
+
+``simulate`` turns its arguments into a ``RunOptions`` (``core/run_options.py``), asks
+``run/paths.py`` which stepping to take (the loop compiled with the model, or scipy's stepping
+of the compiled right-hand side: ``System.integration_path`` reports the same choice), and
+runs ``run_steps``: one loop in which a stepping (``run/stepping.py``) hands over accepted steps
+that need Python (an event in them, samples inside them, a projection after them) until t_end.
+``Result.stats`` comes from ``run/stats.py`` on every path.
+"""
 from __future__ import annotations
 
 import time
@@ -6,77 +15,50 @@ from typing import Any
 
 import numpy as np
 
+from mbcomp.codegen.integrators import RankLost
 from mbcomp.core import checks
-from mbcomp.core.errors import ModelError, SimulationError, TrialStateError
-from mbcomp.run.events import ContactWatch
-from mbcomp.formulations.impact import GAP_TOLERANCE
-from mbcomp.run.drive_runtime import DriveTorque, DriveWorkspace
-from mbcomp.codegen.integrators import (EVENT, FINISHED, CollapseWatch, RankLost, bind_dop853, bind_reduced, collapse_message, compiled_jacobian,
-                          dop853_segment, hooked, poll_step_hooks, run_compiled, step_hook, why_not_compiled)
+from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.core.progress import ProgressBar
-
-#: scipy methods that use a Jacobian: given one computed in compiled code when possible.
-IMPLICIT_METHODS = ("Radau", "BDF", "LSODA")
 from mbcomp.core.result import Result
+from mbcomp.core.run_options import RunOptions
+from mbcomp.formulations.impact import GAP_TOLERANCE
+from mbcomp.run.events import ContactWatch
+from mbcomp.run.paths import IntegrationPath, choose_path
+from mbcomp.run.stats import PRESCRIBED, Counts, run_stats
+from mbcomp.run.stepping import CompiledStepping, ScipyStepping, Stepping
 
 
 #: Processor seconds between progress updates from a compiled loop.
 PROGRESS_INTERVAL = 0.1
 
 
-def _delay(progress: Any) -> float:
-    """``progress=True`` shows the bar at once; a number (s) shows it once the run has taken
-    that long (the command line's choice, so short runs stay quiet)."""
-    if isinstance(progress, bool) or not isinstance(progress, (int, float)):
-        return 0.0
-    return max(float(progress), 0.0)
-
-
-def solver_class(method: Any) -> type:
-    """scipy's ``OdeSolver`` for a name (``"RK45"``, ``"DOP853"``, ``"Radau"``, ``"BDF"``,
-    ``"LSODA"``, ``"RK23"``) or a subclass passed directly.  (scipy.integrate is imported
-    here, for scipy's stepping only: runs in compiled code never need it.)"""
-    from scipy.integrate import OdeSolver
-    from scipy.integrate._ivp.ivp import METHODS
-    if isinstance(method, type) and issubclass(method, OdeSolver):
-        return method
-    if isinstance(method, str) and method in METHODS:
-        return METHODS[method]
-    raise ModelError("simulate", f"method must be one of {sorted(METHODS)} or an OdeSolver subclass, got {method!r}")
-
-
-def check_settings(t_end, rtol, atol, t_eval, max_step=np.inf, dt=None, rest_speed=1e-4):
-    """The numeric settings of a run, checked (``ModelError`` naming the argument)."""
-    t_end = checks.number(t_end, "t_end", positive=True)
-    rtol = checks.number(rtol, "rtol", positive=True)
-    atol = checks.number(atol, "atol", positive=True)
-    checks.number(max_step, "max_step", positive=True, finite=False)
-    checks.number(rest_speed, "rest_speed", nonnegative=True)
-    if dt is not None:
-        dt = checks.number(dt, "dt", positive=True)
-    if t_eval is not None:
-        t_eval = checks.time_grid(t_eval, t_end)
-    return t_end, t_eval
-
-
 class _Rows:
-    """Rows of equal length appended one by one into one growing float array (8 bytes a
-    value, not a Python array object per row); ``np.array(rows)`` gives the rows."""
+    """Rows of ``width`` values appended one by one or in blocks into one growing float array
+    (8 bytes a value, not a Python array object per row); ``np.array(rows)`` gives the rows."""
 
-    def __init__(self):
-        self.data: np.ndarray | None = None
+    def __init__(self, width: int | None = None):
+        self.data: np.ndarray | None = None if width is None else np.empty((64, width))
         self.n = 0
+
+    def _room(self, width: int, more: int) -> None:
+        if self.data is None:
+            self.data = np.empty((max(64, more), width))
+        elif self.n + more > len(self.data):
+            grown = np.empty((max(2 * len(self.data), self.n + more), self.data.shape[1]))
+            grown[:self.n] = self.data[:self.n]
+            self.data = grown
 
     def append(self, row: Any) -> None:
         row = np.asarray(row, dtype=float).reshape(-1)
-        if self.data is None:
-            self.data = np.empty((64, row.size))
-        elif self.n == len(self.data):
-            grown = np.empty((2 * len(self.data), self.data.shape[1]))
-            grown[:self.n] = self.data
-            self.data = grown
+        self._room(row.size, 1)
         self.data[self.n] = row
         self.n += 1
+
+    def extend(self, block: np.ndarray) -> None:
+        block = np.asarray(block, dtype=float)
+        self._room(block.shape[1], len(block))
+        self.data[self.n:self.n + len(block)] = block
+        self.n += len(block)
 
     def __len__(self) -> int:
         return self.n
@@ -87,29 +69,49 @@ class _Rows:
 
 
 class _Recorder:
-    """Collects output samples: every step, or the requested ``t_eval`` times."""
+    """Collects output samples: every step, or the requested ``t_eval`` times.  ``nq``, ``nv``,
+    ``nz``: the columns of q, qd and the drive states; ``closed`` gives the contacts held at a
+    sample (None: no contacts watched), ``states`` the drive states at a sample."""
 
-    def __init__(self, t_eval, closed=lambda: (), states=lambda: (), budget=None):
+    def __init__(self, t_eval, nq: int, nv: int, nz: int, closed=None, states=lambda: (), budget=None):
         self.t_eval = t_eval
         self.budget = budget if t_eval is None else None  # (StepBudget: every step kept)
         self.closed_now = closed
         self.states_now = states  # drive-element states at the sample (set by full_state)
-        self.z = _Rows()
+        self.nq, self.nv = nq, nv
         self.closed: list[tuple] = []  # persistent contacts at each sample
         self.next = 0
-        self.t: list[float] = []
-        self.q = _Rows()
-        self.qd = _Rows()
+        self.t = _Rows(1)
+        self.q, self.qd, self.z = _Rows(nq), _Rows(nv), _Rows(nz)
 
     def add(self, t, q, qd):
         if self.budget is not None and len(self.t) >= self.budget.rows:
             raise self.budget.exceeded(float(t))
-        closed = self.closed_now()
-        self.closed.append(closed if isinstance(closed, tuple) else tuple(closed))  # (a Closed keeps its friction modes)
+        if self.closed_now is not None:
+            closed = self.closed_now()
+            self.closed.append(closed if isinstance(closed, tuple) else tuple(closed))  # (a Closed keeps its friction modes)
         self.z.append(self.states_now())
         self.t.append(float(t))
         self.q.append(q)
         self.qd.append(qd)
+
+    def extend(self, times: np.ndarray, rows: np.ndarray) -> None:
+        """Samples a compiled loop wrote: rows of ``[q, qd, z]`` (z may be absent)."""
+        if not len(times):
+            return
+        if self.budget is not None and len(self.t) + len(times) > self.budget.rows:
+            raise self.budget.exceeded(float(times[self.budget.rows - len(self.t)]))
+        if self.closed_now is not None:
+            self.closed.extend([tuple(self.closed_now())] * len(times))
+        nq, nv = self.nq, self.nv
+        self.t.extend(np.asarray(times, dtype=float)[:, None])
+        self.q.extend(rows[:, :nq])
+        self.qd.extend(rows[:, nq:nq + nv])
+        self.z.extend(rows[:, nq + nv:] if rows.shape[1] > nq + nv else np.zeros((len(times), self.z.data.shape[1])))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(t, q, qd, z)`` of the samples."""
+        return np.array(self.t).reshape(-1), np.array(self.q), np.array(self.qd), np.array(self.z)
 
     def record_until(self, workspace, solver, dense, t_old, t_stop, q_stop, qd_stop):
         """Samples up to an event at ``t_stop`` (the state there is given)."""
@@ -134,19 +136,16 @@ class _Recorder:
         if self.t_eval is None:
             return
         dense = None
-        span = getattr(workspace, "span", None)  # (lagrange: Newton's predictor spans the step)
         try:
             while self.next < len(self.t_eval) and self.t_eval[self.next] < t_new:
                 ts = self.t_eval[self.next]
                 if dense is None:
-                    if span is not None:
-                        span(t_new, solver.y)
+                    workspace.span(t_new, solver.y)  # (lagrange: Newton's predictor spans the step)
                     dense = solver.dense_output()
                 self.add(ts, *workspace.full_state(ts, dense(ts)))
                 self.next += 1
         finally:
-            if span is not None:
-                workspace.end_span()
+            workspace.end_span()
 
     def record_end(self, workspace, t_new, y_end):
         """The state at the end of a step (after any projection), when it is a sample."""
@@ -164,186 +163,126 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
     drive elements' states) at t = 0 to ``t_end`` with ``formulation`` on ``kernel``; see
     ``System.simulate``.  The Result carries no System (the caller binds one).  With
     ``t_eval=None`` at most ``max_samples`` steps are kept (``checks.StepBudget``)."""
-    t_end, t_eval = check_settings(t_end, rtol, atol, t_eval, max_step, dt, rest_speed)
+    options = RunOptions.checked(t_end, method=method, rtol=rtol, atol=atol, t_eval=t_eval, max_step=max_step,
+                                 rest_speed=rest_speed, integrator=integrator, dt=dt, progress=progress,
+                                 max_samples=max_samples)
+    return run(kernel, formulation, options, q0, qd0, tau=tau, z0=z0)
+
+
+def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray, *, tau: Any = None,
+        z0: np.ndarray | None = None) -> Result:
+    """The driver: checks what the options and inputs ask for, chooses the stepping
+    (``paths.choose_path``) and runs ``run_steps`` with it.  A compiled run that meets a singular
+    position of the constraints (``RankLost``) is run again in scipy's stepping, which
+    handles it, unless the options insist on compiled code."""
     z0 = np.zeros(kernel.compiled.drives.nz) if z0 is None else z0
     columns = len(q0) + len(qd0) + len(z0)
-    budget = checks.StepBudget(max_samples, columns + 1, t_end)  # (a row: t and the state)
-    if t_eval is not None:
-        checks.output_size(len(t_eval), columns + 1, f"t_eval of {len(t_eval)} times", fix="use fewer output times")
+    budget = checks.StepBudget(options.max_samples, columns + 1, options.t_end)  # (a row: t and the state)
+    if options.t_eval is not None:
+        checks.output_size(len(options.t_eval), columns + 1, f"t_eval of {len(options.t_eval)} times",
+                           fix="use fewer output times")
     if tau is not None and not callable(tau):
         kernel.tau(tau, 0.0, q0, qd0)
-    if integrator not in ("auto", "compiled", "scipy"):
-        raise ModelError("simulate", f"integrator must be 'auto', 'compiled' or 'scipy', got {integrator!r}")
+    dt, t_end = options.dt, options.t_end
     if dt is not None:  # fixed steps: every step is stored
         checks.output_size(t_end / dt + 1, len(q0) + len(qd0), f"dt = {dt:g} s over t_end = {t_end:g} s")
-        if t_eval is None:
+        if options.t_eval is None:
             budget.check_rows(t_end / dt + 1, f"dt = {dt:g} s over t_end = {t_end:g} s")
-    reason = why_not_compiled(kernel, formulation, method, tau) if integrator != "scipy" else "integrator='scipy'"
-    if method == "RK4" and reason is not None:
-        raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: {reason}")
-    compiled = None
-    if reason is None:
-        # (speed motors hold their coordinate at its start value, as in Python stepping)
-        start_offsets = formulation.motor_offsets(q0, 0.0)
-        q_start, qd_start = formulation.assemble(kernel, q0, qd0, 0.0, start_offsets)
-
-        def run():
-            if kernel.topology.contacts:  # compiled stretches between contact events
-                return _compiled_contacts(kernel, formulation, t_end, q0, qd0, rtol=rtol, atol=atol, t_eval=t_eval,
-                                          tau=tau, max_step=max_step, rest_speed=rest_speed, budget=budget)
-            return run_compiled(kernel, formulation, t_end, q_start, qd_start, method=method, rtol=rtol,
-                                atol=atol, t_eval=t_eval, tau=tau, max_step=max_step, dt=dt, z0=z0, budget=budget)
+    path = choose_path(kernel, formulation, options, tau)
+    if options.method == "RK4" and not path.compiled:
+        raise ModelError("simulate", f"method 'RK4' runs only in compiled code, which cannot be used here: "
+                                     f"{path.reason}")
+    if path.compiled:
         try:
-            if progress:
-                # The compiled loop's step hook reports the time reached; the bar only reads it
-                # (the callback never asks to stop), so the run and its result are unchanged.
-                bar = ProgressBar(t_end, desc="simulating", unit="s", delay=_delay(progress))
-                try:
-                    with step_hook(lambda t: bar.update_to(t) and False, interval=PROGRESS_INTERVAL):
-                        compiled = run()
-                    bar.update_to(t_end)
-                finally:
-                    bar.close()
-            else:
-                compiled = run()
+            return run_steps(CompiledStepping(kernel, formulation, options, tau, z0, Counts(), budget), kernel,
+                         formulation, options, q0, qd0, path, budget)
         except RankLost:
-            if method == "RK4" or integrator == "compiled":
-                raise SimulationError(f"compiled {method} met a singular position of the constraints; "
+            if options.method == "RK4" or options.integrator == "compiled":
+                raise SimulationError(f"compiled {options.method} met a singular position of the constraints; "
                                       f"use integrator='scipy', which handles it") from None
-    if isinstance(compiled, Result):
-        return compiled
-    if compiled is not None:
-        times, values, counts, wall = compiled
-        n = kernel.nq
-        stats = {"method": method, "integrator": "compiled", "restarts": 0, **counts, "njev": 0, "nlu": 0,
-                 "status": 0, "message": "The solver successfully reached the end of the integration interval.",
-                 "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
-        nv = kernel.nv
-        return _result(kernel, formulation, t=np.asarray(times, dtype=float), q=values[:, :n].copy(),
-                       qd=values[:, n:n + nv].copy(), z=values[:, n + nv:].copy(), stats=stats, tau=tau,
-                       offsets=formulation.motor_offsets(q_start, 0.0))
-    if integrator == "compiled" and reason is not None:
-        raise ModelError("simulate", f"integrator='compiled' is not possible: {reason}")
-    cls = solver_class(method)
-    drive = None
-    if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
-        drive = tau = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
+            path = IntegrationPath("scipy", "the compiled loop met a singular position of the constraints")
+    elif options.integrator == "compiled":
+        raise ModelError("simulate", f"integrator='compiled' is not possible: {path.reason}")
+    return run_steps(ScipyStepping(kernel, formulation, options, tau, z0, Counts()), kernel, formulation, options,
+                 q0, qd0, path, budget)
+
+
+def run_steps(stepping: Stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,
+          path: IntegrationPath, budget=None) -> Result:
+    """The one loop over accepted steps.  ``stepping`` (``run/stepping.py``) advances the run
+    and returns each step that needs Python, or None at t_end; the driver samples it,
+    locates and applies contact events in it (``ContactWatch``), applies the workspace's
+    correction after it, and restarts the stepping where an event or a correction asks."""
+    t_end = options.t_end
     offsets = formulation.motor_offsets(q0, 0.0)
     q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
-    watch = ContactWatch(kernel, formulation, rest_speed, offsets, tau) if kernel.topology.contacts else None
+    watch = ContactWatch(kernel, formulation, options.rest_speed, offsets, stepping.applied) \
+        if kernel.topology.contacts else None
     if watch is not None:
         qd0 = watch.start(q0, qd0)
-    workspace = formulation.start(kernel, 0.0, q0, qd0, tau, watch.persistent if watch else ())
-    if drive is not None:
-        workspace = DriveWorkspace(workspace, drive)
-    if watch is not None and workspace.y0.size == 0:
-        max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
-    bar = ProgressBar(t_end, bool(progress), desc="simulating", unit="s", delay=_delay(progress))
-    recorder = _Recorder(t_eval, (lambda: watch.persistent) if watch else (lambda: ()),
-                         (lambda: drive.z) if drive is not None else (lambda: ()), budget)
-    counts = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "restarts": 0}
-
-    def fun(t, y):
-        total = float(y.sum())
-        if total - total != 0.0:  # a NaN or inf entry
-            raise SimulationError(f"state became non-finite at t = {t:.6g} s")
-        return workspace.rhs(t, y)
-
-    options = {}
-    if (getattr(cls, "__name__", "") in IMPLICIT_METHODS and formulation.constraints is None
-            and why_not_compiled(kernel, formulation, "DOP853", tau) is None):
-        options["jac"] = compiled_jacobian(kernel, None if tau is None else kernel.tau(tau, 0.0, q0, qd0))
-
-    def make_solver(t0, y0, first_step=None):
-        return cls(fun, t0, y0, t_end, rtol=rtol, atol=atol, max_step=max_step, first_step=first_step, **options)
-
-    def add_counts(solver):
-        for key in ("nfev", "njev", "nlu"):
-            counts[key] += getattr(solver, key, 0)
-
+    else:
+        # (without contacts, the speed motors' start values are read off the assembled state)
+        offsets = formulation.motor_offsets(q0, 0.0) if stepping.records_start else offsets
+    recorder = _Recorder(options.t_eval, kernel.nq, kernel.nv, stepping.state_columns,
+                         (lambda: watch.persistent) if watch else None, stepping.states, budget)
+    if not stepping.records_start and (options.t_eval is None or (len(options.t_eval) and options.t_eval[0] == 0.0)):
+        recorder.add(0.0, q0, qd0)  # (before the stepping starts: a solver's first evaluations move drive states)
+        recorder.next = 1 if options.t_eval is not None else 0
     started = time.perf_counter()
-    if workspace.y0.size == 0 and watch is None:
-        return _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started,
-                                  budget)
-    if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
-        recorder.add(0.0, q0, qd0)
-        recorder.next = 1 if t_eval is not None else 0
-    gaps_old = watch.gaps(q0, qd0).g if watch else None
-    collapse = CollapseWatch(0.0, t_end)
+    stepping.begin(0.0, q0, qd0, offsets, watch.persistent if watch else (), watch is not None)
+    if stepping.nothing_to_integrate and watch is None:
+        return _prescribed_motion(kernel, formulation, options, stepping, q0, qd0, offsets, started, path, budget)
+    gaps = watch.gaps(q0, qd0).g if watch else None
+    bar = ProgressBar(t_end, bool(options.progress), desc="simulating", unit="s", delay=options.progress_delay)
     try:
-        solver = make_solver(0.0, workspace.y0)
-        retries = 0
-        while True:
-            try:
-                message = solver.step()
-            except TrialStateError:
-                # Like a rejected step: back to the last accepted state, a quarter of the step.
-                retries += 1
-                if retries > 10:
-                    raise
-                add_counts(solver)
-                counts["restarts"] += 1
-                h = getattr(solver, "h_abs", None) or (t_end / 100)
-                t_back, y_back = workspace.retreat()
-                solver = make_solver(t_back, y_back, first_step=max(h / 4, 1e-12))
-                continue
-            retries = 0
-            if solver.status == "failed":
-                raise SimulationError(f"solver {getattr(cls, '__name__', method)} gave up at t = {solver.t:.6g} s: {message}")
-            workspace.normalize(solver.y)  # quaternions to unit length, in place
-            counts["steps"] += 1
-            t, restart = solver.t, None
-            if watch is not None:
-                t, restart, corrected, gaps_old = _contact_step(watch, workspace, solver, recorder, gaps_old)
-            else:
-                # Samples inside the step come from its dense output, in the coordinates it was
-                # taken in; the end sample comes after the correction (projection, new partition).
-                recorder.record_interior(workspace, solver, t)
-                corrected = workspace.after_step(t, solver.y)
-                recorder.record_end(workspace, t, solver.y if corrected is None else corrected)
-            bar.update_to(t)
-            poll_step_hooks(t)
-            if collapse.collapsed(t):
-                q_now, qd_now = workspace.full_state(t, solver.y)
-                raise SimulationError(collapse.message(f"solver {getattr(cls, '__name__', method)}", t, qd_now,
-                                                       kernel.topology.speeds))
-            if restart is None and solver.status == "finished":
-                break
-            if restart is None:
-                if corrected is not None:
-                    add_counts(solver)
-                    counts["restarts"] += 1
-                    solver = make_solver(t, corrected)
-                continue
-            add_counts(solver)
-            counts["restarts"] += 1
-            t_restart, q_r, qd_r = restart
-            if t_restart >= t_end:
-                break
-            workspace = formulation.start(kernel, t_restart, q_r, qd_r, tau, watch.persistent)
-            if drive is not None:
-                workspace = DriveWorkspace(workspace, drive)
-            workspace.offsets = offsets
-            solver = make_solver(t_restart, workspace.y0)
+        with stepping.running(bar, PROGRESS_INTERVAL):
+            while True:
+                step = stepping.advance(recorder, gaps)
+                if step is None:
+                    break
+                t, restart, corrected = step.t, None, None
+                if watch is not None:
+                    watch.locator = step.locator  # (a compiled loop's gaps and forces on its event step, in C)
+                    try:
+                        t, restart, corrected, gaps = _contact_step(watch, step.workspace, step, recorder,
+                                                                    gaps if step.gaps is None else step.gaps)
+                    finally:
+                        watch.locator = None
+                else:
+                    # Samples inside the step come from its dense output, in the coordinates it was
+                    # taken in; the end sample comes after the correction (projection, new partition).
+                    recorder.record_interior(step.workspace, step, t)
+                    corrected = step.workspace.after_step(t, step.y)
+                    recorder.record_end(step.workspace, t, step.y if corrected is None else corrected)
+                stepping.accepted(t, step)
+                if restart is None and step.finished:
+                    break
+                if restart is None:
+                    stepping.go_on(t, corrected, step)
+                    continue
+                stepping.stop()
+                t_restart, q_r, qd_r = restart
+                if t_restart >= t_end:
+                    break
+                stepping.restart_at(t_restart, q_r, qd_r, watch.persistent)
+        bar.update_to(t_end)
     except SimulationError as exc:
-        raise SimulationError(f"simulation stopped: {exc}") from None
+        if not stepping.error_prefix:
+            raise
+        raise SimulationError(f"{stepping.error_prefix}{exc}") from None
     finally:
         bar.close()
-    add_counts(solver)
+    stepping.finish_counts()
     wall = time.perf_counter() - started
-    q = np.array(recorder.q).reshape(-1, kernel.nq)
-    qd = np.array(recorder.qd).reshape(-1, kernel.nv)
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+    t, q, qd, z = recorder.arrays()
+    if not stepping.finite_checked and not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
-    stats = {"method": getattr(cls, "__name__", str(method)), "integrator": "scipy", **counts, "status": 0,
-             "message": "The solver successfully reached the end of the integration interval.",
-             "success": True, "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
-    events = watch.events if watch else []
-    z = np.array(recorder.z).reshape(len(recorder.t), -1)
-    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, z=z, stats=stats,
-                   tau=tau if drive is None else drive.tau, offsets=offsets,
-                  events=events, persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
-                  closed_contacts=recorder.closed)
+    stats = run_stats(options, formulation.name, stepping.counts, wall, integrator=stepping.integrator,
+                      method=stepping.method, path=str(path))
+    return _result(kernel, formulation, t=t, q=q, qd=qd, z=z, stats=stats, tau=stepping.result_tau, offsets=offsets,
+                   events=watch.events if watch else [],
+                   persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],
+                   closed_contacts=recorder.closed)
 
 
 def _contact_step(watch, workspace, solver, recorder, gaps_old):
@@ -381,111 +320,25 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
     return te, (te, q, qd), None, watch.gaps(q, qd).g
 
 
-class _EventStep:
-    """The step a compiled loop stopped at because of a contact event: what ``_contact_step``
-    reads of a solver (its span, end state and dense output)."""
-
-    def __init__(self, t_old, t, y, dense):
-        self.t_old, self.t, self.y, self._dense = t_old, t, y, dense
-
-    def dense_output(self):
-        return self._dense
-
-
-def _compiled_contacts(kernel, formulation, t_end, q0, qd0, *, rtol, atol, t_eval, tau, max_step, rest_speed,
-                       budget=None) -> Result:
-    """Contacts with the compiled loop: the stretches between events run in C (the lagrange
-    formulation's reduced loop, watching the contacts after every step); a step with an event
-    comes back here, where ``ContactWatch`` locates and applies it exactly as in Python
-    stepping (``_contact_step``), and the loop restarts after it."""
-    from mbcomp.formulations.lagrange_compiled import ReducedRun
-    lib = kernel.compiled.functions.lib
-    Run = getattr(formulation, "contact_run", None) or ReducedRun  # the dae formulation steps [q, qd] itself
-    run_loop = bind_reduced(lib) if Run is ReducedRun else bind_dop853(lib)
-    n = kernel.nv
-    offsets = formulation.motor_offsets(q0, 0.0)
-    q0, qd0 = formulation.assemble(kernel, q0, qd0, 0.0, offsets)
-    applied = tau  # (what the events see: the drive elements' forces join tau, as in Python stepping)
-    if kernel.compiled.drives.elements:
-        applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
-    watch = ContactWatch(kernel, formulation, rest_speed, offsets, applied)
-    qd0 = watch.start(q0, qd0)
-    recorder = _Recorder(t_eval, lambda: watch.persistent, budget=budget)
-    if t_eval is None or (len(t_eval) and t_eval[0] == 0.0):
-        recorder.add(0.0, q0, qd0)
-        recorder.next = 1 if t_eval is not None else 0
-    tau_arr = None if tau is None else np.ascontiguousarray(kernel.tau(tau, 0.0, q0, qd0), dtype=float)
-    tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
-    t_out = None if t_eval is None else np.ascontiguousarray(t_eval, dtype=float)
-    y_out = None if t_eval is None else np.empty((len(t_out), 2 * n))
-    counts, restarts = np.zeros(3, dtype=np.int64), 0
-    t, q, qd, gaps = 0.0, q0, qd0, watch.gaps(q0, qd0).g
-    started = time.perf_counter()
-    with hooked(lib) as hook:
-        while t < t_end:
-            with Run(formulation, kernel, lib, q, qd, tau_arr, t0=t, contacts=watch.persistent,
-                     offsets=offsets) as segment:
-                if t == 0.0 and segment.ni == 0:
-                    max_step = min(max_step, t_end / 500)  # nothing to integrate: step time to watch the contacts
-                segment.watch_contacts(gaps, GAP_TOLERANCE)
-                state, y = np.array([t, 0.0]), segment.y0
-                i_out = np.array([recorder.next], dtype=np.int64)
-                status, steps_t, steps_y, y, f = dop853_segment(kernel, run_loop, hook, segment, "DOP853", state, y,
-                                                                np.empty_like(y), t_end, rtol, atol, max_step,
-                                                                tau_ptr, counts, t_out, i_out, y_out,
-                                                                budget=budget, stored=len(recorder.t))
-                if t_out is not None:
-                    for j in range(recorder.next, int(i_out[0])):
-                        recorder.add(t_out[j], y_out[j, :n], y_out[j, n:])
-                    recorder.next = int(i_out[0])
-                for tj, row in zip(steps_t, steps_y):
-                    recorder.add(tj, row[:n], row[n:])
-                restarts += segment.restarts
-                if status == FINISHED:
-                    break
-                segment.sync()  # the Python workspace at the step's start, where the loop stopped
-                t_new, y_new, dense = segment.event_step(float(state[0]), y)
-                watch.locator = segment.locator(float(state[0]), y)  # the root finder's gaps and forces in C
-                try:
-                    t, restart, corrected, gaps = _contact_step(watch, segment.workspace, _EventStep(
-                        float(state[0]), t_new, y_new, dense), recorder, segment.gaps.copy())
-                finally:
-                    watch.locator = None
-                restarts += 1
-                if restart is None:  # (the loop's watch and Python's disagree: carry on from the step's end)
-                    q, qd = segment.workspace.full_state(t, y_new if corrected is None else corrected)
-                    continue
-                t, q, qd = restart
-    wall = time.perf_counter() - started
-    q = np.array(recorder.q).reshape(-1, kernel.nq)
-    qd = np.array(recorder.qd).reshape(-1, kernel.nv)
-    stats = {"method": "DOP853", "integrator": "compiled", "nfev": int(counts[0]), "njev": 0, "nlu": 0,
-             "steps": int(counts[1]), "rejected": int(counts[2]), "restarts": restarts, "status": 0,
-             "message": "The solver successfully reached the end of the integration interval.", "success": True,
-             "wall_time": wall, "rtol": rtol, "atol": atol, "formulation": formulation.name}
-    return _result(kernel, formulation, t=np.array(recorder.t), q=q, qd=qd, z=np.zeros((len(recorder.t), 0)),
-                   stats=stats, tau=tau, offsets=offsets, events=watch.events,
-                   persistent_contacts=[watch.names[i] for i in watch.persistent], closed_contacts=recorder.closed)
-
-
-def _prescribed_motion(kernel, formulation, workspace, t_end, t_eval, max_step, q0, qd0, tau, offsets, started,
-                       budget=None) -> Result:
+def _prescribed_motion(kernel, formulation, options: RunOptions, stepping, q0, qd0, offsets, started,
+                       path: IntegrationPath, budget=None) -> Result:
     """No degree of freedom left (every coordinate driven or dependent): nothing to
     integrate; the motion follows from the constraints at each output time (Newton,
     continued from the previous time)."""
+    t_eval = options.t_eval
     if t_eval is None:
-        t_eval = checks.prescribed_times(t_end, max_step, budget)
+        t_eval = checks.prescribed_times(options.t_end, options.max_step, budget)
+    workspace = stepping.workspace
     qs, qds = [], []
     for t in t_eval:
         q, qd = workspace.full_state(t, np.zeros(0))
         workspace.after_step(t, np.zeros(0))
         qs.append(q)
         qds.append(qd)
-    stats = {"method": "prescribed", "integrator": "none", "nfev": 0, "njev": 0, "nlu": 0, "steps": len(t_eval) - 1,
-             "restarts": 0, "status": 0, "message": "No degree of freedom: the motion follows from the constraints.",
-             "success": True, "wall_time": time.perf_counter() - started, "formulation": formulation.name}
+    stats = run_stats(options, formulation.name, Counts(steps=len(t_eval) - 1), time.perf_counter() - started,
+                      integrator="none", method="prescribed", path=str(path), message=PRESCRIBED)
     return _result(kernel, formulation, t=np.asarray(t_eval, dtype=float), q=np.array(qs), qd=np.array(qds), stats=stats,
-                  tau=tau, offsets=offsets)
+                   tau=stepping.result_tau, offsets=offsets)
 
 
 def _result(kernel, formulation, **data) -> Result:

@@ -275,6 +275,8 @@ class Constraint(Component):
 
     n_equations: ClassVar[int] = 0
     section = "constraints"
+    #: How messages name this kind of constraint ("" : by its class name).
+    noun: ClassVar[str] = ""
 
     def equations(self, ground) -> list:
         """The constraint's equations as primitives (``mbcomp.spec.components.primitives``:

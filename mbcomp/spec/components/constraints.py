@@ -120,6 +120,8 @@ class LoopClosure(Constraint):
     Reactions carry the joint's name.
     """
 
+    noun = "loop closure"
+
     def __init__(self, joint):
         super().__init__("closure")
         object.__setattr__(self, "name", joint.name)  # may be a nested (dotted) name

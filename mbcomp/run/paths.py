@@ -1,0 +1,65 @@
+"""Which stepping a run takes: the loop compiled with the model, or scipy's stepping of the
+compiled right-hand side, and why.
+
+The compiled loop is the product path: every model whose forces, drives and motors are
+expressions runs there in either formulation.  A run leaves it only for a reason this module
+names (``IntegrationPath.reason``): a scipy method asked for, Python callables in the model or
+in ``tau``, a formulation option that steps in Python (``Formulation.compiled_loop``), a model
+compiled without a C compiler.  ``System.integration_path`` reports the choice.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from mbcomp.core.run_options import COMPILED_METHODS, RunOptions
+
+
+@dataclass(frozen=True)
+class IntegrationPath:
+    """``stepping``: ``"compiled"`` or ``"scipy"``; ``reason``: why not compiled (None when
+    compiled).  ``str()`` gives ``"compiled"`` or ``"scipy: <reason>"``."""
+
+    stepping: str
+    reason: str | None = None
+
+    @property
+    def compiled(self) -> bool:
+        return self.stepping == "compiled"
+
+    def __str__(self) -> str:
+        return self.stepping if self.reason is None else f"{self.stepping}: {self.reason}"
+
+
+def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
+    """Why the compiled loop cannot run ``method`` on this model with these inputs (None when
+    it can).  The formulation answers for its constraints and contacts through its hooks
+    (``compiled_loop()``, ``compiled_methods``, ``compiled_contacts``)."""
+    if method not in COMPILED_METHODS:
+        return f"scipy method {method!r} requested (compiled loops: {', '.join(COMPILED_METHODS)})"
+    if kernel.backend != "c":
+        return "the model was compiled without a C compiler (backend 'python')"
+    reason = formulation.compiled_loop()
+    if reason is not None:
+        return reason
+    if method not in formulation.compiled_methods:
+        return f"the {formulation.name} formulation of this model has no compiled {method} loop"
+    if kernel.topology.contacts and not formulation.compiled_contacts:
+        return "the model has contacts"
+    if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in kernel.topology.contacts):
+        return "contacts with friction step in Python (the compiled loops have no friction law)"
+    if kernel.n_inputs:
+        return "the model has callable forces or torques"
+    if kernel.compiled.drives.callables:
+        return "the model's drives or signals use Python callables"
+    if callable(tau):
+        return "tau is a Python callable"
+    return None
+
+
+def choose_path(kernel, formulation, options: RunOptions, tau: Any = None) -> IntegrationPath:
+    """The stepping ``simulate`` takes with ``options`` (``integrator="scipy"`` asks for scipy's)."""
+    if options.integrator == "scipy":
+        return IntegrationPath("scipy", "integrator='scipy' requested")
+    reason = why_not_compiled(kernel, formulation, options.method, tau)
+    return IntegrationPath("compiled" if reason is None else "scipy", reason)
