@@ -72,3 +72,65 @@ def test_the_feet_carry_the_weight_as_the_statics_say(standing_runs):
     np.testing.assert_allclose(total, [0.0, 0.0, weight], rtol=1e-9, atol=1e-8)
     for leg, fz in zip(solo.LEGS, f):
         np.testing.assert_allclose(res.contact_forces[f"{leg}_foot"][-1], [0.0, 0.0, fz], rtol=1e-8, atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def drop_runs(robot):
+    """Pure PD (no feed-forward), dropped with the feet 2 mm above the floor, run 0.4 s."""
+    pd_only = robot.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
+    q0 = solo.standing_state(pd_only, clearance=0.002)
+    t = np.linspace(0.0, 0.4, 81)
+    return pd_only, q0, pd_only.simulate(0.4, q0, np.zeros(robot.nv), t_eval=t)
+
+
+def test_dropped_it_lands_on_four_feet_and_settles(drop_runs):
+    """The four feet land together after the free fall of 2 mm (t = sqrt(2 h / g): in free
+    fall the PD keeps the posture), stick, and the robot settles with no drift."""
+    robot, q0, res = drop_runs
+    assert [e.kind for e in res.events] == ["impact"] * 4
+    assert [e.time for e in res.events] == [pytest.approx(np.sqrt(2 * 0.002 / G), rel=1e-6)] * 4
+    for q in res.q:
+        assert min(robot.gaps(q).values()) >= -1e-6
+    late = res.t >= 0.3
+    assert np.abs(res.q[late] - res.q[-1]).max() < 1e-6                     # at rest: no drift
+    assert np.abs(res.qd[-1]).max() < 1e-6
+    total = sum(res.contact_forces[f"{leg}_foot"][-1] for leg in solo.LEGS)
+    mass = sum(float(node.get("value")) for node in ET.parse(solo.urdf_path()).iter("mass"))
+    np.testing.assert_allclose(total, [0.0, 0.0, mass * G], rtol=1e-6, atol=1e-6 * mass * G)
+
+
+def test_dropped_its_feet_stick(drop_runs):
+    """After landing the material point of each foot sphere touching the floor does not
+    move (stick; the sphere may roll as the knees give)."""
+    robot, _, res = drop_runs
+    for k in np.flatnonzero(res.t > 0.03):
+        for leg in solo.LEGS:
+            state = robot.body_state(f"{leg}_LOWER_LEG", res.q[k])
+            below = state.rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+            touching = np.asarray(solo.foot_point(leg)) + below
+            v = robot.body_state(f"{leg}_LOWER_LEG", res.q[k], res.qd[k], point=touching).velocity
+            assert np.hypot(v[0], v[1]) < 1e-6, (leg, res.t[k], v)
+
+
+def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
+    """At rest the PD torques kp (target - q) balance what holds the robot with the
+    contact forces found: h(q) = J^T F on the joints (the sag below the kinematic height
+    is the joints' compliance, ~6 mm at kp = 20 N m/rad)."""
+    robot, q0, res = drop_runs
+    q = res.q[-1]
+    nv = robot.nv
+    generalised = np.zeros(nv)
+    for leg in solo.LEGS:
+        force = res.contact_forces[f"{leg}_foot"][-1]          # acts at the touching point
+        below = robot.body_state(f"{leg}_LOWER_LEG", q).rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+        touching = np.asarray(solo.foot_point(leg)) + below
+        for k in range(nv):
+            e = np.zeros(nv)
+            e[k] = 1.0
+            generalised[k] += force @ robot.body_state(f"{leg}_LOWER_LEG", q, e, point=touching).velocity
+    kp = robot.parameters["FL_HAA_pd.value.constant1.value"]
+    pd = np.array([kp * (solo.POSTURE[name] - q[robot.coords.index(name)]) for name in robot.coords[7:]])
+    hold = robot.holding_forces(q)
+    np.testing.assert_allclose(hold[6:], pd + generalised[6:], atol=1e-6)
+    np.testing.assert_allclose(hold[:6], generalised[:6], atol=1e-6)
+    assert 0.001 < q0[2] - 0.002 - q[2] < 0.02
