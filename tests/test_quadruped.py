@@ -134,3 +134,16 @@ def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
     np.testing.assert_allclose(hold[6:], pd + generalised[6:], atol=1e-6)
     np.testing.assert_allclose(hold[:6], generalised[:6], atol=1e-6)
     assert 0.001 < q0[2] - 0.002 - q[2] < 0.02
+
+
+def test_formulations_agree_on_the_drop():
+    """Lagrange and DAE: the same landing time and the same rest state (to 1e-7)."""
+    ends = []
+    for formulation in FORMULATIONS:
+        system = solo.solo12(formulation)
+        system = system.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
+        res = system.simulate(0.4, solo.standing_state(system, clearance=0.002), np.zeros(system.nv),
+                              t_eval=[0.0, 0.4])
+        ends.append((res.events[0].time, res.q[-1]))
+    assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-9)
+    np.testing.assert_allclose(ends[0][1], ends[1][1], atol=1e-7)
