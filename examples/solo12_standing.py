@@ -11,9 +11,12 @@ work: ``tau = h(q) - J^T F`` with ``h`` the holding forces of the free robot and
 least-norm vertical foot forces whose wrench on the base balances gravity).  So the posture
 is an exact equilibrium: the base stands at ``z = -(lowest foot centre below the base) + r``.
 
-Dropped from a few millimetres, the four feet land together (one simultaneous frictional
-impact), stick, and the robot settles back onto that height with its feet fixed on the
-floor; the contact forces then carry its weight.
+Put down touching the floor at rest, it stands there: no event, no drift, the feet carry
+the statics' forces.  With the PD alone (feed-forward 0) dropped from 2 mm, the four feet
+land together (one simultaneous frictional impact), stick, and the knees give until the PD
+torques hold the weight: the base settles 2.8 mm below the kinematic height.  (Dropped with
+the feed-forward on, the legs stretch during the fall and the feet land unevenly: that run
+slows to a crawl in the stick/slip event handling; see docs/contacts.md.)
 
 Needs ``example-robot-data`` (``pip install "mbcomp[robots]"``).
 
@@ -120,16 +123,23 @@ def main() -> None:
         return
     for formulation in ("lagrange", "dae"):
         system = solo12(formulation)
-        q0 = standing_state(system, clearance=0.002)
         height = standing_state(system)[2]
+        # 1. Put down touching the floor at rest: PD + feed-forward hold the posture exactly.
         start = time.perf_counter()
-        res = system.simulate(1.0, q0, np.zeros(system.nv), t_eval=np.linspace(0.0, 1.0, 101))
-        elapsed = time.perf_counter() - start
+        res = system.simulate(1.0, standing_state(system), np.zeros(system.nv), t_eval=[0.0, 0.5, 1.0])
         force = sum(res.contact_forces[f"{leg}_foot"][-1] for leg in LEGS)
-        print(f"{formulation}: {elapsed:.1f} s, events {[(round(e.time, 6), e.kind, e.contact) for e in res.events]}")
-        print(f"  base height {res['base_link_free_z'][-1]:.9f} m (standing height {height:.9f} m); "
-              f"contact force {force} N; lowest gap {min(min(system.gaps(q).values()) for q in res.q):.2e} m")
-
+        print(f"{formulation}, standing: {time.perf_counter() - start:.1f} s for 1 s, events {res.events}, "
+              f"base height {res['base_link_free_z'][-1]:.9f} m (kinematic {height:.9f} m), feet carry {force} N")
+        # 2. Pure PD (no feed-forward), dropped from 2 mm: lands on four feet, the knees give.
+        pd_only = system.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in POSTURE})
+        start = time.perf_counter()
+        res = pd_only.simulate(1.0, standing_state(pd_only, clearance=0.002), np.zeros(system.nv),
+                               t_eval=np.linspace(0.0, 1.0, 101))
+        force = sum(res.contact_forces[f"{leg}_foot"][-1] for leg in LEGS)
+        print(f"{formulation}, dropped: {time.perf_counter() - start:.1f} s for 1 s, "
+              f"events {[(round(e.time, 6), e.kind, e.contact) for e in res.events]}")
+        print(f"  base height {res['base_link_free_z'][-1]:.9f} m (sag {height - res['base_link_free_z'][-1]:.6f} m), "
+              f"feet carry {force} N, lowest gap {min(min(pd_only.gaps(q).values()) for q in res.q):.1e} m")
 
 if __name__ == "__main__":
     main()

@@ -115,7 +115,7 @@ def test_dropped_its_feet_stick(drop_runs):
 def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
     """At rest the PD torques kp (target - q) balance what holds the robot with the
     contact forces found: h(q) = J^T F on the joints (the sag below the kinematic height
-    is the joints' compliance, ~6 mm at kp = 20 N m/rad)."""
+    is the joints' compliance, ~2.8 mm at kp = 20 N m/rad)."""
     robot, q0, res = drop_runs
     q = res.q[-1]
     nv = robot.nv
