@@ -5,6 +5,7 @@ from mbcomp.spec.model import Model
 from mbcomp.spec.components import (Ball, Body, Contact, Cylindrical, Damper, Fixed, Force, Free, JointTorque, Motor, Planar,
                          Prismatic, Revolute, Slider, Spherical, Spring, TorsionSpring, Universal)
 from mbcomp.spec.components import DCMotor, Drive, JointFriction, JointLimit
+from mbcomp.spec.components import NoSlip, RollingBall, RollingDisc
 from mbcomp.spec.components.signals import PID, Angle, Constant, Signal, Sine, Speed, Step
 from mbcomp.spec.components.frame import Frame, rpy
 from mbcomp.spec.servo import Servo
@@ -80,7 +81,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Model", "Body", "Revolute", "Prismatic", "Spherical", "Ball", "Free", "Universal", "Cylindrical", "Planar", "Fixed", "Spring", "Damper", "Force",
-    "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "System", "Result", "Energy",
+    "JointTorque", "TorsionSpring", "Slider", "Motor", "Contact", "RollingDisc", "RollingBall", "NoSlip", "System", "Result", "Energy",
     "BodyState", "Event", "Frame", "rpy", "Submodel", "Parameter", "Option", "Box", "Cylinder", "Sphere", "Mesh",
     "ModelError", "CompileError", "SimulationError", "WriteError", "load", "load_urdf", "sweep",
     "Drive", "DCMotor", "JointFriction", "JointLimit", "Signal", "Angle", "Speed", "Constant", "Step", "Sine", "PID",

@@ -198,6 +198,17 @@ class TestRoundTrip:
         assert again.description == model.description
         assert dumps(again) == path.read_text(encoding="utf-8"), "saving is not idempotent"
 
+    def test_a_normalised_axis_keeps_its_parameter_expression(self, tmp_path):
+        """A joint axis written with parameters (the bicycle's head axis, from ``lambda``) is
+        normalised by the joint: saving writes the expressions given, not the derived
+        numbers, so the reloaded model still refuses a change of ``lambda`` (structure)."""
+        model = load(MODELS["whipple_bicycle"])
+        save(model, tmp_path / "bike.toml")
+        text = (tmp_path / "bike.toml").read_text(encoding="utf-8")
+        assert 'axis = ["sin(lambda)", 0.0, "(-cos(lambda))"]' in text and "derived from" not in text
+        with pytest.raises(mb.ModelError, match="lambda"):
+            load(tmp_path / "bike.toml").compile().with_parameters({"lambda": 0.35})
+
     @pytest.mark.parametrize("name", ["arm3d", "double_pendulum_spring"])
     def test_same_coordinates_and_accelerations(self, tmp_path, name):
         model = load(MODELS[name])
@@ -403,6 +414,18 @@ class TestExpressions:
     def test_everything_else_is_rejected(self, text):
         with pytest.raises(ExpressionError):
             parse_expression(text, {"m": 3.0}, allow_t=True)
+
+    def test_a_parameter_may_be_named_like_a_python_keyword(self):
+        """The bicycle papers call the head angle ``lambda``: a declared parameter of that name
+        is usable in expressions; the keyword itself (a lambda expression) stays rejected."""
+        names = {"lambda": 0.3, "lambda_": 2.0, "m": 3.0}
+        node = parse_expression("sin(lambda)*lambda_ + m*lambda", names, allow_t=False)
+        assert evaluate(node) == pytest.approx(math.sin(0.3) * 2.0 + 3.0 * 0.3, rel=1e-15)
+        for text in ("lambda: 1", "lambda x: x", "m if lambda else 1"):
+            with pytest.raises(ExpressionError):
+                parse_expression(text, names, allow_t=False)
+        with pytest.raises(ExpressionError, match="invalid syntax"):
+            parse_expression("sin(lambda)", {"m": 1.0}, allow_t=False)   # not declared: still a keyword
 
     def test_deep_nesting_is_rejected_not_crashing(self):
         with pytest.raises(ExpressionError):

@@ -370,6 +370,61 @@ def check_pid_arm(model, system):
     assert abs(later["shoulder.angle"][-1] - 0.3) < 2e-3
 
 
+def check_whipple_bicycle(model, system):
+    # Riding straight ahead, upright at 5 m/s is a steady motion: it stays upright and straight,
+    # the rear contact point moves at 5 m/s and the wheels roll at -v/r; between the weave and
+    # capsize speeds it is stable: the lean/steer block of the linearisation has the paper's
+    # eigenvalues at 5 m/s (Meijaard et al. 2007, table 2; tests/test_bicycle.py does the rest).
+    p = model.named_parameters
+    result = simulate(model, system, 1.0, n=11)
+    assert_energy_conserved(result, rtol=1e-9)
+    np.testing.assert_allclose(result["x"], 5.0 * result.t, atol=1e-7)
+    for name in ("y", "yaw", "lean", "steer", "pitch"):
+        assert np.abs(result[name]).max() < 1e-9, name
+    np.testing.assert_allclose(result["rear_wheel_angle"], -5.0 / p["rR"] * result.t, atol=1e-7)
+    q, qd = initial_state(model, system)
+    lin = system.linearize(q, qd)
+    states = list(lin.states)
+    rows = [states.index(s) for s in ("lean", "steer", "lean_dot", "steer_dot")]
+    eigenvalues = np.sort_complex(np.linalg.eigvals(lin.A[np.ix_(rows, rows)]))
+    published = np.sort_complex([-14.07838969279822, -0.32286642900409,
+                                 -0.77534188219585 - 4.46486771378823j, -0.77534188219585 + 4.46486771378823j])
+    np.testing.assert_allclose(eigenvalues, published, rtol=0, atol=1e-8)
+
+
+def check_rolling_disc(model, system):
+    # Rolling does no work: the energy is conserved; the lowest point stays on the ground and
+    # at rest (no slip); faster than sqrt(g R / 3) the leaned coin wobbles and turns but its
+    # lean stays small (it does not fall).
+    result = simulate(model, system, 2.0, n=201, rtol=1e-10, atol=1e-12)
+    assert_energy_conserved(result, rtol=1e-8)
+    assert np.max(result.constraint_violation()) < 1e-9
+    for q, qd in zip(result.q[::20], result.qd[::20]):
+        cv = system.constraint_values(q, qd)
+        assert np.max(np.abs(cv.J @ qd)) < 1e-8
+    p = model.named_parameters
+    axes = np.array([system.body_state("coin", q).rotation[:, 1] for q in result.q])  # the coin's axis, world
+    lean = np.arcsin(axes[:, 2])
+    assert np.max(np.abs(lean)) < 3 * p["tilt"]
+    heading = np.unwrap(np.arctan2(axes[:, 1], axes[:, 0]))
+    assert abs(heading[-1] - heading[0]) > 0.1  # the lean makes it turn
+
+
+def check_chaplygin_sleigh(model, system):
+    # The blade's forward speed follows u(t) = U tanh(m a U t / J + atanh(u0 / U)) with
+    # U = sqrt(2 E / m), J = I + m a^2 (Chaplygin 1911): the sleigh ends going straight.
+    p = model.named_parameters
+    result = simulate(model, system, 5.0, n=51, rtol=1e-10, atol=1e-12)
+    assert_energy_conserved(result, rtol=1e-8)
+    heading = result["heading"]
+    u = result.qd[:, 0] * np.cos(heading) + result.qd[:, 1] * np.sin(heading)
+    J = p["I"] + p["m"] * p["a"] ** 2
+    U = math.sqrt((p["m"] * p["u0"] ** 2 + J * p["w0"] ** 2) / p["m"])
+    expected = U * np.tanh(p["m"] * p["a"] * U * result.t / J + math.atanh(p["u0"] / U))
+    np.testing.assert_allclose(u, expected, atol=1e-8)
+    np.testing.assert_allclose(-result.qd[:, 0] * np.sin(heading) + result.qd[:, 1] * np.cos(heading), 0, atol=1e-9)
+
+
 CHECKS = {name[len("check_"):]: func for name, func in globals().items() if name.startswith("check_")}
 
 
@@ -443,7 +498,10 @@ def test_compiled_stepping_equals_scipy_stepping(name, formulation):
     assert [compiled.stats["integrator"], stepped.stats["integrator"]] == \
         ["compiled", "none" if system.ndof == 0 and formulation == "lagrange" else "scipy"]
     if not system.topology.contacts:  # at contact events the compiled loop restarts its steps
-        assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"]
+        # (the compiled dae loop evaluates once more after each step its projection moved:
+        # up to one per step, which a short run of few steps, such as a steady ride, shows)
+        projections = compiled.stats["steps"] if formulation == "dae" else 0
+        assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"] + projections
     assert compiled.extra_states == stepped.extra_states == tuple(system.extra_states)
     columns = [("q", compiled.q, stepped.q), ("qd", compiled.qd, stepped.qd)]
     columns += [(state, compiled[state], stepped[state]) for state in system.extra_states]

@@ -115,3 +115,46 @@ def test_a_parameter_compiled_into_an_expression_of_t_is_refused_at_change():
     with pytest.raises(mb.ModelError, match=r"'amplitude'.*\[constraints.motor\] position"):
         sys.with_parameters({"amplitude": 0.3})
     assert sys.with_parameters({"L": 0.6}).parameters["L"] == 0.6   # the others still change
+
+
+def test_a_joint_rotation_follows_or_refuses_its_parameter(tmp_path):
+    """A file's joint frame turned by a parameter ``a``: changing ``a`` at run time must either
+    turn the frame as a fresh build does or be refused (the code holds the rotation as
+    numbers): it is refused, naming where the parameter is used."""
+    path = tmp_path / "turned.toml"
+    path.write_text('''name = "turned"
+[parameters]
+a = 0.3
+[bodies.b]
+mass = 1.0
+com = [0.0, 0.0, -1.0]
+inertia = [0.01, 0.01, 0.01]
+[joints.j]
+type = "revolute"
+parent = "ground"
+child = "b"
+axis = "x"
+parent_rotation = [["cos(a)", 0.0, "sin(a)"], [0.0, 1.0, 0.0], ["-sin(a)", 0.0, "cos(a)"]]
+''')
+    system = mb.load(path).compile()
+    with pytest.raises(mb.ModelError, match=r"parameter 'a'.*\[joints.j\] parent_rotation"):
+        system.with_parameters({"a": 0.6})
+    assert system.with_parameters({"a": 0.3}).body_state("b", [0.0]).rotation[0, 2] == pytest.approx(np.sin(0.3))
+
+
+def test_a_sub_model_rotation_built_from_its_parameter_is_refused_at_change():
+    """In Python, a part whose joint frame is turned by its own parameter: the rebuilt joint's
+    rotation moves, which the compiled code cannot follow, so the change is refused."""
+    class Turned(mb.Submodel):
+        angle = mb.Parameter(0.3)
+
+        def build(self):
+            body = self.add(mb.Body("b", mass=1.0, com=(0, 0, -1.0), inertia=(0.01, 0.01, 0.01)))
+            c, s = np.cos(self.angle), np.sin(self.angle)
+            turn = ((c, 0.0, s), (0.0, 1.0, 0.0), (-s, 0.0, c))
+            self.add(mb.Revolute("j", mb.Frame("ground", rotation=turn), body, axis="x"))
+    m = mb.Model("m")
+    m.add(Turned("part"))
+    system = m.compile()
+    with pytest.raises(mb.ModelError, match=r"part.j.*rotation.*as a constant"):
+        system.with_parameters({"part.angle": 0.6})

@@ -68,7 +68,7 @@ thrust = 3.0
 
 def test_registry_lists_the_built_in_kinds():
     assert component_class("revolute") is mb.Revolute and component_class("contact") is mb.Contact
-    assert list(kinds_in("constraints")) == ["slider", "motor", "joint_limit"]
+    assert list(kinds_in("constraints")) == ["slider", "motor", "rolling_disc", "rolling_ball", "no_slip", "joint_limit"]
     assert component_class(["revolute"]) is None  # unhashable keys are just unknown
 
 

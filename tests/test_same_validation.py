@@ -46,6 +46,9 @@ EXAMPLES = {
     "dc_motor": ("dc", dict(joint="h", ratio=10.0, resistance=1.0, inductance=1e-3, k=0.05, voltage=1.0)),
     "joint_friction": ("fr", dict(joint="h", coulomb=0.1, viscous=0.01)),
     "joint_limit": ("lim", dict(joint="h", lower=-1.0, upper=1.0, restitution=0.5)),
+    "rolling_disc": ("rd", dict(disc="c", radius=0.5, axis="y", center=(0, 0, 0.1), origin=(0, 0, -1.2))),
+    "rolling_ball": ("rb", dict(ball="c", radius=0.5, center=(0, 0, 0.1), origin=(0, 0, -1.3))),
+    "no_slip": ("ns", dict(body="c", point=(0, 0, -1.0), direction="x")),
 }
 #: Kinds whose parameters are tested with their own component (controllers take signals).
 ELSEWHERE = {"pid"}

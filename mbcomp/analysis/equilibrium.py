@@ -79,7 +79,8 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float | None = None, m
         if np.linalg.svd(J, compute_uv=False)[-1] < SINGULAR * sigma0:
             raise _Singular(y)  # at a dead point: the search would creep towards it for ever
         projected = f - J.T @ np.linalg.solve(J @ J.T, J @ f)
-        return np.concatenate((projected / scale, cv.g[rows], rates))
+        g = cv.g[rows]  # (velocity rows, rolling and no-slip, have no position residual: NaN)
+        return np.concatenate((projected / scale, np.where(np.isfinite(g), g, 0.0), rates))
 
     def solved(q, z):
         worst = float(np.max(np.abs(reduced_forces(system, q, t, tau, states=z)), initial=0.0))
@@ -369,6 +370,8 @@ def _continuation(system, q0: np.ndarray, z0: np.ndarray, drives: "DriveRest", t
         return np.concatenate((a, drives.rates(qx, w)))
 
     chart = Chart(system, q, t)
+    if chart.kq != chart.k:
+        return q, z  # velocity rows: more coordinates than speeds, no square iteration (Newton's result stands)
     size = chart.k + len(active)
     a = accel(chart, z, np.zeros(size))
     D = _jacobian(lambda s: accel(chart, z, s), np.zeros(size), 1e-6)

@@ -10,6 +10,10 @@ from mbcomp.core.errors import SimulationError, format_state
 from mbcomp.analysis.space import Chart, force_vector, joint_speed_indices, speed_names, speed_vector
 from mbcomp.analysis.space import drive_state_vector
 
+#: An entry of ``A`` below this fraction of its row's largest (or of 1) is the differences'
+#: noise, and is set to zero (ignorable coordinates then give exact zero eigenvalues).
+IGNORABLE = 1e-9
+
 #: Relative step of the central differences (fourth order: truncation ~ h^4, rounding ~ eps/h).
 STEP = 1e-3
 
@@ -22,7 +26,10 @@ class Linearization:
     other than ``Ball`` these are the coordinates themselves) then their speeds, named
     ``"<speed>_dot"``, then the states of drive elements (``"component.state"``).  ``inputs``: the speeds whose generalised forces are inputs (N or N m).
     ``basis`` (n, k) maps independent speed (or position) deviations to all speeds, so a
-    deviation of all coordinates is ``basis @ z[:k]``.  ``q``, ``qd``, ``t``: the operating point;
+    deviation of all coordinates is ``basis @ z[:k]``.  With velocity constraints (rolling,
+    no-slip) the independent coordinates (from the position rows) outnumber the independent
+    speeds ``independent`` (from all rows): the states are those coordinates, then the speeds,
+    and ``basis`` maps the independent speeds only.  ``q``, ``qd``, ``t``: the operating point;
     ``operating_states``: the drive states there (``system.extra_states`` order).
     """
 
@@ -131,9 +138,9 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
     if chart.constrained:
         q, v0 = system.assemble(q, v0, t)
         chart = Chart(system, q, t, independent)
-    k = chart.k
+    k, kq = chart.k, chart.kq
     names = speed_names(system)
-    ind = chart.ind
+    ind, qind = chart.ind, chart.qind
     v0i = v0[ind]
     input_idx = [] if inputs is None else joint_speed_indices(system, inputs, "inputs")
 
@@ -147,24 +154,30 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
         w0 = drive_state_vector(system, states)
 
     def derivative(z: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
-        qz, x = chart.position(z[:k])
-        v = chart.velocity(qz, z[k:2 * k])
+        qz, x = chart.position(z[:kq])
+        v = chart.velocity(qz, z[kq:kq + k])
         extra = force_vector(system, tau, t, qz, v)
         if u is not None:
             extra = u if extra is None else extra + u
         if not extra_names:
             a = system.accelerations(qz, v, t, tau=extra)
-            return np.concatenate((chart.rate(qz, x, v)[ind], a[ind]))
-        w = z[2 * k:]
+            return np.concatenate((chart.rate(qz, x, v)[qind], a[ind]))
+        w = z[kq + k:]
         a = system.accelerations(qz, v, t, tau=extra, states=w)
-        return np.concatenate((chart.rate(qz, x, v)[ind], a[ind], system.drive_outputs(t, qz, v, w)[1]))
+        return np.concatenate((chart.rate(qz, x, v)[qind], a[ind], system.drive_outputs(t, qz, v, w)[1]))
 
-    z0 = np.concatenate((np.zeros(k), v0i, w0))
+    z0 = np.concatenate((np.zeros(kq), v0i, w0))
     f0 = derivative(z0)
-    steps = np.concatenate((np.full(k, step), step * np.maximum(1.0, np.abs(v0i)),
+    steps = np.concatenate((np.full(kq, step), step * np.maximum(1.0, np.abs(v0i)),
                             step * np.maximum(1.0, np.abs(w0))))
     A = _central(derivative, z0, steps)
-    if len(names) == len(system.coords):  # speeds are coordinate rates: dx/dt = v exactly
+    # Entries below the differences' noise (~1e-11 of their row's scale) are zero: a coordinate
+    # the rates do not depend on (an ignorable one: position and heading on the ground, a
+    # wheel's angle) would otherwise split the repeated zero eigenvalues it brings by the
+    # noise's square root (~1e-6), as a defective eigenvalue does.
+    rows_scale = np.maximum(1.0, np.max(np.abs(A), axis=1, initial=0.0))
+    A[np.abs(A) < IGNORABLE * rows_scale[:, None]] = 0.0
+    if len(names) == len(system.coords) and qind is ind:  # speeds are coordinate rates: dx/dt = v exactly
         A[:k] = 0.0
         A[:k, k:2 * k] = np.eye(k)
     B = np.zeros((len(z0), len(input_idx)))
@@ -175,7 +188,8 @@ def linearize(system, q: Any, qd: Any = None, t: float | None = None, inputs: Se
     if not np.all(np.isfinite(A)) or not np.all(np.isfinite(B)):
         raise SimulationError(f"the linearisation is not finite at q = {format_state(q)}")
     ind_names = tuple(names[i] for i in ind)
-    return Linearization(A=A, B=B, states=ind_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
+    coordinate_names = tuple(names[i] for i in qind)
+    return Linearization(A=A, B=B, states=coordinate_names + tuple(f"{s}_dot" for s in ind_names) + extra_names,
                          inputs=tuple(names[i] for i in input_idx), independent=ind_names,
                          basis=chart.basis(q), q=q, qd=v0, t=float(t), state_derivative=f0,
                          operating_states=w0)

@@ -55,24 +55,32 @@ class Modes:
         return f"Modes([{rows}], stable={self.stable})"
 
 
-def modes(system, q: Any, t: float | None = None, tau: Any = None, states: Any = None) -> Modes:
+def modes(system, q: Any, t: float | None = None, tau: Any = None, states: Any = None, qd: Any = None) -> Modes:
     """Modes of the motion about the equilibrium ``q`` (``tau``: generalised forces held constant,
     e.g. ``system.holding_forces(q)`` to study a pose held by constant torques; ``states``: values
     of drive-element states, default those at rest there (``rest_states``); their eigenvalues
     join the mechanical ones, so a model with drive states has more modes than degrees of
     freedom; ``t`` as in ``linearize``).  ``SimulationError`` when ``q`` is not an equilibrium (find one
-    with ``equilibrium``)."""
-    lin = linearize(system, q, None, t=t, tau=tau, states=states)
+    with ``equilibrium``).
+
+    ``qd``: the speeds of a steady motion (a disc or bicycle rolling upright at constant speed):
+    the modes of the motion about it, whose independent speeds must then be constant (their
+    accelerations vanish), while coordinates that do not enter the equations (position and
+    heading on the ground, wheel angles: ignorable) may change.  With velocity (rolling,
+    no-slip) constraints there are more independent coordinates than speeds, and ``shapes``
+    are then speed shapes (each mode's deviation of all speeds, largest entry 1)."""
+    lin = linearize(system, q, qd, t=t, tau=tau, states=states)
     k = len(lin.independent)
+    kq = len(lin.states) - k - len(lin.operating_states)  # independent coordinates (k without velocity rows)
     A = lin.A
-    stiffness = max(1.0, float(np.linalg.norm(A[k:2 * k, :k]))) if k else 1.0
-    accel = lin.state_derivative[k:2 * k]
-    rates = lin.state_derivative[2 * k:]
+    stiffness = max(1.0, float(np.linalg.norm(A[kq:kq + k, :kq]))) if k else 1.0
+    accel = lin.state_derivative[kq:kq + k]
+    rates = lin.state_derivative[kq + k:]
     # a drive state nothing depends on (a PID integral with ki = 0: its column of A is zero)
     # drifts without effect; the others must rest too
     size = max(1.0, float(np.max(np.abs(A), initial=0.0)))
-    acting = np.any(np.abs(A[:, 2 * k:]) > 1e-12 * size, axis=0) if rates.size else np.zeros(0, dtype=bool)
-    rate_scale = max(1.0, float(np.linalg.norm(A[2 * k:]))) if rates.size else 1.0
+    acting = np.any(np.abs(A[:, kq + k:]) > 1e-12 * size, axis=0) if rates.size else np.zeros(0, dtype=bool)
+    rate_scale = max(1.0, float(np.linalg.norm(A[kq + k:]))) if rates.size else 1.0
     if (np.max(np.abs(accel), initial=0.0) > EQUILIBRIUM_TOLERANCE * stiffness
             or np.max(np.abs(rates[acting]), initial=0.0) > EQUILIBRIUM_TOLERANCE * rate_scale):
         moving = f"accelerations {format_state(accel)}"
@@ -82,15 +90,19 @@ def modes(system, q: Any, t: float | None = None, tau: Any = None, states: Any =
         if np.max(np.abs(rates[acting]), initial=0.0) > EQUILIBRIUM_TOLERANCE * rate_scale:
             hint = ("the drive states cannot rest there (a PID with an integral rests only on its setpoint); find "
                     "the equilibrium with equilibrium()")
+        if qd is not None:
+            raise SimulationError(f"(q, qd) = ({format_state(lin.q)}, {format_state(lin.qd)}) is not a steady "
+                                  f"motion: the independent speeds change ({moving})")
         raise SimulationError(f"q = {format_state(lin.q)} is not an equilibrium ({moving}): {hint}")
     values, vectors = scipy.linalg.eig(A) if k else (np.zeros(0, complex), np.zeros((0, 0), complex))
     scale = max(1.0, float(np.max(np.abs(values), initial=0.0)))
-    groups = _pair(values, vectors[:k] if k else vectors, scale)
+    shape_rows = slice(0, k) if kq == k else slice(kq, kq + k)  # positions, or speeds when they differ
+    groups = _pair(values, vectors[shape_rows] if k else vectors, scale)
     reps, shapes = [], []
     for members in groups:
         best = max(members, key=lambda i: (values[i].real, values[i].imag))
         reps.append(values[best])
-        shape = lin.basis @ vectors[:k, best]
+        shape = lin.basis @ vectors[shape_rows, best]
         peak = shape[np.argmax(np.abs(shape))] if shape.size else 1.0
         shapes.append(shape / peak if abs(peak) > 0 else shape)
     reps = np.array(reps, dtype=complex)

@@ -140,6 +140,11 @@ class Chart:
     ``ind``/``dep``: speed indices; ``rows``: the independent constraint rows used.
     ``position(xi)`` gives the full ``q`` and tangent ``x``; ``velocity(q, vi)`` the full speeds;
     ``basis(q)`` the (n, k) matrix ``N`` with ``v = N vi`` (for ``g_t = 0``).
+
+    Velocity (non-holonomic: rolling, no-slip) rows remove speeds but not coordinates: the
+    independent tangent coordinates ``qind`` (``kq`` of them) then come from the position rows
+    ``prows`` alone, and the independent speeds ``ind`` (``k``) from all rows; without
+    velocity rows the two are the same (``qind is ind``).
     """
 
     def __init__(self, system, q0: np.ndarray, t: float = 0.0, independent: Sequence[str] | None = None):
@@ -150,7 +155,11 @@ class Chart:
             self.rows = np.arange(0)
             self.dep, self.ind = np.arange(0), np.arange(self.n)
         else:
+            #: rows with a position residual (velocity rows have none: NaN)
+            self.position_mask = ~np.asarray(getattr(system, "velocity_rows", np.zeros(0, dtype=bool)), dtype=bool)
             cv = self._values(self.q0)
+            if self.position_mask.shape != cv.g.shape:
+                self.position_mask = np.ones(cv.g.shape, dtype=bool)
             self.rows = independent_rows(cv.J)
             if independent is None:
                 self.dep, self.ind = partition(cv.J[self.rows])
@@ -164,30 +173,48 @@ class Chart:
                 if block.size and np.linalg.matrix_rank(block) < len(self.dep):
                     raise ModelError("independent", f"{list(independent)} cannot be chosen independent here: the "
                                                     f"remaining coordinates are not determined by the constraints")
+        self.prows, self.qdep, self.qind = self.rows, self.dep, self.ind
+        if self.constrained and not self.position_mask.all():
+            positions = np.flatnonzero(self.position_mask)
+            self.prows = positions[independent_rows(cv.J[positions])] if positions.size else np.arange(0)
+            self.qdep, self.qind = partition(cv.J[self.prows]) if self.prows.size else (np.arange(0), np.arange(self.n))
+            if independent is not None and self.prows.size:
+                # the named speeds' coordinates stay independent: the dependent ones come from the others
+                others = np.setdiff1d(np.arange(self.n), self.ind)
+                block = cv.J[np.ix_(self.prows, others)]
+                if np.linalg.matrix_rank(block) < len(self.prows):
+                    raise ModelError("independent", f"{list(independent)} cannot be chosen independent here: the "
+                                                    f"other coordinates do not determine the position constraints")
+                self.qdep = np.sort(others[partition(block)[0]])
+                self.qind = np.setdiff1d(np.arange(self.n), self.qdep)
         self.k = len(self.ind)
+        self.kq = len(self.qind)
 
     def _values(self, q: np.ndarray, v: np.ndarray | None = None):
         cv = self.system.constraint_values(q, v, self.t)
-        if not np.all(np.isfinite(cv.g)):
+        mask = getattr(self, "position_mask", None)
+        if not np.all(np.isfinite(cv.g if mask is None else cv.g[mask])):
             raise SimulationError("a constraint is not finite here (a speed motor without a position?)")
         return cv
 
     def position(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Full ``(q, x)`` with independent tangent coordinates ``xi`` (dependent by Newton)."""
         x = np.zeros(self.n)
-        x[self.ind] = xi
+        x[self.qind] = xi
         q = integrate(self.system, self.q0, x)
-        if not len(self.dep):
+        if not len(self.qdep):
             return q, x
         residual = np.inf
+        polished = False
         for _ in range(40):
             cv = self._values(q)
-            g = cv.g[self.rows]
+            g = cv.g[self.prows]
             residual = float(np.max(np.abs(g)))
-            if residual < CHART_TOLERANCE:
+            if residual < CHART_TOLERANCE and polished:
                 return q, x
+            polished = residual < CHART_TOLERANCE  # one more step: the linearisation divides by small steps
             try:
-                x[self.dep] -= np.linalg.solve(cv.J[np.ix_(self.rows, self.dep)], g)
+                x[self.qdep] -= np.linalg.solve(cv.J[np.ix_(self.prows, self.qdep)], g)
             except np.linalg.LinAlgError:
                 break
             q = integrate(self.system, self.q0, x)

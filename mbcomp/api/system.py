@@ -572,6 +572,13 @@ class System:
         return self._formulation.constraint_values(self._kernel, t, q, qd, offsets)
 
     @property
+    def velocity_rows(self) -> np.ndarray:
+        """Which rows of ``constraint_values`` constrain speeds only (rolling and no-slip rows,
+        non-holonomic: their ``g`` is NaN), as a boolean mask."""
+        cs = self._formulation.constraints
+        return np.zeros(0, dtype=bool) if cs is None else cs.velocity_rows.copy()
+
+    @property
     def constraint_rows(self) -> list[str]:
         """The constraint owning each row of ``constraint_values`` (by name)."""
         cs = self._formulation.constraints
@@ -590,10 +597,11 @@ class System:
         from mbcomp.analysis import linearize
         return linearize(self, q, qd, t=t, inputs=inputs, tau=tau, independent=independent, states=states)
 
-    def modes(self, q: Any, t: float | None = None, tau: Any = None, states: Any = None):
-        """Natural frequencies, damping ratios, shapes and stability about ``q`` (see ``mbcomp.analysis``)."""
+    def modes(self, q: Any, t: float | None = None, tau: Any = None, states: Any = None, qd: Any = None):
+        """Natural frequencies, damping ratios, shapes and stability about ``q`` at rest, or about
+        the steady motion ``(q, qd)`` (see ``mbcomp.analysis``)."""
         from mbcomp.analysis import modes
-        return modes(self, q, t=t, tau=tau, states=states)
+        return modes(self, q, t=t, tau=tau, states=states, qd=qd)
 
     def jacobian(self, frame: Any, q: Any, point: Any = None) -> np.ndarray:
         """(6, n) angular then linear velocity (world) of a body point per speed (see ``mbcomp.analysis``)."""

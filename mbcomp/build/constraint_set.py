@@ -15,7 +15,7 @@ import numpy as np
 
 from mbcomp.spec.components.values import name_of
 from mbcomp.spec.components.constraints import LoopClosure
-from mbcomp.spec.components.primitives import CoordinateEquation
+from mbcomp.spec.components.primitives import CoordinateEquation, RollingEquation
 from mbcomp.core.errors import SimulationError
 
 
@@ -67,8 +67,12 @@ class ConstraintSet:
         for name, _, eqs in self.groups:
             self.slices[name] = slice(start, start + len(eqs))
             start += len(eqs)
+        #: Rows that constrain speeds only (rolling and no-slip rows): ``g`` is NaN there.
+        self.velocity_rows = np.array([isinstance(eq, RollingEquation) and eq.speed_only for eq in self.equations],
+                                      dtype=bool)
+        self._velocity_index = np.flatnonzero(self.velocity_rows)
         self.position_rows = np.array([not (isinstance(eq, CoordinateEquation) and eq.speed is not None)
-                                       for eq in self.equations], dtype=bool)
+                                       for eq in self.equations], dtype=bool) & ~self.velocity_rows
         self.coordinate_rows = [r for r, eq in enumerate(self.equations) if isinstance(eq, CoordinateEquation)]
         self.exact_derivatives = {}
         for r in self.coordinate_rows:
@@ -90,11 +94,14 @@ class ConstraintSet:
         nv, nc = self.topology.nv, self.nc
         if not self.coordinate_rows:  # every row geometric, in the generated function's order
             g, J, bias = kernel.constraints(q, qd)   # (views of a new array: this call's own)
+            if self._velocity_index.size:
+                g[self._velocity_index] = np.nan
             return ConstraintValues(g, J, np.zeros(nc), bias)
         g, J, g_t, bias = np.zeros(nc), np.zeros((nc, nv)), np.zeros(nc), np.zeros(nc)
         rows = self._geometric_index
         if rows.size:
             g[rows], J[rows], bias[rows] = kernel.constraints(q, qd)
+            g[self._velocity_index] = np.nan
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
@@ -124,6 +131,7 @@ class ConstraintSet:
         rows = self.geometric_rows
         if rows and m:
             G[:, rows] = kernel.evaluate_series("constraints", q)[:, :len(rows)]
+            G[:, self._velocity_index] = np.nan
         for r in self.coordinate_rows:
             eq = self.equations[r]
             k = self.topology.q_slice[name_of(eq.joint)].start
@@ -167,10 +175,26 @@ class ConstraintSet:
                 return comp
         return None
 
-    def split_reactions(self, lam: np.ndarray) -> dict[str, np.ndarray]:
-        """Multipliers by constraint name (a float for a motor, an array otherwise)."""
+    def split_reactions(self, lam: np.ndarray, kernel=None, q: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Multipliers by constraint name (a float for a one-row constraint, an array
+        otherwise).  A rolling disc's or ball's three (along the plane's normal and two
+        tangents) become the contact force on the disc/ball, a world-frame 3-vector (N):
+        with ``kernel`` and ``q`` when the plane is a body (its rotation at ``q``)."""
         out = {}
         for name, comp, eqs in self.groups:
             value = lam[self.slices[name]]
+            if hasattr(comp, "plane_directions"):
+                value = comp.plane_directions() @ value
+                plane = getattr(comp, "plane", None)
+                if plane is not None and name_of(plane) != self.topology.ground.name:
+                    if kernel is None or q is None:
+                        raise SimulationError(f"the reaction of {name!r} needs the configuration (its plane moves)")
+                    value = self._rotation(kernel, plane, q) @ value
             out[name] = float(value[0]) if len(eqs) == 1 else value.copy()
         return out
+
+    def _rotation(self, kernel, body, q: np.ndarray) -> np.ndarray:
+        """The rotation matrix (body to world) of ``body`` at ``q``."""
+        from mbcomp.build.layout import body_fields
+        rows, _ = kernel.kinematics(q, np.zeros(self.topology.nv))
+        return body_fields(rows[self.topology.body_index(self.topology.resolve(body))])["rotation"]

@@ -252,10 +252,84 @@ def _combine(nv, *terms):
     return row
 
 
+def _body_motion(kin, body):
+    """Angular velocity, spatial velocity's ``v0``, bias spatial acceleration ``(alpha, a0)``
+    and motion columns ``{k: S_k}`` of a body (zeros and none for the ground)."""
+    name = name_of(body)
+    if name == kin.topology.ground.name:
+        zero = [sp.Integer(0)] * 3
+        return zero, zero, zero, zero, {}
+    V, A = kin.V[name], kin.A[name]
+    return V[:3], V[3:], A[:3], A[3:], {k: kin.S[k] for k in kin.topology.speed_indices_of_body(body)}
+
+
+def _rolling_point(kin, eq):
+    """World position ``c`` of a rolling equation's contact point and its rate ``c'``
+    (the geometric point's, which slides over the rolling body's surface)."""
+    prog = kin.prog
+    kind = eq.contact[0]
+    w_p = _body_motion(kin, eq.plane)[0]
+    n = prog.lets(matvec(kin.rotation(eq.plane), [exact(c) for c in eq.normal]))
+    n_rate = prog.lets(cross(w_p, n))
+    if kind == "point":
+        point = _vector(kin, eq.contact[1])
+        return kin.position(eq.body, point), kin.velocity(eq.body, point)
+    center = _vector(kin, eq.contact[1])
+    r = kin.layout.symbols(eq.contact[2])
+    C = kin.position(eq.body, center)
+    C_rate = kin.velocity(eq.body, center)
+    if kind == "ball":  # c = C - r n
+        c = prog.lets([x - r * y for x, y in zip(C, n)])
+        return c, prog.lets([x - r * y for x, y in zip(C_rate, n_rate)])
+    # disc: d = -u / |u| with u = n - (n.a) a (the in-plane direction towards the plane), c = C + r d
+    w_b = _body_motion(kin, eq.body)[0]
+    a = prog.lets(matvec(kin.rotation(eq.body), [exact(x) for x in eq.contact[3]]))
+    a_rate = prog.lets(cross(w_b, a))
+    k = prog.let(dot(n, a))
+    k_rate = prog.let(dot(n_rate, a) + dot(n, a_rate))
+    u = prog.lets([x - k * y for x, y in zip(n, a)])
+    u_rate = prog.lets([x - k_rate * y - k * z for x, y, z in zip(n_rate, a, a_rate)])
+    s = prog.let(sp.sqrt(dot(u, u)))
+    d = prog.lets([-x / s for x in u])
+    s_rate = prog.let(dot(u, u_rate) / s)
+    d_rate = prog.lets([-(x + y * s_rate) / s for x, y in zip(u_rate, d)])
+    c = prog.lets([x + r * y for x, y in zip(C, d)])
+    return c, prog.lets([x + r * y for x, y in zip(C_rate, d_rate)])
+
+
+def _rolling_row(kin, eq, nv):
+    """``(g, Jacobian row, bias)`` of a ``RollingEquation`` (see ``primitives``): the row
+    ``e . (v_b(c) - v_a(c))`` with ``v_X(c) = v0_X + w_X x c`` the material velocity of
+    body X at the contact point, and its rate's part without accelerations::
+
+        e . (a0_b + alpha_b x c - a0_a - alpha_a x c + (w_b - w_a) x c') + (w_f x e) . v_rel
+    """
+    prog = kin.prog
+    c, c_rate = _rolling_point(kin, eq)
+    wb, vb, alb, ab, Sb = _body_motion(kin, eq.body)
+    wa, va, ala, aa, Sa = _body_motion(kin, eq.plane)
+    wf = _body_motion(kin, eq.frame)[0]
+    e = prog.lets(matvec(kin.rotation(eq.frame), [exact(x) for x in eq.direction]))
+    rel = prog.lets([x + y - z - t for x, y, z, t in zip(vb, cross(wb, c), va, cross(wa, c))])
+    row = [sp.Integer(0)] * nv
+    for sign, columns in ((1, Sb), (-1, Sa)):
+        for k, S in columns.items():
+            row[k] += sign * dot(e, [x + y for x, y in zip(S[3:], cross(S[:3], c))])
+    w_rel = [x - y for x, y in zip(wb, wa)]
+    acc = [p - q + x - y + z for p, q, x, y, z in zip(ab, aa, cross(alb, c), cross(ala, c), cross(w_rel, c_rate))]
+    bias = dot(e, acc) + dot(cross(wf, e), rel)
+    if eq.origin is None:
+        g = sp.Integer(0)
+    else:
+        o = kin.position(eq.plane, _vector(kin, eq.origin))
+        g = dot(e, [x - y for x, y in zip(c, o)])
+    return g, row, bias
+
+
 def constraint_outputs(prog: Program, kin, equations, output: str = "constraints") -> None:
     """Output ``output``: residual g, Jacobian rows (row-major) and acceleration bias of the
     geometric constraint equations (point and dot), as ``constraint_set`` documents."""
-    from mbcomp.spec.components.primitives import CoordinateGap, DotEquation, PointEquation
+    from mbcomp.spec.components.primitives import CoordinateGap, DotEquation, PointEquation, RollingEquation
     nv = kin.topology.nv
     g_out, J_out, bias_out = [], [], []
     for eq in equations:
@@ -282,6 +356,8 @@ def constraint_outputs(prog: Program, kin, equations, output: str = "constraints
             row = _combine(nv, (axis, Jwb), ([-c for c in axis], Jwa))
             rate = [x + y for x, y in zip(cross(cross(wb, ub), ua), cross(ub, cross(wa, ua)))]
             bias = dot([x - y for x, y in zip(alb, ala)], axis) + dot([x - y for x, y in zip(wb, wa)], rate)
+        elif isinstance(eq, RollingEquation):
+            g, row, bias = _rolling_row(kin, eq, nv)
         elif isinstance(eq, CoordinateGap):  # on a 1-DOF screw joint: its speed is its rate
             k = kin.topology.q_slice[name_of(eq.joint)].start
             kv = kin.topology.v_slice[name_of(eq.joint)].start  # a 1-DOF screw joint: its speed

@@ -179,6 +179,8 @@ class Derivation:
                  frozen: dict | None = None):
         self.parameters = parameters
         self.components = [(full, comp, _dependencies(comp)) for full, comp in components]
+        #: per component, the parameters its frames' rotations were built from (held as numbers)
+        self.rotations = {full: _rotation_parameters(comp.expression_args) for full, comp in components}
         #: gravity's components as expressions of parameters (``Model.set_gravity``), or None
         self.gravity = gravity
         #: parameters whose numbers are compiled into code (``{name: where}``): not changeable
@@ -209,12 +211,16 @@ class Derivation:
         touched = {p for p, v in env.items() if v != current.get(p)}
         stuck = sorted(touched & set(self.frozen))
         if stuck:
-            raise ModelError(f"parameter {stuck[0]!r}", f"is compiled with its value into {self.frozen[stuck[0]]} "
-                             "(an expression of t): change it in the model and compile again")
+            raise ModelError(f"parameter {stuck[0]!r}", f"is compiled with its value into {self.frozen[stuck[0]]}: "
+                             "change it in the model and compile again")
         updates: dict[str, Any] = dict(env)
         for full, comp, deps in self.components:
             if not deps & touched:
                 continue
+            turned = sorted(self.rotations.get(full, set()) & touched)
+            if turned:
+                raise ModelError(full, f"changing {turned} turns a frame's rotation, which the generated code holds "
+                                 "as a constant (not a run-time parameter); build and compile the model again")
             args, kwargs = comp.expression_args
             try:
                 new = type(comp)(*substitute(args, env), **substitute(kwargs, env))
@@ -223,11 +229,55 @@ class Derivation:
             if new.structure() != comp.structure():
                 raise ModelError(full, f"changing {sorted(deps & touched)} changes the structure "
                                  f"({comp.structure()} -> {new.structure()}); build and compile the model again")
+            frozen = _moved_constants(comp, new)
+            if frozen:
+                raise ModelError(full, f"changing {sorted(deps & touched)} changes {', '.join(frozen)}, which the "
+                                 "generated code holds as a constant (not a run-time parameter); build and compile "
+                                 "the model again")
             for attr, value in new.parameter_values().items():
                 updates[f"{full}.{attr}"] = value if np.ndim(value) == 0 else tuple(value)
         if self.gravity is not None:
             updates["gravity"] = tuple(substitute(self.gravity, env))
         return updates
+
+
+def _rotation_parameters(value: Any) -> set:
+    """Parameters read by the rotations of the ``Frame``s in ``value`` (component arguments)."""
+    if isinstance(value, Frame):
+        return set(value.rotation_parameters)
+    if isinstance(value, (tuple, list)):
+        return set().union(*(_rotation_parameters(v) for v in value)) if value else set()
+    if isinstance(value, dict):
+        return set().union(*(_rotation_parameters(v) for v in value.values())) if value else set()
+    return set()
+
+
+def _moved_constants(old: Any, new: Any) -> list[str]:
+    """Attributes of plain numbers (a joint frame's rotation, an axis) that differ between a
+    component and its rebuild but are not among its run-time parameters: the code holds
+    them, so a run-time change cannot reach them."""
+    params = set(old.parameter_values())
+    moved = []
+    for attr, value in vars(old).items():
+        if attr in params or attr.startswith("_") or attr == "expression_args":
+            continue
+        before, after = _plain_numbers(value), _plain_numbers(getattr(new, attr, None))
+        if before is not None and (after is None or before.shape != after.shape or not np.array_equal(before, after)):
+            moved.append(attr)
+    return moved
+
+
+def _plain_numbers(value: Any) -> np.ndarray | None:
+    """``value`` as a float array when it is a number or a nested sequence of numbers, else None."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return None
+    if isinstance(value, (int, float, np.ndarray, tuple, list)):
+        try:
+            array = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            return None
+        return array
+    return None
 
 
 def _dependencies(comp) -> set:
@@ -245,6 +295,7 @@ def _dependencies(comp) -> set:
                 visit(v)
         elif isinstance(value, Frame):
             visit(value.point)
+            found.update(value.rotation_parameters)
         elif getattr(value, "signal_args", None) is not None:   # a signal source (components/signals.py)
             visit(value.signal_args)
     visit(comp.expression_args)

@@ -98,7 +98,7 @@ def c_integrators() -> str:
 def _instance(run: str, init: str, reduced: bool) -> str:
     """One DOP853 loop: on the tree state (``rhs``) or on the lagrange formulation's reduced
     state (``lagrange_rhs``; full output rows)."""
-    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (2 * lag_ni + NZ)\n"
+    macros = ("#define LOOP_REDUCED 1\n#define LOOP_NY (lag_nqi + lag_ni + NZ)\n"
               "#define LOOP_RHS(tt, yy, ff) lagrange_rhs(tt, yy, ff, p, tau)\n" if reduced else
               "#define LOOP_REDUCED 0\n#define LOOP_NY NY\n#define LOOP_RHS(tt, yy, ff) rhs(tt, yy, ff, p, tau, work)\n")
     return (macros + c_text.fill(c_text.read("mbcomp.codegen", "dop853_loop.c"), RUN=run, INIT=init)

@@ -4,7 +4,10 @@ evaluated by walking the tree, never with ``eval``; exact derivatives for motor 
 from __future__ import annotations
 
 import ast
+import io
+import keyword
 import math
+import tokenize
 from typing import Any, Callable
 
 import numpy as np
@@ -51,12 +54,58 @@ def parse_expression(text: str, names: dict[str, float], *, allow_t: bool, keep_
     if len(text) > MAX_EXPRESSION_LENGTH:
         raise ExpressionError(f"expression is longer than {MAX_EXPRESSION_LENGTH} characters")
     try:
-        tree = ast.parse(text.strip(), mode="eval")
+        source, aliases = _alias_keywords(text.strip(), names)
+        tree = ast.parse(source, mode="eval")
+        if aliases:
+            tree = _Unalias(aliases).visit(tree)
     except SyntaxError as exc:
         raise ExpressionError(f"{_shown(text)} is not a number or an arithmetic expression ({exc.msg})") from None
     except (RecursionError, MemoryError, ValueError):
         raise ExpressionError(f"{_shown(text)} is too deeply nested") from None
     return _convert(tree.body, text, names, allow_t, 0, keep_names)
+
+
+_KEYWORD_PREFIX = "_kw_"
+
+
+def _alias_keywords(text: str, names: dict[str, Any]) -> tuple[str, dict[str, str]]:
+    """``text`` with every parameter name that is a Python keyword (``lambda``, the head angle
+    of the bicycle papers) replaced by an identifier Python's parser accepts, and the map back.
+
+    Only names declared in ``names`` are aliased, token by token (never inside other names),
+    so any other keyword stays a syntax error."""
+    wanted = {n for n in names if keyword.iskeyword(n)}
+    if not wanted or not any(n in text for n in wanted):
+        return text, {}
+    try:
+        tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+    except (tokenize.TokenError, IndentationError, SyntaxError):
+        return text, {}   # ast.parse reports the syntax error
+    aliases: dict[str, str] = {}
+    pieces, last = [], 0
+    lines = text.splitlines(keepends=True)
+    starts = [sum(len(x) for x in lines[:i]) for i in range(len(lines) + 1)]
+    for tok in tokens:
+        if tok.type == tokenize.NAME and tok.string in wanted:
+            alias = _KEYWORD_PREFIX + tok.string
+            while alias in names:
+                alias += "_"
+            aliases[alias] = tok.string
+            begin = starts[tok.start[0] - 1] + tok.start[1]
+            pieces.append(text[last:begin] + alias)
+            last = begin + len(tok.string)
+    return "".join(pieces) + text[last:], aliases
+
+
+class _Unalias(ast.NodeTransformer):
+    """Puts the keyword parameter names that ``_alias_keywords`` replaced back into the tree."""
+
+    def __init__(self, aliases: dict[str, str]):
+        self.aliases = aliases
+
+    def visit_Name(self, node: ast.Name) -> ast.Name:
+        node.id = self.aliases.get(node.id, node.id)
+        return node
 
 
 def _convert(node: ast.AST, text: str, names: dict[str, float], allow_t: bool, depth: int,

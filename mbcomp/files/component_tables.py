@@ -87,6 +87,16 @@ class Reader:
         #: change of one is refused (``Derivation.frozen``) rather than silently not reaching it.
         self.frozen: dict[str, str] = {}
 
+    def freeze(self, value: Any, where: str) -> None:
+        """Record the parameters that expressions in ``value`` read as compiled with their
+        numbers at ``where`` (a run-time change of one is then refused, naming ``where``)."""
+        if isinstance(value, Expr):
+            for name in value.parameters():
+                self.frozen.setdefault(name, where)
+        elif isinstance(value, (list, tuple)):
+            for item in value:
+                self.freeze(item, where)
+
     # -- reporting ------------------------------------------------------------------------
     def problem(self, table: str | None, key: str | None, message: str) -> _Bad:
         where = self.label
@@ -127,7 +137,7 @@ class Reader:
                 frozen = sorted(n for n in used if n not in model_level and not isinstance(self.parameters[n], (int, float)))
                 if model_level and not frozen:   # compiled with their numbers; a change is refused
                     for n in model_level:
-                        self.frozen.setdefault(n, f"[{table}] {key}")
+                        self.frozen.setdefault(n, f"[{table}] {key} (an expression of t)")
                     node = parse_expression(value, {**self.parameters, **{n: float(self.parameters[n]) for n in model_level}},
                                             allow_t=True)
                 if frozen:
@@ -264,6 +274,7 @@ def read_rotation(r: Reader, label: str, key: str, value: Any) -> Any:
     rows = [r.vector(label, f"{key}[{i}]", row) for i, row in enumerate(value)]
     if any(row is BAD for row in rows):
         return BAD
+    r.freeze(rows, f"[{label}] {key}")   # the code holds a joint frame's rotation as numbers
     try:
         return rotation_matrix(rows, label, key)
     except ModelError as exc:

@@ -127,6 +127,7 @@ def load(path: str | os.PathLike) -> Model:
     data = _parse_toml(path, label)
     reader = Reader(label)
     files = _Files(path, data)
+    reader.frozen = files.frozen
     try:
         files.check_limits(label)   # before anything is built: milliseconds even for 2**29 instances
         model = _read_model(reader, data, path, files)
@@ -452,6 +453,8 @@ class _Files:
     def __init__(self, path: Path, data: dict):
         self.top = path
         self.data: dict[Path, Any] = {path.resolve(): data}
+        #: parameters compiled with their numbers, across every file of the load (Reader.frozen)
+        self.frozen: dict[str, str] = {}
 
     def data_of(self, path: Path, label: str) -> dict:
         """The parsed data of ``path`` (read once; a file that failed fails again)."""
@@ -613,6 +616,7 @@ def _part_class(path: Path, context: _FileContext) -> type:
 
     def build(self, **ports: Any) -> None:
         reader = Reader(label)
+        reader.frozen = context.files.frozen
         reader.parameters = {key: getattr(self, key) for key in declared}
         reader.ports = set(ports)
         bodies: dict[str, Any] = {"ground": "ground", **ports}
@@ -665,6 +669,7 @@ def _inline_class(r: Reader, label: str, table: dict, bodies: dict, context: _Fi
 
     def build(self) -> None:
         reader = Reader(where)
+        reader.frozen = r.frozen
         reader.parameters = {**r.parameters, **{key: getattr(self, key) for key in declared}}
         _see_instance_parameters(reader, self)
         _read_parts(reader, table, self, dict(outer), context, {})
@@ -841,7 +846,9 @@ def _expr_text(expr: Any, scope: str) -> str | None:
             return path[len(scope) + 1:]
         parts = path.split(".")
         if len(parts) == 1 and not scope:   # a model-level parameter (Model.parameter), seen from the top
-            return path if path.isidentifier() and not keyword.iskeyword(path) and path not in RESERVED else None
+            # (a keyword such as the bicycle's `lambda` is fine: the file declares it, and a
+            # declared parameter may be named like a keyword, mbcomp.core.expressions)
+            return path if path.isidentifier() and path not in RESERVED else None
         if len(parts) < 2 or not all(p.isidentifier() and not keyword.iskeyword(p) for p in parts):
             return None
         return path
@@ -909,15 +916,38 @@ def _expression_table(comp: Any, copy: Any, written: Any, scope: str) -> tuple[d
                          "written as its value (it will not follow a parameter change)")
         return old
 
+    def derived(new: Any, old: Any) -> bool:
+        """A value the constructor computed from marked arguments (not passed through)."""
+        if isinstance(new, (list, tuple)) and isinstance(old, (list, tuple)) and len(new) == len(old):
+            return any(derived(n, o) for n, o in zip(new, old))
+        return isinstance(new, float) and new not in by_marker and new != old
+
     table = {}
     for key, new in marked.items():
-        if key in plain:
+        given = _given_text(kwargs.get(key), scope) if key in plain and derived(new, plain[key]) else None
+        if given is not None:   # e.g. a normalised axis: the argument as given derives the same value
+            table[key] = given
+        elif key in plain:
             table[key] = merge(key, new, plain[key])
         elif _mentions(new, by_marker):   # a default value, here linked to parameters
             table[key] = merge(key, new, _unmarked(new, by_marker))
     for key, old in plain.items():
         table.setdefault(key, old)
     return table, list(dict.fromkeys(notes))
+
+
+def _given_text(value: Any, scope: str) -> Any:
+    """A constructor argument holding expressions (a vector such as a joint axis that the
+    constructor normalises) as file values: numbers stay, expressions become their text;
+    None when it holds none or one a file cannot write."""
+    if isinstance(value, Expr):
+        return _expr_text(value, scope)
+    if isinstance(value, (list, tuple)) and any(isinstance(v, Expr) for v in value):
+        parts = [_given_text(v, scope) if isinstance(v, Expr) else v for v in value]
+        ok = all(p is not None and (isinstance(p, str) or (isinstance(p, (int, float)) and not isinstance(p, bool)))
+                 for p in parts)
+        return [p if isinstance(p, str) else float(p) for p in parts] if ok else None
+    return None
 
 
 def _mentions(value: Any, by_marker: dict) -> bool:

@@ -261,6 +261,19 @@ class Formulation:
         """Independent rows of a constraint Jacobian of this model (see ``independent_rows``)."""
         return independent_rows(J, scale=self.jacobian_scale, prefer=self.preferred_rows(J.shape[0]))
 
+    def position_mask(self, n: int) -> np.ndarray:
+        """Which of ``n`` constraint rows (the model's, then closed contacts') constrain
+        positions: all but the velocity rows (rolling, no-slip)."""
+        mask = np.ones(n, dtype=bool)
+        if self.constraints is not None:
+            mask[:self.constraints.nc] = ~self.constraints.velocity_rows
+        return mask
+
+    @property
+    def has_velocity_rows(self) -> bool:
+        """Whether the model has velocity (non-holonomic) constraint rows."""
+        return self.constraints is not None and bool(self.constraints.velocity_rows.any())
+
     def preferred_rows(self, n: int) -> np.ndarray | None:
         """Rows kept first when some must go: all but the drivers (motor rows); None without drivers."""
         drivers = [] if self.constraints is None else self.constraints.coordinate_rows
@@ -280,7 +293,7 @@ class Formulation:
             return {}
         lam = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1]
         nc = 0 if self.constraints is None else self.constraints.nc
-        out = {} if self.constraints is None else self.constraints.split_reactions(lam[:nc])
+        out = {} if self.constraints is None else self.constraints.split_reactions(lam[:nc], kernel, q)
         names = [c.name for c in kernel.topology.contacts]
         out.update({names[i]: float(value) for i, value in zip(contacts, lam[nc:])})
         return out
@@ -498,15 +511,17 @@ def _newton_onto(formulation, kernel, q: np.ndarray, steps: int = 20) -> np.ndar
     first = None
     for _ in range(steps):
         cv = formulation.constraint_values(kernel, 0.0, q, zero)
-        if not (np.all(np.isfinite(cv.g)) and np.all(np.isfinite(cv.J))):
+        rows = formulation.position_mask(len(cv.g))  # (velocity rows have no residual)
+        g, J = cv.g[rows], cv.J[rows]
+        if not (np.all(np.isfinite(g)) and np.all(np.isfinite(J))):
             return None
-        residual = float(np.max(np.abs(cv.g), initial=0.0))
+        residual = float(np.max(np.abs(g), initial=0.0))
         if residual < ASSEMBLY_TOLERANCE:
             return q
         first = residual if first is None else first
         if residual > 100.0 * first:
             return None
-        step, *_ = np.linalg.lstsq(cv.J, -cv.g, rcond=1e-10)
+        step, *_ = np.linalg.lstsq(J, -g, rcond=1e-10)
         if not np.any(step):  # the residual is outside the Jacobian's range (a singular guess)
             return None
         q = state_map.integrate(q, step)

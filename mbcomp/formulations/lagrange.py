@@ -43,7 +43,7 @@ class LagrangeWorkspace(Workspace):
         self._span = None  # (t, q, qd) at the end of the step whose samples are being taken
         self.chart = Chart(self.state_map, q0)
         self.choose(t0, q0)
-        self.y0 = np.concatenate((self.chart.to_x(q0)[self.ind], qd0[self.ind]))
+        self.y0 = np.concatenate((self.chart.to_x(q0)[self.qind], qd0[self.ind]))
 
     def choose(self, t, q):
         """Partition the speeds at ``q`` (and centre the chart there)."""
@@ -52,7 +52,20 @@ class LagrangeWorkspace(Workspace):
                                                 self.contacts)
         self.rows = self.formulation.rows_of(cv.J)
         self.formulation.check_dead_point(cv.J, self.qd_accepted, t, q, self.contacts, self.rows)
-        self.dep, self.ind = partition(cv.J[self.rows])
+        self.set_partition(cv.J, self.rows)
+
+    def set_partition(self, J, rows):
+        """Speeds partitioned on every independent row ``rows`` of ``J``, coordinates on the
+        position rows among them: velocity (rolling, no-slip) rows remove speeds, not
+        coordinates.  Without velocity rows the two partitions are the same."""
+        self.rows = rows
+        self.dep, self.ind = partition(J[rows])
+        mask = self.formulation.position_mask(J.shape[0])
+        self.prows = rows[mask[rows]]
+        if self.prows.size == rows.size:
+            self.qdep, self.qind = self.dep, self.ind
+        else:
+            self.qdep, self.qind = partition(J[self.prows])
 
     def span(self, t_end: float, y_end: np.ndarray) -> None:
         """Before the dense output and samples of the step to ``(t_end, y_end)``: Newton starts
@@ -60,7 +73,7 @@ class LagrangeWorkspace(Workspace):
         end advanced by its speeds) instead of the start state advanced by its speeds, which
         near a singular position can be closer to another assembly branch."""
         self._span = None
-        q, qd, _ = self._full_state(t_end, np.asarray(y_end)[:2 * len(self.ind)])  # (without drive states)
+        q, qd, _ = self._full_state(t_end, np.asarray(y_end)[:len(self.qind) + len(self.ind)])  # (without drive states)
         self._span = (float(t_end), q, qd)
 
     def end_span(self) -> None:
@@ -86,18 +99,18 @@ class LagrangeWorkspace(Workspace):
         from the last accepted state, advanced along its velocity, or ``span``'s predictor)."""
         chart = self.chart
         x = chart.to_x(self._predictor(t))
-        x[self.ind] = xi
+        x[self.qind] = xi
         q = chart.to_q(x)
         zero = np.zeros(self.kernel.nv)
         for _ in range(25):
             cv = self.formulation.constraint_values(self.kernel, t, q, zero, self.offsets, self.contacts)
-            g = cv.g[self.rows]
+            g = cv.g[self.prows]
             if float(np.abs(g).max(initial=0.0)) < ASSEMBLY_TOLERANCE:
                 break
             D = chart.tangent(x)
-            Jx = cv.J[self.rows] if D is None else cv.J[self.rows] @ D
+            Jx = cv.J[self.prows] if D is None else cv.J[self.prows] @ D
             try:
-                x[self.dep] -= solve(Jx[:, self.dep], g)
+                x[self.qdep] -= solve(Jx[:, self.qdep], g)
             except np.linalg.LinAlgError:
                 raise TrialStateError(f"dependent coordinates are singular at t = {t:g}: constraints "
                                       f"{self.formulation.row_names(self.rows, self.contacts)}") from None
@@ -111,12 +124,12 @@ class LagrangeWorkspace(Workspace):
     def retreat(self):
         """``(t, y)`` of the last accepted state, with the coordinates chosen afresh there."""
         self.choose(self.t_accepted, self.q_accepted)
-        return self.t_accepted, np.concatenate((self.chart.to_x(self.q_accepted)[self.ind],
+        return self.t_accepted, np.concatenate((self.chart.to_x(self.q_accepted)[self.qind],
                                                 self.qd_accepted[self.ind]))
 
     def _full_state(self, t, y):
-        k = len(self.ind)
-        xi, qdi = y[:k], y[k:]
+        k = len(self.qind)
+        xi, qdi = y[:k], y[k:k + len(self.ind)]
         q, cv, x = self.dependent(t, xi)
         qd = np.zeros(self.kernel.nv)
         qd[self.ind] = qdi
@@ -136,14 +149,14 @@ class LagrangeWorkspace(Workspace):
         tau = self.kernel.tau(self.tau, t, q, qd)
         qdd, _ = self.formulation.solve(self.kernel, t, q, qd, tau, self.offsets, self.contacts,
                                         (self.rows, self.dep, self.ind), multipliers=False)
-        return np.concatenate((self.chart.rate(x, qd)[self.ind], qdd[self.ind]))
+        return np.concatenate((self.chart.rate(x, qd)[self.qind], qdd[self.ind]))
 
     def after_step(self, t, y):
         q, qd, x = self._full_state(t, y)
         self.t_accepted, self.q_accepted, self.qd_accepted = t, q, qd
         if self.chart.largest_rotation(x) > CHART_LIMIT:
             self.chart = Chart(self.state_map, q)  # re-centre the rotations' chart here
-            return np.concatenate((self.chart.to_x(q)[self.ind], qd[self.ind]))
+            return np.concatenate((self.chart.to_x(q)[self.qind], qd[self.ind]))
         if not len(self.dep):
             return None
         return self.repartition(t, q, qd)
@@ -155,7 +168,7 @@ class LagrangeWorkspace(Workspace):
         Jacobian lost rank (no independent coordinates exist there)."""
         cv = self.formulation.constraint_values(self.kernel, t, q, np.zeros(self.kernel.nv), self.offsets,
                                                 self.contacts)
-        condition = self.condition(cv.J, self.rows, self.dep)
+        condition = max(self.condition(cv.J, self.rows, self.dep), self.condition(cv.J, self.prows, self.qdep))
         if condition < REPARTITION_CONDITION:
             return None
         rows = self.formulation.rows_of(cv.J)
@@ -166,14 +179,16 @@ class LagrangeWorkspace(Workspace):
                 f"the mechanism reaches a singular position at t = {t:g} (q = {format_state(q)}): the constraint "
                 f"Jacobian loses rank, so no set of independent coordinates exists there; constraints involved: "
                 f"{self.formulation.row_names(lost)}. The dae formulation can pass such positions in motion.")
-        dep, ind = partition(cv.J[rows])
-        if np.array_equal(dep, self.dep) and np.array_equal(rows, self.rows):
+        old = (self.rows, self.dep, self.ind, self.prows, self.qdep, self.qind)
+        self.set_partition(cv.J, rows)
+        if all(np.array_equal(a, b) for a, b in zip(old, (self.rows, self.dep, self.ind, self.prows, self.qdep,
+                                                          self.qind))):
             return None
-        if self.condition(cv.J, rows, dep) > 0.5 * condition:
+        if max(self.condition(cv.J, self.rows, self.dep), self.condition(cv.J, self.prows, self.qdep)) > 0.5 * condition:
+            self.rows, self.dep, self.ind, self.prows, self.qdep, self.qind = old
             return None  # no clearly better choice
-        self.rows, self.dep, self.ind = rows, dep, ind
         self.chart = Chart(self.state_map, q)
-        return np.concatenate((self.chart.to_x(q)[ind], qd[ind]))
+        return np.concatenate((self.chart.to_x(q)[self.qind], qd[self.ind]))
 
     def condition(self, J, rows, dep) -> float:
         """How close the dependent block is to singular, against the Jacobian's regular size:

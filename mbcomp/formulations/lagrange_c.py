@@ -6,6 +6,10 @@ coordinates and their speeds); everything else follows in C, as in ``LagrangeWor
 - the dependent coordinates by Newton on ``g(q, t) = 0`` (the rows chosen independent),
   started from the last accepted state advanced by its speeds;
 - the dependent speeds from ``J_d qd_d = -(J_i qd_i + g_t)``;
+- velocity rows (rolling, no-slip: ``g`` has no position part) remove speeds only: the
+  coordinates are then partitioned on the position rows alone (``lag_prows``, ``lag_qdep``,
+  ``lag_qind``), the speeds on all rows, and ``y = [x_qi, qd_i]`` holds more coordinates
+  than speeds (the rates of the independent coordinates may be dependent speeds);
 - the accelerations from ``(B^T M B) qdd_i = B^T (f + tau - M c)``, ``B = [I; -J_d^-1 J_i]``,
   ``c = -J_d^-1 bias`` on the dependent rows;
 - after each accepted step, the condition of ``J_d`` (largest singular value of ``J``, or its

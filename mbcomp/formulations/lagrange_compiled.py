@@ -121,7 +121,8 @@ class ReducedRun(ContactWatching):
         self.retries, self.t_retry = 0, -np.inf
         self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
         configure = lib.lagrange_configure
-        configure.argtypes = [_INT] + [_VOID] * 5 + [_INT, _VOID, _VOID, _INT, _VOID, _DBL, _DBL, _VOID, _VOID]
+        configure.argtypes = ([_INT] + [_VOID] * 5 + [_INT, _VOID, _VOID, _INT, _VOID] * 2
+                              + [_DBL, _DBL, _VOID, _VOID])
         configure.restype = ctypes.c_int
         self.run = lib.dop853_reduced_run
         self.gaps = self.event = self.held = None
@@ -150,9 +151,14 @@ class ReducedRun(ContactWatching):
         self.rows = np.ascontiguousarray(ws.rows, dtype=np.int64)
         self.dep = np.ascontiguousarray(ws.dep, dtype=np.int64)
         self.ind = np.ascontiguousarray(ws.ind, dtype=np.int64)
+        # the coordinates' partition (on the position rows: the speeds' one without velocity rows)
+        self.prows = np.ascontiguousarray(ws.prows, dtype=np.int64)
+        self.qdep = np.ascontiguousarray(ws.qdep, dtype=np.int64)
+        self.qind = np.ascontiguousarray(ws.qind, dtype=np.int64)
         status = self.lib.lagrange_configure(
             len(self.geo), _ptr(self.geo), _ptr(self.mq), _ptr(self.mv), _ptr(self.speed), _ptr(self.offset),
             len(self.rows), _ptr(self.rows), _ptr(self.dep), len(self.ind), _ptr(self.ind),
+            len(self.prows), _ptr(self.prows), _ptr(self.qdep), len(self.qind), _ptr(self.qind),
             float(self.formulation.jacobian_scale), float(self.formulation.repartition_condition), _ptr(self.acc), _ptr(self.info))
         if status:
             raise SimulationError("the compiled lagrange loop could not allocate its work space")
@@ -190,7 +196,8 @@ class ReducedRun(ContactWatching):
                 f"over it, and the dae formulation passes such positions in motion")
 
     def close(self) -> None:
-        self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0.0, 0.0, None, None)
+        self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0, None, None, 0, None,
+                                    0.0, 0.0, None, None)
         self.lib.lagrange_drives(0)
 
     def __enter__(self) -> "ReducedRun":
@@ -202,8 +209,12 @@ class ReducedRun(ContactWatching):
     # -- the state ---------------------------------------------------------------------------------
     @property
     def ni(self) -> int:
-        """Degrees of freedom in the current partition (the reduced state has 2 ni entries)."""
-        return len(self.workspace.ind)
+        """Degrees of freedom in the current partition: the independent speeds (the reduced
+        state has as many independent coordinates besides, more where velocity rows remove
+        speeds only).  Where the speeds are all dependent but coordinates are not (velocity
+        rows), the count of those coordinates: 0 means nothing to integrate."""
+        ws = self.workspace
+        return len(ws.ind) or len(ws.qind)
 
     @property
     def y0(self) -> np.ndarray:
@@ -249,7 +260,7 @@ class ReducedRun(ContactWatching):
             chart = ws.chart
             if chart.largest_rotation(chart.to_x(q)) > self.formulation.chart_limit:  # re-centre the rotations' chart (as after_step)
                 ws.chart = Chart(ws.state_map, q)
-                y_new = np.concatenate((ws.chart.to_x(q)[ws.ind], qd[ws.ind]))
+                y_new = np.concatenate((ws.chart.to_x(q)[ws.qind], qd[ws.ind]))
             else:
                 y_new = ws.repartition(t, q, qd)
             if y_new is None:

@@ -179,7 +179,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
                 if (t_out[*i_out] == t_new) dense = y_new;
                 const int os_ = lagrange_full(t_out[*i_out], dense, out, out + NCOORD, p);
                 if (os_) { status = os_; goto done; }
-                for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[2 * lag_ni + i];  /* the drive states */
+                for (int i = 0; i < NZ; ++i) out[NMECH + i] = dense[lag_nqi + lag_ni + i];  /* the drive states */
 #else
                 normalize_state(out);
                 if (t_out[*i_out] == t_new) mb_copy(out, y_new, sizeof(double) * LOOP_NY);

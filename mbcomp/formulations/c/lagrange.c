@@ -7,6 +7,13 @@
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
+/* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
+   coordinates lag_qdep, lag_qind (nqi) independent; the same as the speeds' partition
+   unless velocity rows (rolling, no-slip: no position residual) remove speeds only */
+static __thread int lag_npr, lag_nqi;
+static __thread const long *lag_prows, *lag_qdep, *lag_qind;
+static __thread double *lag_plu;
+static __thread int *lag_ppiv;
 static __thread const double *lag_speed, *lag_offset;
 static __thread double *lag_acc, *lag_info, lag_scale, lag_limit;
 static __thread double *lag_mem = 0;
@@ -189,6 +196,7 @@ int lagrange_watch(int nk, const long *held, double *gaps, double gap_tol, doubl
    motor's prescribed position was not finite (written then)]. */
 int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, const double *speed,
                        const double *offset, int nr, const long *rows, const long *dep, int ni, const long *ind,
+                       int npr, const long *prows, const long *qdep, int nqi, const long *qind,
                        double scale, double limit, double *acc, double *info) {
     free(lag_mem);
     lag_mem = 0;
@@ -198,7 +206,7 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     const int n = NQ, m = nc > n ? nc : n;
     const long size = CONSTRAINTS_SIZE + 4L * nc + (long)nc * n + (long)nr * nr + nr + (long)nr * (ni + 1)
         + DYNAMICS_SIZE + (long)n * ni + (long)ni * ni + 2L * n + 2L * m * m + 6L * n + 8 + 2L * NCOORD + 2L * n
-        + 2L * n + NCOORD + n + 8;
+        + 2L * n + NCOORD + n + 8 + (long)npr * npr + npr;
     lag_mem = malloc(sizeof(double) * size);
     if (!lag_mem) return -4;
     double *w = lag_mem;
@@ -221,9 +229,12 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
     lag_x = w; w += n;
     lag_rate = w; w += n;
     lag_end = w; w += NCOORD + n;
+    lag_plu = w; w += (long)npr * npr;
+    lag_ppiv = (int *)w; w += npr;
     lag_span = 0;
     lag_nc = nc; lag_geo = geo; lag_mq = mq; lag_mv = mv; lag_speed = speed; lag_offset = offset;
     lag_nr = nr; lag_rows = rows; lag_dep = dep; lag_ni = ni; lag_ind = ind;
+    lag_npr = npr; lag_prows = prows; lag_qdep = qdep; lag_nqi = nqi; lag_qind = qind;
     lag_scale = scale; lag_limit = limit; lag_acc = acc; lag_info = info;
     lag_on = 1;
     return 0;
@@ -268,16 +279,14 @@ static int lag_values(double t, const double *q, const double *qd, const double 
 
 /* LU factorisation with partial pivoting of the dependent block J[rows][:, dep] into lag_lu;
    1 when it is exactly singular (as numpy's solve reports). */
-static int lag_factor(void) {
-    const int n = lag_nr;
-    double *A = lag_lu;
+static int lag_factor_block(int n, const long *rows, const long *dep, double *A, int *pivots) {
     for (int a = 0; a < n; ++a)
-        for (int b = 0; b < n; ++b) A[a * n + b] = lag_J[lag_rows[a] * NQ + lag_dep[b]];
+        for (int b = 0; b < n; ++b) A[a * n + b] = lag_J[rows[a] * NQ + dep[b]];
     for (int k = 0; k < n; ++k) {
         int piv = k;
         double best = fabs(A[k * n + k]);
         for (int i = k + 1; i < n; ++i) if (fabs(A[i * n + k]) > best) { best = fabs(A[i * n + k]); piv = i; }
-        lag_piv[k] = piv;
+        pivots[k] = piv;
         if (!(best > 0.0)) return 1;
         if (piv != k)
             for (int j = 0; j < n; ++j) { double s = A[k * n + j]; A[k * n + j] = A[piv * n + j]; A[piv * n + j] = s; }
@@ -290,11 +299,13 @@ static int lag_factor(void) {
     return 0;
 }
 
-/* b <- J_d^-1 b with the factors of lag_factor. */
-static void lag_solve(double *b) {
-    const int n = lag_nr;
-    const double *A = lag_lu;
-    for (int k = 0; k < n; ++k) if (lag_piv[k] != k) { double s = b[k]; b[k] = b[lag_piv[k]]; b[lag_piv[k]] = s; }
+static int lag_factor(void) {
+    return lag_factor_block(lag_nr, lag_rows, lag_dep, lag_lu, lag_piv);
+}
+
+/* b <- A^-1 b with the factors of lag_factor_block. */
+static void lag_solve_block(int n, const double *A, const int *pivots, double *b) {
+    for (int k = 0; k < n; ++k) if (pivots[k] != k) { double s = b[k]; b[k] = b[pivots[k]]; b[pivots[k]] = s; }
     for (int i = 0; i < n; ++i) { double s = b[i]; for (int k = 0; k < i; ++k) s -= A[i * n + k] * b[k]; b[i] = s; }
     for (int i = n - 1; i >= 0; --i) {
         double s = b[i];
@@ -303,12 +314,17 @@ static void lag_solve(double *b) {
     }
 }
 
+/* b <- J_d^-1 b with the factors of lag_factor. */
+static void lag_solve(double *b) {
+    lag_solve_block(lag_nr, lag_lu, lag_piv, b);
+}
+
 /* Full q (NCOORD) and qd (NV) at time t from the reduced state y = [x_i, qd_i] (the
    independent chart coordinates, which are the coordinates themselves without quaternions):
    Newton from the last accepted state advanced by its speeds.  Leaves J (speed space, and
    the LU of J_d) at q and the chart coordinates in lag_x.  Returns 0 or LAG_TRIAL. */
 int lagrange_full(double t, const double *y, double *q, double *qd, const double *p) {
-    const int nr = lag_nr, ni = lag_ni;
+    const int nr = lag_nr, ni = lag_ni, npr = lag_npr, nqi = lag_nqi;
     const double ta = lag_acc[0], *qa = lag_acc + 1, *va = lag_acc + 1 + NCOORD;
     double *s = lag_h, *x = lag_x;
     const int span = lag_span && lag_t_end > ta;
@@ -327,51 +343,52 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
             lag_qstep(q0 + QUAT_Q[k], phi, q + QUAT_Q[k]);
         }
         lag_to_x(q, x);
-        for (int k = 0; k < ni; ++k) x[lag_ind[k]] = y[k];
+        for (int k = 0; k < nqi; ++k) x[lag_qind[k]] = y[k];
         lag_to_q(x, q);
     } else if (span) {
         for (int i = 0; i < NQ; ++i) q[i] = h00 * qa[i] + h10 * va[i] + h01 * qe[i] + h11 * ve[i];
-        for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+        for (int k = 0; k < nqi; ++k) q[lag_qind[k]] = y[k];
     } else {
         for (int i = 0; i < NQ; ++i) q[i] = qa[i] + va[i] * (t - ta);
-        for (int k = 0; k < ni; ++k) q[lag_ind[k]] = y[k];
+        for (int k = 0; k < nqi; ++k) q[lag_qind[k]] = y[k];
     }
     for (int i = 0; i < NQ; ++i) lag_v[i] = 0.0;
     int converged = 0;
     for (int it = 0; it < LAG_NEWTON_ITER; ++it) {
         if (lag_values(t, q, lag_v, p)) return LAG_TRIAL;
         double gmax = 0.0;
-        for (int a = 0; a < nr; ++a) { const double e = fabs(lag_g[lag_rows[a]]); if (!(e <= gmax)) gmax = e; }
+        for (int a = 0; a < npr; ++a) { const double e = fabs(lag_g[lag_prows[a]]); if (!(e <= gmax)) gmax = e; }
         if (gmax < LAG_NEWTON_TOL) { converged = 1; break; }
         if (MB_HAS_QUAT)  /* Newton in the chart: J dv/dx = J D, D = J_r(phi) on each rotation */
             for (int k = 0; k < NQUAT; ++k) {
                 const int o = QUAT_V[k];
                 double R[9];
                 lag_right_jacobian(x + o, R);
-                for (int a = 0; a < nr; ++a) {
-                    double *Jr = lag_J + lag_rows[a] * NQ + o;
+                for (int a = 0; a < npr; ++a) {
+                    double *Jr = lag_J + lag_prows[a] * NQ + o;
                     const double j0 = Jr[0], j1 = Jr[1], j2 = Jr[2];
                     for (int c = 0; c < 3; ++c) Jr[c] = j0 * R[c] + j1 * R[3 + c] + j2 * R[6 + c];
                 }
             }
-        if (lag_factor()) return LAG_TRIAL;
-        for (int a = 0; a < nr; ++a) s[a] = lag_g[lag_rows[a]];
-        lag_solve(s);
+        if (lag_factor_block(npr, lag_prows, lag_qdep, lag_plu, lag_ppiv)) return LAG_TRIAL;
+        for (int a = 0; a < npr; ++a) s[a] = lag_g[lag_prows[a]];
+        lag_solve_block(npr, lag_plu, lag_ppiv, s);
         if (MB_HAS_QUAT) {
-            for (int a = 0; a < nr; ++a) x[lag_dep[a]] -= s[a];
+            for (int a = 0; a < npr; ++a) x[lag_qdep[a]] -= s[a];
             lag_to_q(x, q);
         } else {
-            for (int a = 0; a < nr; ++a) q[lag_dep[a]] -= s[a];
+            for (int a = 0; a < npr; ++a) q[lag_qdep[a]] -= s[a];
         }
     }
     if (!converged) return LAG_TRIAL;
-    for (int k = 0; k < ni; ++k) qd[lag_ind[k]] = y[ni + k];
+    for (int i = 0; i < NQ; ++i) qd[i] = 0.0;
+    for (int k = 0; k < ni; ++k) qd[lag_ind[k]] = y[nqi + k];
     if (nr) {
         if (lag_factor()) return LAG_TRIAL;
         for (int a = 0; a < nr; ++a) {
             const double *Jr = lag_J + lag_rows[a] * NQ;
             double v = lag_gt[lag_rows[a]];
-            for (int k = 0; k < ni; ++k) v += Jr[lag_ind[k]] * y[ni + k];
+            for (int k = 0; k < ni; ++k) v += Jr[lag_ind[k]] * y[nqi + k];
             s[a] = -v;
         }
         lag_solve(s);
@@ -400,14 +417,14 @@ void lagrange_span_end(void) {
 /* f = [qd_i, qdd_i] at (t, y): returns 0, 1 (reduced mass matrix not positive definite)
    or LAG_TRIAL. */
 int lagrange_rhs(double t, const double *y, double *f, const double *p, const double *tau) {
-    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    const int nr = lag_nr, ni = lag_ni, nqi = lag_nqi, n = NQ;
     double *q = lag_q, *qd = lag_qd;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
-    const double *drive = lag_drive_forces(t, q, qd, y + 2 * ni, p);
+    const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
     double *X = lag_X, *col = lag_v, *h = lag_h;
     for (int k = 0; k <= ni; ++k) {  /* X = J_d^-1 [J_i, bias] (column k stored X[a * (ni + 1) + k]) */
         for (int a = 0; a < nr; ++a)
@@ -428,7 +445,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
             for (int a = 0; a < nr; ++a) s -= X[a * (ni + 1) + l] * LAG_MIJ(M, i, lag_dep[a]);
             lag_MB[i * ni + l] = s;
         }
-    double *Mr = lag_Mr, *r = f + ni, scale = 1e-300;
+    double *Mr = lag_Mr, *r = f + nqi, scale = 1e-300;
     for (int k = 0; k < ni; ++k) {  /* B^T (M B) and B^T h */
         for (int l = 0; l <= k; ++l) {
             double s = lag_MB[lag_ind[k] * ni + l];
@@ -456,11 +473,11 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
     if (MB_HAS_QUAT) {  /* x' of the independent chart coordinates */
         lag_chart_rate(lag_x, qd, lag_rate);
-        for (int k = 0; k < ni; ++k) f[k] = lag_rate[lag_ind[k]];
-    } else {
-        for (int k = 0; k < ni; ++k) f[k] = y[ni + k];
+        for (int k = 0; k < nqi; ++k) f[k] = lag_rate[lag_qind[k]];
+    } else {  /* (a dependent speed where velocity rows leave the coordinate independent) */
+        for (int k = 0; k < nqi; ++k) f[k] = qd[lag_qind[k]];
     }
-    for (int k = 0; k < LAG_NZ; ++k) f[2 * ni + k] = lag_dv[DRIVES_RATES_OFF + k];
+    for (int k = 0; k < LAG_NZ; ++k) f[nqi + ni + k] = lag_dv[DRIVES_RATES_OFF + k];
     return 0;
 }
 
@@ -575,11 +592,11 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
     lag_acc[0] = t;
     mb_copy(lag_acc + 1, q, sizeof(double) * NCOORD);
     mb_copy(lag_acc + 1 + NCOORD, qd, sizeof(double) * NQ);
-    for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + NCOORD + NQ + k] = y[2 * lag_ni + k];
+    for (int k = 0; k < LAG_NZ; ++k) lag_acc[1 + NCOORD + NQ + k] = y[lag_nqi + lag_ni + k];
     if (out) {
         mb_copy(out, q, sizeof(double) * NCOORD);
         mb_copy(out + NCOORD, qd, sizeof(double) * NQ);
-        for (int k = 0; k < LAG_NZ; ++k) out[NCOORD + NQ + k] = y[2 * lag_ni + k];
+        for (int k = 0; k < LAG_NZ; ++k) out[NCOORD + NQ + k] = y[lag_nqi + lag_ni + k];
     }
     if (MB_HAS_QUAT && lag_largest_rotation(lag_x) > lag_chart_limit) return LAG_PAUSED;  /* Python re-centres the chart */
     if (!lag_nr) return 0;
@@ -597,7 +614,7 @@ int lagrange_accept(double t, const double *y, double *out, const double *p) {
    J_r^T lam = M qdd - f - tau (least squares): the held contacts' normal forces among them.
    Returns 0, 1 (rows dependent: cannot happen for chosen rows) or LAG_TRIAL. */
 static int lag_held_forces(double t, const double *y, const double *p, const double *tau, double **lam_out) {
-    const int nr = lag_nr, ni = lag_ni, n = NQ;
+    const int nr = lag_nr, ni = lag_ni, nqi = lag_nqi, n = NQ;
     double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
     double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
     int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
@@ -605,10 +622,10 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_dv + DRIVES_FORCES_OFF;
     for (int i = 0; i < n; ++i) qdd[i] = 0.0;
-    for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[ni + k];
+    for (int k = 0; k < ni; ++k) qdd[lag_ind[k]] = f[nqi + k];
     for (int a = 0; a < nr; ++a) {
         double v = -lag_X[a * (ni + 1) + ni];
-        for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[ni + k];
+        for (int k = 0; k < ni; ++k) v -= lag_X[a * (ni + 1) + k] * f[nqi + k];
         qdd[lag_dep[a]] = v;
     }
     for (int i = 0; i < n; ++i) {

@@ -138,6 +138,15 @@ def sin(x): return x.sin() if isinstance(x, Expr) else math.sin(x)
 def cos(x): return x.cos() if isinstance(x, Expr) else math.cos(x)
 
 
+def parameters_in(value: Any) -> set[str]:
+    """The parameter paths the ``Expr``s in ``value`` (nested sequences) read."""
+    if isinstance(value, Expr):
+        return value.parameters()
+    if isinstance(value, (tuple, list)):
+        return set().union(*(parameters_in(v) for v in value)) if value else set()
+    return set()
+
+
 def contains_expr(value: Any) -> bool:
     """True when ``value`` (numbers, sequences, mappings, Frames) holds an ``Expr``."""
     if isinstance(value, Expr):
@@ -152,7 +161,7 @@ def contains_expr(value: Any) -> bool:
         return any(contains_expr(v) for v in value.values())
     point = getattr(value, "point", None)
     if point is not None and type(value).__name__ == "Frame":
-        return contains_expr(point)
+        return contains_expr(point) or bool(getattr(value, "rotation_parameters", ()))
     if hasattr(value, "dtype") and getattr(value, "dtype", None) == object:
         return any(contains_expr(v) for v in value.ravel().tolist())
     return False

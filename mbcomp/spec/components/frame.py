@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from mbcomp.core.errors import ModelError
+from mbcomp.spec.components.expr import parameters_in
 from mbcomp.spec.components.values import name_of, vector3
 
 
@@ -65,7 +66,7 @@ class Frame:
     hold sub-model parameter expressions; they are resolved by the component that uses it.
     """
 
-    __slots__ = ("body", "point", "rotation")
+    __slots__ = ("body", "point", "rotation", "rotation_parameters")
 
     def __init__(self, body: Any, point: Any = (0.0, 0.0, 0.0), rotation: Any = None):
         if isinstance(body, Frame):
@@ -77,6 +78,9 @@ class Frame:
         self.body = body
         self.point = tuple(point)
         self.rotation = rotation_matrix(rotation, owner)
+        #: parameters the rotation was built from: the code holds it as numbers, so a
+        #: run-time change of one is refused (build.flatten.Derivation)
+        self.rotation_parameters = frozenset(parameters_in(rotation))
 
     @property
     def rotation_matrix(self) -> np.ndarray:

@@ -54,3 +54,37 @@ class CoordinateGap:
     bound: str
     sign: int
     label: str = ""
+
+
+@dataclass(frozen=True)
+class RollingEquation:
+    """One row of a rolling (or no-slip) contact between ``body`` and ``plane`` (a body or
+    the ground) at the contact point ``c(q)``: the relative velocity of the two bodies'
+    material points at ``c`` along the unit ``direction`` (constants, fixed in ``frame``:
+    the plane or the body) is zero::
+
+        direction . (v_body(c) - v_plane(c)) = 0
+
+    ``contact`` says where ``c`` is: ``("point", key)`` a body point (parameter key, body
+    frame); ``("ball", center_key, radius_key)`` the ball's point nearest the plane,
+    ``center - radius n``; ``("disc", center_key, radius_key, axis)`` the lowest point of
+    a thin disc of body-frame ``axis`` (``n`` the plane's unit ``normal``, constants in the
+    plane's frame).  With ``origin`` (a parameter key: a point of the plane, plane frame)
+    the row is holonomic, ``g = direction . (c - origin)``, whose rate is the row; without
+    it the row constrains speeds only (``g`` is NaN in ``ConstraintValues``, 0 in the
+    generated code so that Baumgarte's velocity term acts on it alone).  Its multiplier is
+    the force (N) along ``direction`` on ``body`` at ``c`` (its opposite on ``plane``).
+    """
+
+    body: Any
+    plane: Any
+    frame: Any
+    direction: tuple
+    contact: tuple
+    normal: tuple = (0.0, 0.0, 1.0)
+    origin: str | None = None
+    label: str = ""
+
+    @property
+    def speed_only(self) -> bool:
+        return self.origin is None
