@@ -22,12 +22,18 @@ def stewart():
     return model, {f: model.compile(f) for f in ("lagrange", "dae")}
 
 
+#: Library models with Coulomb friction: scipy's stepping (the compiled loops have no friction law).
+FRICTION = {"sliding_ball", "box_on_slope"}
+
+
 @pytest.mark.parametrize("name", sorted(MODELS))
 def test_every_library_model_runs_compiled_in_both_formulations(name):
     model = load(MODELS[name])
     for formulation in ("lagrange", "dae"):
         system = model.compile(formulation)
-        assert system.integration_path() == "compiled", (name, formulation, system.integration_path())
+        expected = ("scipy: contacts with friction step in Python (the compiled loops have no friction law)"
+                    if name in FRICTION else "compiled")
+        assert system.integration_path() == expected, (name, formulation, system.integration_path())
 
 
 def _spinning(system, q0):
