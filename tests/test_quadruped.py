@@ -1,0 +1,149 @@
+"""solo12 (example-robot-data) standing on four frictional foot contacts under compiled PD
+control plus a feed-forward (examples/solo12_standing.py).
+
+The standing height and the foot forces are computed from the kinematics alone (the lowest
+foot centre below the base plus the foot radius; the least-norm vertical foot forces whose
+wrench balances the weight); the simulation must hold them, with the feet stuck and no drift.
+Skipped without example-robot-data.
+"""
+import importlib.util
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("yourdfpy")
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "solo12_standing.py"
+_spec = importlib.util.spec_from_file_location("solo12_standing", EXAMPLE)
+solo = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(solo)
+if solo.urdf_path() is None:
+    pytest.skip("example-robot-data is not installed", allow_module_level=True)
+
+pytestmark = pytest.mark.slow   # compiling the 18-speed robot takes ~20 s per formulation
+G = 9.81
+FORMULATIONS = ("lagrange", "dae")
+
+
+@pytest.fixture(scope="module", params=FORMULATIONS)
+def robot(request):
+    return solo.solo12(request.param)
+
+
+@pytest.fixture(scope="module")
+def standing_runs(robot):
+    """The robot put down touching the floor at rest in the posture, run 0.3 s."""
+    q0 = solo.standing_state(robot)
+    res = robot.simulate(0.3, q0, np.zeros(robot.nv), t_eval=[0.0, 0.1, 0.2, 0.3])
+    return robot, q0, res
+
+
+def test_the_standing_height_is_the_kinematic_one(robot):
+    """The base height puts the lowest foot sphere on the floor: every gap is zero (the
+    posture is symmetric) and the feet hang 0.16 m (shank) below the knees."""
+    q0 = solo.standing_state(robot)
+    assert max(abs(g) for g in robot.gaps(q0).values()) < 1e-12
+    # By hand: the hip joint sits at the base's height (URDF origins z = 0), the thigh (0.16 m)
+    # leans by HFE = 0.8 rad and the shank (0.16 m) by HFE + KFE = -0.8 rad: both drop 0.16 cos 0.8.
+    assert q0[robot.coords.index("base_link_free_z")] == pytest.approx(2 * 0.16 * np.cos(0.8) + solo.FOOT_RADIUS,
+                                                                       rel=1e-12)
+
+
+def test_it_stands_still_with_its_feet_stuck(standing_runs):
+    robot, q0, res = standing_runs
+    assert res.events == []
+    assert sorted(res.persistent_contacts) == sorted(f"{leg}_foot" for leg in solo.LEGS)
+    np.testing.assert_allclose(res.q[-1], q0, atol=1e-9)          # no drift, no creep
+    np.testing.assert_allclose(res.qd[-1], 0.0, atol=1e-8)
+    for q in res.q:
+        assert min(robot.gaps(q).values()) >= -1e-9
+
+
+def test_the_feet_carry_the_weight_as_the_statics_say(standing_runs):
+    """Each foot carries the least-norm vertical force of the statics (a quarter of the weight
+    by the robot's symmetry) and no friction force; together exactly m g."""
+    robot, q0, res = standing_runs
+    _, f = solo.feed_forward(robot, q0)
+    mass = sum(float(node.get("value")) for node in ET.parse(solo.urdf_path()).iter("mass"))   # the URDF's links
+    total = sum(res.contact_forces[f"{leg}_foot"][-1] for leg in solo.LEGS)
+    weight = mass * G
+    assert f.sum() == pytest.approx(weight, rel=1e-12)
+    np.testing.assert_allclose(total, [0.0, 0.0, weight], rtol=1e-9, atol=1e-8)
+    for leg, fz in zip(solo.LEGS, f):
+        np.testing.assert_allclose(res.contact_forces[f"{leg}_foot"][-1], [0.0, 0.0, fz], rtol=1e-8, atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def drop_runs(robot):
+    """Pure PD (no feed-forward), dropped with the feet 2 mm above the floor, run 0.4 s."""
+    pd_only = robot.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
+    q0 = solo.standing_state(pd_only, clearance=0.002)
+    t = np.linspace(0.0, 0.4, 81)
+    return pd_only, q0, pd_only.simulate(0.4, q0, np.zeros(robot.nv), t_eval=t)
+
+
+def test_dropped_it_lands_on_four_feet_and_settles(drop_runs):
+    """The four feet land together after the free fall of 2 mm (t = sqrt(2 h / g): in free
+    fall the PD keeps the posture), stick, and the robot settles with no drift."""
+    robot, q0, res = drop_runs
+    assert [e.kind for e in res.events] == ["impact"] * 4
+    assert [e.time for e in res.events] == [pytest.approx(np.sqrt(2 * 0.002 / G), rel=1e-6)] * 4
+    for q in res.q:
+        assert min(robot.gaps(q).values()) >= -1e-6
+    late = res.t >= 0.3
+    assert np.abs(res.q[late] - res.q[-1]).max() < 1e-6                     # at rest: no drift
+    assert np.abs(res.qd[-1]).max() < 1e-6
+    total = sum(res.contact_forces[f"{leg}_foot"][-1] for leg in solo.LEGS)
+    mass = sum(float(node.get("value")) for node in ET.parse(solo.urdf_path()).iter("mass"))
+    np.testing.assert_allclose(total, [0.0, 0.0, mass * G], rtol=1e-6, atol=1e-6 * mass * G)
+
+
+def test_dropped_its_feet_stick(drop_runs):
+    """After landing the material point of each foot sphere touching the floor does not
+    move (stick; the sphere may roll as the knees give)."""
+    robot, _, res = drop_runs
+    for k in np.flatnonzero(res.t > 0.03):
+        for leg in solo.LEGS:
+            state = robot.body_state(f"{leg}_LOWER_LEG", res.q[k])
+            below = state.rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+            touching = np.asarray(solo.foot_point(leg)) + below
+            v = robot.body_state(f"{leg}_LOWER_LEG", res.q[k], res.qd[k], point=touching).velocity
+            assert np.hypot(v[0], v[1]) < 1e-6, (leg, res.t[k], v)
+
+
+def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
+    """At rest the PD torques kp (target - q) balance what holds the robot with the
+    contact forces found: h(q) = J^T F on the joints (the sag below the kinematic height
+    is the joints' compliance, ~2.8 mm at kp = 20 N m/rad)."""
+    robot, q0, res = drop_runs
+    q = res.q[-1]
+    nv = robot.nv
+    generalised = np.zeros(nv)
+    for leg in solo.LEGS:
+        force = res.contact_forces[f"{leg}_foot"][-1]          # acts at the touching point
+        below = robot.body_state(f"{leg}_LOWER_LEG", q).rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+        touching = np.asarray(solo.foot_point(leg)) + below
+        for k in range(nv):
+            e = np.zeros(nv)
+            e[k] = 1.0
+            generalised[k] += force @ robot.body_state(f"{leg}_LOWER_LEG", q, e, point=touching).velocity
+    kp = robot.parameters["FL_HAA_pd.value.constant1.value"]
+    pd = np.array([kp * (solo.POSTURE[name] - q[robot.coords.index(name)]) for name in robot.coords[7:]])
+    hold = robot.holding_forces(q)
+    np.testing.assert_allclose(hold[6:], pd + generalised[6:], atol=1e-6)
+    np.testing.assert_allclose(hold[:6], generalised[:6], atol=1e-6)
+    assert 0.001 < q0[2] - 0.002 - q[2] < 0.02
+
+
+def test_formulations_agree_on_the_drop():
+    """Lagrange and DAE: the same landing time and the same rest state (to 1e-7)."""
+    ends = []
+    for formulation in FORMULATIONS:
+        system = solo.solo12(formulation)
+        system = system.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
+        res = system.simulate(0.4, solo.standing_state(system, clearance=0.002), np.zeros(system.nv),
+                              t_eval=[0.0, 0.4])
+        ends.append((res.events[0].time, res.q[-1]))
+    assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-9)
+    np.testing.assert_allclose(ends[0][1], ends[1][1], atol=1e-7)
