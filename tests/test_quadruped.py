@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("yourdfpy")
+pytest.importorskip("yourdfpy", exc_type=ImportError)
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "solo12_standing.py"
 _spec = importlib.util.spec_from_file_location("solo12_standing", EXAMPLE)
 solo = importlib.util.module_from_spec(_spec)
