@@ -34,6 +34,19 @@ class _RollingOnPlane(Constraint):
 
     section = "constraints"
     n_equations = 3
+    #: the attribute (and reference role) naming the rolling body: "disc" or "ball"
+    rolling_role = ""
+
+    @property
+    def body(self) -> Any:
+        """The rolling body (the disc or the ball)."""
+        return getattr(self, self.rolling_role)
+
+    def references(self):
+        refs = {self.rolling_role: self.body}
+        if self.plane is not None:
+            refs["plane"] = self.plane
+        return refs
 
     def reaction_unit(self, resolve) -> str:
         return "N"
@@ -72,6 +85,7 @@ class RollingDisc(_RollingOnPlane):
     """
 
     kind = "rolling_disc"
+    rolling_role = "disc"
     params = (ParameterSpec("radius", (), "m", positive, default=None, doc="disc radius"),
               ParameterSpec("center", (3,), "m", default=(0.0, 0.0, 0.0), doc="disc centre, body frame"),
               ParameterSpec("axis", (3,), "", unit_vector, default="y", structural=True,
@@ -94,17 +108,6 @@ class RollingDisc(_RollingOnPlane):
         self.normal = normal
         self.origin = origin
 
-    @property
-    def body(self) -> Any:
-        """The rolling body (the disc)."""
-        return self.disc
-
-    def references(self):
-        refs = {"disc": self.disc}
-        if self.plane is not None:
-            refs["plane"] = self.plane
-        return refs
-
     def structure(self):
         return (self.axis, self.normal)
 
@@ -121,6 +124,7 @@ class RollingBall(_RollingOnPlane):
     """
 
     kind = "rolling_ball"
+    rolling_role = "ball"
     params = (ParameterSpec("radius", (), "m", positive, default=None, doc="ball radius"),
               ParameterSpec("center", (3,), "m", default=(0.0, 0.0, 0.0), doc="ball centre, body frame"),
               ParameterSpec("normal", (3,), "", unit_vector, default=(0.0, 0.0, 1.0), structural=True,
@@ -139,17 +143,6 @@ class RollingBall(_RollingOnPlane):
         self.plane = plane
         self.normal = normal
         self.origin = origin
-
-    @property
-    def body(self) -> Any:
-        """The rolling body (the ball)."""
-        return self.ball
-
-    def references(self):
-        refs = {"ball": self.ball}
-        if self.plane is not None:
-            refs["plane"] = self.plane
-        return refs
 
     def structure(self):
         return (self.normal,)
