@@ -249,3 +249,15 @@ def test_info_names_the_constraints_and_the_redundant_equations(main):
     assert "loop closures: C" in proc.stdout
     redundant = next(line for line in proc.stdout.splitlines() if line.startswith("redundant"))
     assert sorted(word.strip(",") for word in redundant.split()[1:4]) == ["C.t1", "C.t2", "C.z"]
+
+
+def test_run_summary_counts_events_by_kind(main, tmp_path):
+    """The library's sliding ball: no impact, one stick event when it starts to roll, at
+    t = 2 v0 / (7 mu g) (v0 = 2 m/s, mu = 0.3, g = 9.81: 0.194166 s)."""
+    import re
+    proc = main("run", "sliding_ball", "--t-end", "0.5", "--samples", "3")
+    assert proc.returncode == 0, proc.stderr
+    line = next(line for line in proc.stdout.splitlines() if line.startswith("events"))
+    assert "impact" not in line and "1 stick" in line, line
+    onset = float(re.search(r"first at t = ([0-9.e-]+)", line).group(1))
+    assert abs(onset - 2 * 2.0 / (7 * 0.3 * 9.81)) < 1e-5, line

@@ -289,9 +289,12 @@ def run_summary(model, path: Path, system, result) -> str:
         except Exception as exc:
             lines.append(f"constraints  violation unavailable ({exc})")
     events = list(getattr(result, "events", []) or [])
-    if events:
-        lines.append(f"events       {len(events)} impact{'s' * (len(events) != 1)}, first at t = "
-                     f"{_fmt(events[0].time)} s")
+    if events:   # counted by kind (impact, stick, slip, release), each with its first time
+        kinds: dict[str, list] = {}
+        for event in events:
+            kinds.setdefault(getattr(event, "kind", "impact"), []).append(event.time)
+        lines.append("events       " + "; ".join(f"{len(times)} {kind}{'s' * (len(times) != 1)}, first at t = "
+                                                  f"{_fmt(times[0])} s" for kind, times in kinds.items()))
     return "\n".join(lines)
 
 
