@@ -52,9 +52,12 @@ def numbers() -> dict[str, np.ndarray]:
     return out
 
 
-def main(argv: list[str]) -> int:
+def main(argv: list[str], numbers=None, usage: str | None = None) -> int:
+    """``record FILE`` or ``compare FILE`` for ``numbers()`` (this script's, or another
+    bench script's function returning ``{key: array}``): exit code 1 when any array differs."""
+    numbers = numbers or globals()["numbers"]
     if len(argv) != 3 or argv[1] not in ("record", "compare"):
-        print(__doc__)
+        print(usage or __doc__)
         return 2
     current = numbers()
     if argv[1] == "record":

@@ -12,6 +12,7 @@ Used to show that a change of the simulate driver leaves every run's numbers unt
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -54,22 +55,10 @@ def numbers() -> dict[str, np.ndarray]:
 
 
 def main(argv: list[str]) -> int:
-    if len(argv) != 3 or argv[1] not in ("record", "compare"):
-        print(__doc__)
-        return 2
-    current = numbers()
-    if argv[1] == "record":
-        np.savez_compressed(argv[2], **current)
-        print(f"recorded {len(current)} arrays into {argv[2]}")
-        return 0
-    before = dict(np.load(argv[2]))
-    differ = [k for k in sorted(set(before) | set(current))
-              if k not in before or k not in current or before[k].shape != current[k].shape
-              or not np.array_equal(before[k], current[k])]
-    for key in differ:
-        print("differs:", key)
-    print(f"{len(current)} arrays, {len(differ)} differ")
-    return 1 if differ else 0
+    """The same ``record``/``compare`` command as ``generated_numbers.py``, for the run numbers."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from generated_numbers import main as record_or_compare
+    return record_or_compare(argv, numbers, __doc__)
 
 
 if __name__ == "__main__":
