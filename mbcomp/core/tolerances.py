@@ -38,9 +38,49 @@ PROJECTION_RESIDUAL = 1e-13
 EVENT_GAP_XTOL = 1e-14
 EVENT_FORCE_XTOL = 1e-13
 
+# -- Coulomb friction on held contacts (formulations/friction.py, the compiled loops' friction.h) --
+#: 1/s: the velocity feedback on sticking tangential rows (slip left by integration error
+#: decays at this rate; at rest it is exactly zero, so nothing creeps).  C ``MB_STICK_RATE``.
+STICK_RATE = 10.0
+
+#: m/s: below this slip speed the slip direction is not taken from the slip velocity but
+#: from the one the contact started sliding in.  C ``MB_DIRECTION_SPEED``.
+DIRECTION_SPEED = 1e-9
+
+#: Relative tolerance of the cone test (|lam_t| <= mu lam_n (1 + CONE_TOLERANCE) + CONE_FLOOR
+#: N).  C ``MB_CONE_TOLERANCE``, ``MB_CONE_FLOOR``.
+CONE_TOLERANCE = 1e-9
+CONE_FLOOR = 1e-12
+
+#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip along its
+#: direction falls below zero; a contact sliding at most this fast while sticking ones hold
+#: the body has nothing to stop (round-off of a slip held at zero).  C ``MB_STOP_SPEED``.
+STOP_SPEED = 1e-9
+
+#: m/s: the slip speed below which the slip direction at a step's start is not its own
+#: (the contact's direction is used instead) when a stop is watched for.  C ``MB_SLIP_FLOOR``.
+SLIP_FLOOR = 1e-12
+
+#: The friction solve's least-squares cut-off: singular values of its (non-symmetric) KKT
+#: Schur matrix below this fraction of the largest are dropped (redundant rows share the
+#: load by the least-norm multipliers).  C ``MB_FRICTION_RCOND``.
+FRICTION_RCOND = 1e-10
+
+#: A sliding contact's effective normal inverse mass with friction ``(J M^-1 W^T)_kk`` at or
+#: below this fraction of the largest diagonal entry is Painleve's paradox.  C ``MB_PAINLEVE``.
+PAINLEVE = 1e-9
+
+#: Largest residual of the friction solve (relative to max(1, |rhs|)) before the held rows
+#: count as inconsistent.  C ``MB_FRICTION_RESIDUAL``.
+FRICTION_RESIDUAL = 1e-6
+
 #: ``{C name: value}`` of every constant the C files read.
 C_NAMES = {"MB_PIVOT_TOLERANCE": PIVOT_TOLERANCE, "MB_RANK_TOLERANCE": RANK_TOLERANCE,
-           "MB_REST_SPEED": REST_SPEED, "MB_PROJECTION_RESIDUAL": PROJECTION_RESIDUAL}
+           "MB_REST_SPEED": REST_SPEED, "MB_PROJECTION_RESIDUAL": PROJECTION_RESIDUAL,
+           "MB_STICK_RATE": STICK_RATE, "MB_DIRECTION_SPEED": DIRECTION_SPEED,
+           "MB_CONE_TOLERANCE": CONE_TOLERANCE, "MB_CONE_FLOOR": CONE_FLOOR, "MB_STOP_SPEED": STOP_SPEED,
+           "MB_SLIP_FLOOR": SLIP_FLOOR, "MB_FRICTION_RCOND": FRICTION_RCOND, "MB_PAINLEVE": PAINLEVE,
+           "MB_FRICTION_RESIDUAL": FRICTION_RESIDUAL}
 
 
 def c_defines() -> str:

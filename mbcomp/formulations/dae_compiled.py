@@ -9,7 +9,10 @@ stepped by ``run/stepping.CompiledStepping``): the loop steps the full state ``[
 event (a free contact closing, a held contact's force pulling); at one it stops with the
 step's end and dense output, Python locates the event with the gaps and forces evaluated
 in C (``locator``), applies the impact law (``events.ContactWatch``) and starts the next
-stretch with the new set of held contacts.
+stretch with the new set of held contacts.  Held contacts with friction modes add the
+friction law of ``friction_c.py`` (``c/friction.h``) to the solve and to the watch; the
+stretch then holds every constraint and contact row (the least-norm multipliers of the
+Python path's friction solve share the load of redundant rows).
 """
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.codegen.expressions_c import compile_position
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
+from mbcomp.formulations.friction import has_friction
+from mbcomp.formulations.friction_c import FrictionRows
 
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
@@ -126,7 +131,7 @@ class DaeRun(ContactWatching):
     def __init__(self, formulation, kernel, lib, q0: np.ndarray, qd0: np.ndarray, tau, t0: float = 0.0,
                  contacts: tuple = (), offsets: dict | None = None):
         self.formulation, self.kernel, self.lib = formulation, kernel, lib
-        self.contacts = tuple(contacts)
+        self.contacts = contacts if isinstance(contacts, tuple) else tuple(contacts)  # (a friction.Closed keeps its modes)
         self.n = kernel.nv
         self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
         if offsets is not None:
@@ -135,12 +140,19 @@ class DaeRun(ContactWatching):
         self.restarts = 0
         self.gaps = self.event = self.held = None
         nc = 0 if formulation.constraints is None else formulation.constraints.nc
-        rows = self._rows(t0, q0)
+        self.friction = None
+        if has_friction(self.contacts):  # every row, as the Python path's least-norm friction solve
+            rows = np.arange(nc + len(self.contacts))
+        else:
+            rows = self._rows(t0, q0)
         self.dae_rows = None
         if rows is not None and len(rows):
             self.dae_rows = DaeRows(formulation, kernel, lib, rows, self.workspace.offsets, self.contacts)
         else:  # the tree's own accelerations
             _bind_configure(lib)(-1, None, None, None, 0.0, 0.0, 0.0, 0.0)
+        if has_friction(self.contacts):
+            self.friction = FrictionRows(kernel, lib, self.contacts, {i: nc + r for r, i in enumerate(self.contacts)},
+                                         len(rows), q0, qd0)
         self.nc = nc
 
     def _rows(self, t0, q0):
@@ -170,7 +182,13 @@ class DaeRun(ContactWatching):
     def sync(self) -> None:
         """(The full state is the loop's own: nothing to bring over.)"""
 
+    def friction_failure(self) -> SimulationError | None:
+        """The error of a friction solve that stopped the loop (Painleve), or None."""
+        return None if self.friction is None else self.friction.failure()
+
     def close(self) -> None:
+        if self.friction is not None:
+            self.friction.close()
         if self.dae_rows is not None:
             self.dae_rows.close()
         if self.event is not None:

@@ -33,18 +33,9 @@ import numpy as np
 
 from mbcomp.build.layout import body_fields
 from mbcomp.core.errors import SimulationError
+from mbcomp.core.tolerances import (CONE_TOLERANCE, DIRECTION_SPEED, FRICTION_RCOND,  # noqa: F401 (CONE_TOLERANCE: re-exported)
+                                    FRICTION_RESIDUAL, PAINLEVE, STICK_RATE)
 from mbcomp.core.rotations import cross
-
-#: 1/s: the velocity feedback on sticking tangential rows (slip left by integration error
-#: decays at this rate; at rest it is exactly zero, so nothing creeps).
-STICK_RATE = 10.0
-
-#: m/s: below this slip speed the slip direction is not taken from the slip velocity but
-#: from the one the contact started sliding in.
-DIRECTION_SPEED = 1e-9
-
-#: Relative tolerance of the cone test (|lam_t| <= mu lam_n (1 + CONE_TOLERANCE) + tiny).
-CONE_TOLERANCE = 1e-9
 
 #: Sweeps of the impact's projected Gauss-Seidel, and its relative convergence tolerance (on
 #: the change of the velocities a sweep produces).
@@ -214,16 +205,27 @@ def solve_sliding(Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: np.ndarra
     b = rhs - J @ (Minv @ f)
     scale = max(float(np.abs(np.diag(A)).max(initial=0.0)), 1e-300)
     for k in sliding_rows:
-        if A[k, k] <= 1e-9 * scale:
-            raise SimulationError(f"Painleve's paradox at t = {t:g}: the sliding contact {where} has no "
-                                  f"consistent normal force (its effective inverse mass with friction, "
-                                  f"{A[k, k]:.3g}, is not positive); lower the friction coefficient")
-    lam = np.linalg.lstsq(A, b, rcond=1e-10)[0]  # (least norm: redundant rows share the load)
+        if A[k, k] <= PAINLEVE * scale:
+            raise SimulationError(painleve_message(t, where, A[k, k]))
+    lam = np.linalg.lstsq(A, b, rcond=FRICTION_RCOND)[0]  # (least norm: redundant rows share the load)
     residual = float(np.abs(A @ lam - b).max(initial=0.0))
-    if residual > 1e-6 * max(1.0, float(np.abs(b).max(initial=0.0))):
-        raise SimulationError(f"the contact and constraint forces at t = {t:g} are inconsistent ({where}): "
-                              f"no forces meet every closed contact (residual {residual:.3g})")
+    if residual > FRICTION_RESIDUAL * max(1.0, float(np.abs(b).max(initial=0.0))):
+        raise SimulationError(inconsistent_message(t, where, residual))
     return Minv @ (f + W.T @ lam), lam
+
+
+def painleve_message(t: float, where: str, mass: float) -> str:
+    """The error of a sliding contact without a consistent normal force (``where``: the
+    closed contacts' names; ``mass``: its effective inverse mass with friction), the same
+    from the Python and the compiled friction solve."""
+    return (f"Painleve's paradox at t = {t:g}: the sliding contact {where} has no consistent normal force (its "
+            f"effective inverse mass with friction, {mass:.3g}, is not positive); lower the friction coefficient")
+
+
+def inconsistent_message(t: float, where: str, residual: float) -> str:
+    """The error of held rows no forces can meet (``residual`` of the least-squares solve)."""
+    return (f"the contact and constraint forces at t = {t:g} are inconsistent ({where}): no forces meet every "
+            f"closed contact (residual {residual:.3g})")
 
 
 def friction_solve(kernel, Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: np.ndarray, closed: Closed,

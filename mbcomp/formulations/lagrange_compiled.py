@@ -11,6 +11,13 @@ only where the scipy-stepped path would do something other than step:
   state with a quarter of the step (``Workspace.retreat``), at most ``MAX_RETRIES`` times in
   a row.
 
+Held contacts with friction modes (``friction_c.py``): the loop keeps its partition on the
+held rows (the state and its dependent coordinates and speeds) and takes the independent
+accelerations from the full KKT system with friction, as the Python path's
+``Formulation.solve_friction`` does: a sticking contact's tangential rows hold at the
+acceleration level (with the ``STICK_RATE`` feedback), a sliding contact's normal force
+carries its friction; the held contacts' forces are that solve's multipliers.
+
 A model without degrees of freedom (every coordinate driven or dependent) has nothing to
 integrate: ``prescribed`` evaluates the motion at the output times in C.
 
@@ -30,6 +37,8 @@ from mbcomp.core.statemap import Chart
 from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, bind_reduced
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
+from mbcomp.formulations.friction import has_friction
+from mbcomp.formulations.friction_c import FrictionRows
 
 #: Trial failures in a row (without an accepted step between) before the run gives up.
 MAX_RETRIES = 10
@@ -89,7 +98,7 @@ class ReducedRun(ContactWatching):
         self.nq = kernel.topology.nq  #: coordinates (more than speeds with quaternions)
         constraints = formulation.constraints
         topology = kernel.topology
-        self.contacts = tuple(contacts)
+        self.contacts = contacts if isinstance(contacts, tuple) else tuple(contacts)  # (a friction.Closed keeps its modes)
         self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
         if offsets is not None:  # after an event: the speed motors keep the run's start values
             self.workspace.offsets = offsets
@@ -127,6 +136,10 @@ class ReducedRun(ContactWatching):
         self.run = lib.dop853_reduced_run
         self.gaps = self.event = self.held = None
         self._configure()
+        self.friction = None
+        if has_friction(self.contacts):  # the full KKT solve with friction on every equation (friction_c.py)
+            self.friction = FrictionRows(kernel, lib, self.contacts, {i: nm + r for r, i in enumerate(self.contacts)},
+                                         nc, q0, qd0)
         if self.programs is not None:  # (after configuring: the C side reports into self.info)
             positions = lib.lagrange_positions
             positions.argtypes, positions.restype = [_VOID] * 2, ctypes.c_int
@@ -195,7 +208,13 @@ class ReducedRun(ContactWatching):
                 f"position of the constraints {self.formulation.row_names(ws.rows)}); a looser tolerance steps "
                 f"over it, and the dae formulation passes such positions in motion")
 
+    def friction_failure(self) -> SimulationError | None:
+        """The error of a friction solve that stopped the loop (Painleve), or None."""
+        return None if self.friction is None else self.friction.failure()
+
     def close(self) -> None:
+        if getattr(self, "friction", None) is not None:
+            self.friction.close()
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0, None, None, 0, None,
                                     0.0, 0.0, None, None)
         self.lib.lagrange_drives(0)

@@ -6,14 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from mbcomp.core.errors import SimulationError
-from mbcomp.core.tolerances import EVENT_FORCE_XTOL, EVENT_GAP_XTOL
-from mbcomp.formulations.friction import CONE_TOLERANCE, Closed, friction_of, plane_contact_rows
+from mbcomp.core.tolerances import CONE_FLOOR, CONE_TOLERANCE, EVENT_FORCE_XTOL, EVENT_GAP_XTOL, SLIP_FLOOR, STOP_SPEED
+from mbcomp.formulations.friction import Closed, friction_of, plane_contact_rows
 from mbcomp.formulations.impact import GAP_TOLERANCE, solve_impact
 from mbcomp.core.result import Event
 
-#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip along its
-#: direction falls below minus this; above it, round-off of a slip held at zero.
-STOP_SPEED = 1e-9
 
 
 class ContactWatch:
@@ -95,7 +92,7 @@ class ContactWatch:
             lam_t = solution.tangential[i]
             lam_n = normal[list(closed).index(i)]
             size = float(np.linalg.norm(lam_t))
-            tolerance = CONE_TOLERANCE * max(abs(lam_n) * self.mu[i], size) + 1e-12
+            tolerance = CONE_TOLERANCE * max(abs(lam_n) * self.mu[i], size) + CONE_FLOOR
             out[i] = (size - self.mu[i] * max(lam_n, 0.0) - tolerance, -(rows.basis[r, 1:].T @ lam_t))
         return out
 
@@ -213,7 +210,7 @@ class ContactWatch:
             rows = plane_contact_rows(self.kernel, q_old, qd_old, [i])
             v = rows.basis[0, 1:].T @ (rows.tangent[0] @ qd_old)
             speed = float(np.linalg.norm(v))
-            direction = v / speed if speed > 1e-12 else closed.slip[i]
+            direction = v / speed if speed > SLIP_FLOOR else closed.slip[i]
             along_new = self.slip_speed(q_new, qd_new, i, direction)
             if along_new > 0.0:
                 continue

@@ -50,8 +50,10 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
                 "body kinematics")
     if kernel.topology.contacts and not formulation.compiled_contacts:
         return "the model has contacts"
-    if any(float(kernel.parameters.get(f"{c.name}.friction", 0.0)) > 0.0 for c in kernel.topology.contacts):
-        return "contacts with friction step in Python (the compiled loops have no friction law)"
+    from mbcomp.formulations.friction_c import compiled_friction_problem
+    friction = compiled_friction_problem(kernel)
+    if friction is not None:
+        return friction
     if kernel.n_inputs:
         return "the model has callable forces or torques"
     if kernel.compiled.drives.callables:

@@ -383,10 +383,16 @@ class CompiledStepping:
             t_out = None if o.t_eval is None else np.ascontiguousarray(o.t_eval, dtype=float)
             y_out = None if o.t_eval is None else np.empty((len(t_out), kernel.nq + n))
             i_out = np.array([recorder.next], dtype=np.int64)
-            status, steps_t, steps_y, y, f = dop853_segment(
-                kernel, segment.loop(lib), self.hook, segment, o.replace(method="DOP853", max_step=self.max_step),
-                state, y, np.empty_like(y), self.tau_ptr, counts, t_out, i_out, y_out, budget=self.budget,
-                stored=len(recorder.t))
+            try:
+                status, steps_t, steps_y, y, f = dop853_segment(
+                    kernel, segment.loop(lib), self.hook, segment, o.replace(method="DOP853", max_step=self.max_step),
+                    state, y, np.empty_like(y), self.tau_ptr, counts, t_out, i_out, y_out, budget=self.budget,
+                    stored=len(recorder.t))
+            except SimulationError:
+                failure = getattr(segment, "friction_failure", lambda: None)()  # (a failed friction solve: Painleve)
+                if failure is not None:
+                    raise failure from None
+                raise
             self.counts.nfev, self.counts.steps, self.counts.rejected = (int(c) for c in counts)
             if t_out is not None:
                 recorder.extend(t_out[recorder.next:int(i_out[0])], y_out[recorder.next:int(i_out[0])])

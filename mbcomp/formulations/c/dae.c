@@ -10,6 +10,7 @@
 #define NDAEWORK (DAE_SOLVE_OFF + NQ * DAE_NR + DAE_NR * DAE_NR + 3 * DAE_NR + NQ)
 #include "program.h"
 #include "brentq.h"
+#include "friction.h"
 /* defined below, or after this code by the recursive program (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
                       const double *tau, double *qdd, double *work);
@@ -180,6 +181,18 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     for (int i = 0; i < n; ++i) uvec[i] = f[i] + (tau ? tau[i] : 0.0);
     if (mass_cholesky(L)) return 1;
     lower_solve(L, uvec);  /* uvec <- L^-1 (f + tau) */
+    if (mb_fr_n > 0) {  /* friction on held contacts (friction.h): the rows' targets, then its own solve */
+        for (int col = 0; col < nr; ++col) {
+            const double *Jr = J + col * NQ;
+            double gdot = gt[col];
+            for (int i = 0; i < n; ++i) gdot += Jr[i] * qd[i];
+            r[col] = -bias[col] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[col];
+        }
+        const int status = mb_friction_solve(dae_time, q, qd, p, L, uvec, nr, J, r, qdd, lam);
+        if (status) return status;
+        for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
+        return 0;
+    }
     for (int col = 0; col < nr; ++col) {  /* Y[:, col] = L^-1 J_row^T; rhs of the row */
         const double gdot = dae_row_solve(L, J, qd, Y, col) + gt[col];
         r[col] = -bias[col] - 2.0 * dae_alpha * gdot - dae_beta * dae_beta * g[col];
@@ -291,6 +304,7 @@ static int dae_event(double t, const double *y, const double *p) {
     if (!event)
         for (int k = 0; k < dae_nr; ++k)
             if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < 0.0) event = 1;
+    if (!event && mb_fr_n > 0) event = mb_friction_event();  /* (the friction solve's, at (t, y) too) */
     if (!event) for (int k = 0; k < dae_nk; ++k) dae_gaps[k] = kc[CONTACTS_GAP_OFF + k];
     return event;
 }

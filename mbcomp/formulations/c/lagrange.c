@@ -5,6 +5,7 @@
 #define LAG_NEWTON_TOL 1e-12
 #define LAG_NEWTON_ITER 25
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
+#include "friction.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -414,6 +415,33 @@ void lagrange_span_end(void) {
     lag_span = 0;
 }
 
+/* Friction on held contacts (friction.h): qdd_i from the full KKT system with the friction
+   rows, as the Python path's solve_friction (the partition gives the state and its speeds;
+   the accelerations satisfy every held row, the normal ones and a sticking contact's
+   tangential ones, at the acceleration level).  The multipliers of every equation stay in
+   the friction scratch (mb_fr_lam) for the held contacts' forces.  Returns 0, 1 (M not
+   positive definite) or the friction solve's failure. */
+static int lag_friction_rhs(double t, const double *q, const double *qd, const double *p, const double *tau,
+                            const double *drive, double *f) {
+    const int n = NQ, nc = lag_nc;
+    const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
+    double *L = mb_fr_aux(), *u = L + n * (n + 1) / 2, *qdd = u + n, *rhs = qdd + n, *lam = rhs + nc;
+    for (int i = 0; i < n * (n + 1) / 2; ++i) L[i] = M[i];
+    if (mass_cholesky(L)) return 1;
+    for (int i = 0; i < n; ++i) u[i] = force[i] + drive[i] + (tau ? tau[i] : 0.0);
+    lower_solve(L, u);
+    for (int r = 0; r < nc; ++r) rhs[r] = -lag_bias[r];
+    const int status = mb_friction_solve(t, q, qd, p, L, u, nc, lag_J, rhs, qdd, lam);
+    if (status) return status;
+    for (int k = 0; k < lag_ni; ++k) f[lag_nqi + k] = qdd[lag_ind[k]];
+    return 0;
+}
+
+/* The multipliers of every equation of the last lag_friction_rhs. */
+static double *lag_friction_lam(void) {
+    return mb_fr_aux() + NQ * (NQ + 1) / 2 + 2 * NQ + lag_nc;
+}
+
 /* f = [qd_i, qdd_i] at (t, y): returns 0, 1 (reduced mass matrix not positive definite)
    or LAG_TRIAL. */
 int lagrange_rhs(double t, const double *y, double *f, const double *p, const double *tau) {
@@ -425,6 +453,11 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
+    if (mb_fr_n > 0) {
+        const int fs = lag_friction_rhs(t, q, qd, p, tau, drive, f);
+        if (fs) return fs;
+        goto rates;
+    }
     double *X = lag_X, *col = lag_v, *h = lag_h;
     for (int k = 0; k <= ni; ++k) {  /* X = J_d^-1 [J_i, bias] (column k stored X[a * (ni + 1) + k]) */
         for (int a = 0; a < nr; ++a)
@@ -471,6 +504,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     }
     for (int i = 0; i < ni; ++i) { double s = r[i]; for (int k = 0; k < i; ++k) s -= Mr[i * ni + k] * r[k]; r[i] = s / Mr[i * ni + i]; }
     for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
+rates:
     if (MB_HAS_QUAT) {  /* x' of the independent chart coordinates */
         lag_chart_rate(lag_x, qd, lag_rate);
         for (int k = 0; k < nqi; ++k) f[k] = lag_rate[lag_qind[k]];
@@ -619,6 +653,12 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
     int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
     if (status) return status < 0 ? status : LAG_TRIAL;
+    if (mb_fr_n > 0) {  /* with friction: the friction solve's multipliers (J^T lam is not all of M qdd - f) */
+        const double *all = lag_friction_lam();
+        for (int a = 0; a < nr; ++a) lam[a] = all[lag_rows[a]];
+        *lam_out = lam;
+        return 0;
+    }
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_dv + DRIVES_FORCES_OFF;
     for (int i = 0; i < n; ++i) qdd[i] = 0.0;
@@ -710,6 +750,13 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
         if (status) return status;
         for (int a = 0; a < nr; ++a)
             if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
+    }
+    if (!event && mb_fr_n > 0) {  /* friction modes: from a solve at (t, y) */
+        if (!(held && nr)) {
+            status = lagrange_rhs(t, y, lag_eig, p, tau);
+            if (status) return status < 0 ? status : LAG_TRIAL;
+        }
+        event = mb_friction_event();
     }
     if (!event) for (int k = 0; k < lag_nk; ++k) lag_gaps[k] = gap[k];
     return event;
