@@ -102,7 +102,8 @@ class _Recorder:
         if self.budget is not None and len(self.t) + len(times) > self.budget.rows:
             raise self.budget.exceeded(float(times[self.budget.rows - len(self.t)]))
         if self.closed_now is not None:
-            self.closed.extend([tuple(self.closed_now())] * len(times))
+            closed = self.closed_now()
+            self.closed.extend([closed if isinstance(closed, tuple) else tuple(closed)] * len(times))  # (modes kept)
         nq, nv = self.nq, self.nv
         self.t.extend(np.asarray(times, dtype=float)[:, None])
         self.q.extend(rows[:, :nq])
