@@ -14,6 +14,7 @@ import ctypes
 import numpy as np
 
 from mbcomp.codegen.integrators import LoopSession
+from mbcomp.core.errors import SimulationError
 
 _VOID, _INT, _DBL, _LONG = ctypes.c_void_p, ctypes.c_int, ctypes.c_double, ctypes.c_long
 
@@ -61,7 +62,7 @@ class EventStepFunctions:
     i, self.p)`` and ``self._force(s, *self.args, row, self.p, self.tau)``."""
 
     def __init__(self, run, t_old: float, y_old: np.ndarray, prefix: str):
-        self.run, self.t_old = run, float(t_old)
+        self.run, self.t_old, self.prefix = run, float(t_old), prefix
         self.y_old = np.ascontiguousarray(y_old, dtype=float).copy()
         ny = len(self.y_old)
         self.h = float(run.event[0]) - self.t_old
@@ -73,6 +74,56 @@ class EventStepFunctions:
         self.args = (self.t_old, self.h, pointer(self.y_old), pointer(self.F), ny)
         self.p = pointer(run.kernel.p)
         self.tau = None if run.tau is None else pointer(run.tau)
+
+    # -- friction (friction_c.FrictionRows of the run): friction.h's functions on the step --
+    @property
+    def has_friction(self) -> bool:
+        """Whether the run's held contacts have friction modes (``cone`` and ``slip`` apply)."""
+        return getattr(self.run, "friction", None) is not None
+
+    def _friction_index(self, i: int) -> int:
+        return self.run.friction.indices.index(int(i))
+
+    def _tangent(self, i: int, direction) -> tuple[float, float]:
+        """A world direction (3,) in contact ``i``'s tangent coordinates."""
+        basis = self.run.friction.data[self._friction_index(i), 11:17].reshape(2, 3)
+        e = basis @ np.asarray(direction, dtype=float)
+        return float(e[0]), float(e[1])
+
+    def _friction_fn(self, what: str):
+        fn = getattr(self.run.lib, f"{self.prefix}_{what}_at")
+        extra = [_VOID] if what == "cone" else [_DBL, _DBL]
+        fn.argtypes = [_DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID] + extra
+        fn.restype = _DBL
+        return fn
+
+    def _friction_value(self, value: float, s: float, what: str) -> float:
+        if value != value:
+            raise SimulationError(f"the {what} cannot be evaluated at t = {s:.6g} s")
+        return value
+
+    def cone(self, s: float, i: int) -> float:
+        """Sticking contact ``i``'s distance outside its friction cone (N, positive outside:
+        ``ContactWatch.cone_excess``) at time ``s`` on the step, from the friction solve in C."""
+        value = self._friction_fn("cone")(float(s), *self.args, self._friction_index(i), self.p, self.tau)
+        return self._friction_value(value, s, "friction force")
+
+    def slip(self, s: float, i: int, direction) -> float:
+        """Contact ``i``'s slip velocity (m/s) along the world ``direction`` at time ``s`` on the
+        step (``ContactWatch.slip_speed``), in C."""
+        value = self._friction_fn("slip")(float(s), *self.args, self._friction_index(i), self.p,
+                                          *self._tangent(i, direction))
+        return self._friction_value(value, s, "slip velocity")
+
+    def cone_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where sticking contact ``i``'s force reaches the cone in [a, b] (s): Brent's method."""
+        from scipy.optimize import brentq
+        return brentq(lambda s: self.cone(s, i), a, b, xtol=xtol, rtol=rtol)
+
+    def slip_root(self, i: int, direction, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where contact ``i``'s slip along ``direction`` reaches zero in [a, b] (s): Brent's method."""
+        from scipy.optimize import brentq
+        return brentq(lambda s: self.slip(s, i, direction), a, b, xtol=xtol, rtol=rtol)
 
     def gap(self, s: float, i: int) -> float:
         """Contact ``i``'s gap (m) at time ``s`` on the step (a formulation's locator defines it)."""

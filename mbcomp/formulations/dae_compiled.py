@@ -241,6 +241,20 @@ class _Locator(EventStepFunctions):
         fn.restype = _DBL
         return self._root(fn, a, b, row, xtol, rtol, "contact force", self.tau)
 
+    def cone_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where sticking contact ``i``'s force reaches the cone in [a, b] (Brent's method in C)."""
+        fn = self.run.lib.dae_cone_root
+        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID, _DBL, _DBL, _VOID]
+        fn.restype = _DBL
+        return self._root(fn, a, b, self._friction_index(i), xtol, rtol, "friction force", self.tau)
+
+    def slip_root(self, i: int, direction, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where contact ``i``'s slip along the world ``direction`` reaches zero in [a, b] (in C)."""
+        fn = self.run.lib.dae_slip_root
+        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _DBL, _DBL, _DBL, _DBL, _VOID]
+        fn.restype = _DBL
+        return self._root(fn, a, b, self._friction_index(i), xtol, rtol, "slip velocity", *self._tangent(i, direction))
+
     def gap(self, s: float, i: int) -> float:
         value = self._gap(float(s), *self.args, int(i), self.p)
         if value != value:

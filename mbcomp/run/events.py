@@ -194,6 +194,9 @@ class ContactWatch:
         def state(s):
             return workspace.full_state(s, dense(s))
 
+        # On a compiled loop's event step the margins and slips come from C (friction.h).
+        loc = self.locator if getattr(self.locator, "has_friction", False) else None
+        rtol = 4 * np.finfo(float).eps
         found = []
         excess = self.cone_excess(t_new, q_new, qd_new)
         for i, (value, _) in excess.items():
@@ -201,10 +204,14 @@ class ContactWatch:
                 continue
 
             def margin(s, i=i):
-                return self.cone_excess(s, *state(s))[i][0]
+                return loc.cone(s, i) if loc is not None else self.cone_excess(s, *state(s))[i][0]
 
-            found.append((t_old if margin(t_old) >= 0.0 else
-                          brentq(margin, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=4 * np.finfo(float).eps), ("slip", i)))
+            if margin(t_old) >= 0.0:
+                found.append((t_old, ("slip", i)))
+            elif loc is not None:
+                found.append((loc.cone_root(i, t_old, t_new, EVENT_FORCE_XTOL, rtol), ("slip", i)))
+            else:
+                found.append((brentq(margin, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=rtol), ("slip", i)))
         for i in closed.slip:
             q_old, qd_old = state(t_old)
             rows = plane_contact_rows(self.kernel, q_old, qd_old, [i])
@@ -220,10 +227,14 @@ class ContactWatch:
                 continue
 
             def along(s, i=i, direction=direction):
-                return self.slip_speed(*state(s), i, direction)
+                return loc.slip(s, i, direction) if loc is not None else self.slip_speed(*state(s), i, direction)
 
-            found.append((t_old if along(t_old) <= 0.0 else
-                          brentq(along, t_old, t_new, xtol=EVENT_GAP_XTOL, rtol=4 * np.finfo(float).eps), ("stick", i)))
+            if along(t_old) <= 0.0:
+                found.append((t_old, ("stick", i)))
+            elif loc is not None:
+                found.append((loc.slip_root(i, direction, t_old, t_new, EVENT_GAP_XTOL, rtol), ("stick", i)))
+            else:
+                found.append((brentq(along, t_old, t_new, xtol=EVENT_GAP_XTOL, rtol=rtol), ("stick", i)))
         return min(found, key=lambda x: x[0]) if found else None
 
     def locate_normal_release(self, workspace, dense, t_old, t_new, q_new, qd_new):

@@ -334,6 +334,28 @@ double dae_force_at(double s, double t_old, double h, const double *y_old, const
     return status ? NAN : dae_lam[row];
 }
 
+/* Friction events on the event step: sticking contact j's distance outside the cone (N,
+   from the friction solve at time s) and sliding contact j's slip velocity (m/s) along the
+   tangent-coordinate direction (e0, e1) at time s. */
+double dae_cone_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                   const double *p, const double *tau) {
+    double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
+    double *work = malloc(sizeof(double) * (NDAEWORK + 1));
+    if (!work) return NAN;
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    dae_time = s;
+    const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
+    free(work);
+    return status ? NAN : mb_friction_margin((int)j);
+}
+
+double dae_slip_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                   const double *p, double e0, double e1) {
+    double y[2 * NQ + 1];
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    return mb_friction_along((int)j, y, y + NQ, p, e0, e1);
+}
+
 /* The event's time on its step by Brent's method in C (events_c.py): where the gap of
    contact `index` (dae_gap_root) or the multiplier of configured row `index` (dae_force_root)
    crosses zero in [a, b]; *status as mb_brentq's. */
@@ -347,6 +369,32 @@ static double dae_gap_fn(double s, void *c) {
 static double dae_force_fn(double s, void *c) {
     const struct dae_root_ctx *x = c;
     return dae_force_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+struct dae_slip_ctx { struct dae_root_ctx c; double e0, e1; };
+
+static double dae_cone_fn(double s, void *c) {
+    const struct dae_root_ctx *x = c;
+    return dae_cone_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+static double dae_slip_fn(double s, void *c) {
+    const struct dae_slip_ctx *x = c;
+    return dae_slip_at(s, x->c.t_old, x->c.h, x->c.y_old, x->c.F, x->c.ny, x->c.index, x->c.p, x->e0, x->e1);
+}
+
+/* Where sticking contact j leaves the cone (dae_cone_root) or sliding contact j's slip along
+   (e0, e1) reaches zero (dae_slip_root) in [a, b]; *status as mb_brentq's. */
+double dae_cone_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                     const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct dae_root_ctx c = {t_old, h, y_old, F, ny, j, p, tau};
+    return mb_brentq(dae_cone_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double dae_slip_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                     const double *p, double e0, double e1, double xtol, double rtol, int *status) {
+    struct dae_slip_ctx c = {{t_old, h, y_old, F, ny, j, p, 0}, e0, e1};
+    return mb_brentq(dae_slip_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
 }
 
 double dae_gap_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny, long index,

@@ -266,6 +266,23 @@ static int mb_friction_solve(double t, const double *q, const double *qd, const 
     return 0;
 }
 
+/* Sticking contact j's distance outside the cone after the last solve (N): |lam_t| - mu lam_n
+   - tolerance (ContactWatch.cone_excess; positive: outside). */
+static double mb_friction_margin(int j) {
+    const double *d = mb_fr_data + (MB_FR_DATA + NQ) * j, *o = mb_fr_out + MB_FR_OUT * j;
+    const double mu = d[3], size = sqrt(o[0] * o[0] + o[1] * o[1]), lam_n = o[2];
+    const double a = fabs(lam_n) * mu, tol = MB_CONE_TOLERANCE * (a > size ? a : size) + MB_CONE_FLOOR;
+    return size - mu * (lam_n > 0.0 ? lam_n : 0.0) - tol;
+}
+
+/* Friction contact j's slip velocity (m/s) at (q, qd) along the tangent-coordinate direction
+   (e0, e1) (ContactWatch.slip_speed). */
+static double mb_friction_along(int j, const double *q, const double *qd, const double *p, double e0, double e1) {
+    double Jt[2 * NQ + 1], bias[2], slip[2];
+    mb_friction_rows_at(q, qd, p, j, Jt, bias, slip);
+    return e0 * slip[0] + e1 * slip[1];
+}
+
 /* The friction watch after a solve at an accepted step's end (out holds that solve): 1 when
    a sticking contact's force left the cone (|lam_t| - mu lam_n - tolerance > 0, as
    ContactWatch.cone_excess) or a sliding contact's slip velocity along its direction at the
@@ -276,11 +293,8 @@ static int mb_friction_event(void) {
     int event = 0;
     for (int j = 0; j < mb_fr_n; ++j) {
         const double *d = mb_fr_data + (MB_FR_DATA + NQ) * j, *o = mb_fr_out + MB_FR_OUT * j;
-        const double mu = d[3];
         if (d[0] == MB_FR_STICK) {
-            const double size = sqrt(o[0] * o[0] + o[1] * o[1]), lam_n = o[2];
-            const double a = fabs(lam_n) * mu, tol = MB_CONE_TOLERANCE * (a > size ? a : size) + MB_CONE_FLOOR;
-            if (size - mu * (lam_n > 0.0 ? lam_n : 0.0) - tol > 0.0) event = 1;
+            if (mb_friction_margin(j) > 0.0) event = 1;
         } else {
             const double speed = sqrt(o[5] * o[5] + o[6] * o[6]), *T = d + 11, *dir = d + 17;
             double e0, e1;

@@ -728,6 +728,26 @@ double lagrange_force_at(double s, double t_old, double h, const double *y_old, 
     return 0.0;
 }
 
+/* Friction events on the event step: sticking contact j's distance outside the cone (N,
+   from the friction solve at time s) and sliding contact j's slip velocity (m/s) along the
+   tangent-coordinate direction (e0, e1) at time s; NaN when the state cannot be found. */
+double lagrange_cone_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                        const double *p, const double *tau) {
+    double y[2 * NQ + LAG_NZ + 1], *lam;
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    if (lag_held_forces(s, y, p, tau, &lam)) return NAN;
+    return mb_friction_margin((int)j);
+}
+
+double lagrange_slip_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
+                        const double *p, double e0, double e1) {
+    double y[2 * NQ + LAG_NZ + 1];
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
+    if (lagrange_full(s, y, q, qd, p)) return NAN;
+    return mb_friction_along((int)j, q, qd, p, e0, e1);
+}
+
 /* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
    contact's gap closed in the step or a held contact's force would pull at its end (the
    step is an event step), 0 otherwise (the gaps become the accepted ones), or LAG_TRIAL. */
