@@ -6,7 +6,9 @@ The rows of the KKT system are configured per thread (``dae_configure_rows``, fr
 ``s`` is a file expression: its value and exact first and second derivatives run as
 postfix programs, see ``expressions_c.py``) and the gaps of contacts held closed (rows of
 the generated ``contacts``).  The multipliers of the last solve are kept (``dae_lam``): the
-contact watch reads the held contacts' normal forces from them.
+contact watch reads the held contacts' normal forces from them.  Held contacts with friction
+modes switch the solve to ``c/friction.h``'s (``friction_c.py``): tangential rows of sticking
+contacts, friction columns of sliding ones, least-norm multipliers.
 """
 from __future__ import annotations
 

@@ -33,7 +33,10 @@ Contacts: a contact held closed (persistent) is one more row (its gap).  With
 gap closes (the test of ``events.ContactWatch``) and a held contact whose normal force
 (from ``J^T lam = M qdd - f - tau`` on the chosen rows) would pull; such a step is not
 taken: the loop returns EVENT with the step's end state and dense output in the watch
-buffer, and Python locates and applies the event (``events.ContactWatch``).
+buffer, and Python locates and applies the event (``events.ContactWatch``).  Held contacts
+with friction modes (``friction_c.py``, ``c/friction.h``): the accelerations come from the
+full KKT system with friction (the partition still gives the state), the held contacts'
+forces from its multipliers, and the watch also stops at a stick or slip transition.
 """
 from __future__ import annotations
 

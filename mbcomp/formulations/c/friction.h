@@ -50,7 +50,7 @@ int mb_friction_configure(int n, int cap, const double *data, double *out, doubl
 }
 
 /* Scratch for the caller after the solve's own (NQ (NQ + 1) / 2 + 2 NQ + 2 cap doubles). */
-static double *mb_fr_aux(void) {
+static inline double *mb_fr_aux(void) {
     return mb_fr_scratch + KINEMATICS_SIZE + 4L * mb_fr_cap * NQ + 2L * mb_fr_cap * mb_fr_cap + 3L * mb_fr_cap
         + 2L * NQ + 8;
 }
