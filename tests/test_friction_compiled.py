@@ -182,11 +182,56 @@ def test_painleve_in_the_compiled_loop_is_the_python_error(formulation):
     assert messages[0] == messages[1]
 
 
-def test_a_contact_with_friction_that_is_no_point_on_a_plane_says_why():
-    """Only point/sphere contacts on a plane have compiled friction rows; the reason names
-    the contact (here a collision, which another reason names first)."""
-    from mbcomp.formulations.friction_c import compiled_friction_problem
-    system = free_ball("dae")
-    assert compiled_friction_problem(system.kernel) is None
-    frictionless = system.with_parameters({"floor.friction": 0.0})
-    assert compiled_friction_problem(frictionless.kernel) is None
+def test_friction_that_cannot_run_compiled_says_why():
+    """The compiled friction solve is dense: with the recursive dynamics a frictional run
+    steps in Python and the path says why; without friction the same model runs compiled."""
+    m = mb.Model("ball", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=1.0, inertia=(0.004,) * 3))
+    m.add(mb.Planar("plane", m.ground, ball, normal="y", coords=("z", "x", "phi")))
+    m.add(mb.Contact("floor", ball, (0, 0, 0), normal=(0, 0, 1), friction=0.3, radius=0.1))
+    system = m.compile("lagrange", dynamics="recursive")
+    assert system.integration_path() == ("scipy: contacts with friction step in Python with the recursive dynamics "
+                                         "(the compiled friction solve is dense)")
+    assert system.with_parameters({"floor.friction": 0.0}).integration_path() == "compiled"
+
+
+def cart_with_pendulum(formulation: str, mu: float = 0.12):
+    """A 2 kg cart on two edge contacts (planar) carrying a 1 kg pendulum of 0.5 m: the swing's
+    pull on the cart grows until the cart's friction cannot hold it."""
+    m = mb.Model("cart", gravity=(0, 0, -G))
+    a, c = 0.2, 0.05
+    box = m.add(mb.Body("cart", mass=2.0, inertia=(0.02, 0.03, 0.02)))
+    bob = m.add(mb.Body("bob", mass=1.0, inertia=(0.001,) * 3, com=(0, 0, -0.5)))
+    m.add(mb.Planar("plane", m.ground, box, normal="y", coords=("z", "x", "phi")))
+    m.add(mb.Revolute("hinge", box, bob, axis="y"))
+    for s, name in ((1, "front"), (-1, "back")):
+        m.add(mb.Contact(name, box, (s * a, 0, -c), normal=(0, 0, 1), friction=mu))
+    return m.compile(formulation=formulation)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_stick_slip_events_of_a_cart_with_a_pendulum(formulation, monkeypatch):
+    """The cart sticks, slips when its force reaches the cone (located by the C cone margin),
+    sticks again when it stops (the C slip speed) and slips again: every event, and the end
+    state, as Python stepping finds them."""
+    from mbcomp.formulations import compiled_watch, dae_compiled
+    system = cart_with_pendulum(formulation)
+    located = []
+    for cls in (compiled_watch.EventStepFunctions, dae_compiled._Locator):
+        for name in ("cone_root", "slip_root"):
+            if name in vars(cls):
+                def spy(*args, _original=vars(cls)[name], _name=name):
+                    located.append(_name)
+                    return _original(*args)
+                monkeypatch.setattr(cls, name, spy)
+    q0, qd0 = [0.05, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 3.0]
+    compiled = system.simulate(1.0, q0, qd0, rtol=1e-10, atol=1e-12)
+    python = system.simulate(1.0, q0, qd0, rtol=1e-10, atol=1e-12, integrator="scipy")
+    assert_compiled(system, compiled)
+    kinds = [e.kind for e in compiled.events]
+    assert kinds == ["slip", "slip", "stick", "stick", "slip", "slip"]
+    assert {"cone_root", "slip_root"} <= set(located)   # (on the compiled loop's event steps, in C)
+    assert [(e.kind, e.contact) for e in compiled.events] == [(e.kind, e.contact) for e in python.events]
+    np.testing.assert_allclose([e.time for e in compiled.events], [e.time for e in python.events], atol=1e-8)
+    np.testing.assert_allclose(compiled.q[-1], python.q[-1], atol=1e-8)
+    np.testing.assert_allclose(compiled.qd[-1], python.qd[-1], atol=1e-8)
