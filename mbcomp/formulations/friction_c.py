@@ -34,10 +34,11 @@ DATA, OUT, STICK, SLIP = 24, 9, 1, 2
 _VOID, _INT = ctypes.c_void_p, ctypes.c_int
 
 
-def compiled_friction_problem(kernel) -> str | None:
+def compiled_friction_problem(kernel, formulation=None) -> str | None:
     """Why this model's friction cannot run in the compiled loops (None when it can): every
-    contact with friction must be a body point or sphere on a world plane (``Contact``), and
-    the dynamics dense (the recursive program has no friction solve)."""
+    contact with friction must be a body point or sphere on a world plane (``Contact``); and
+    the dae formulation's KKT solve must be the dense one (with the recursive dynamics and
+    geometric constraints it is the recursive program's, which has no friction rows)."""
     topology = kernel.topology
     with_friction = [c for i, c in enumerate(topology.contacts) if friction_of(kernel, i) > 0.0]
     if not with_friction:
@@ -46,8 +47,11 @@ def compiled_friction_problem(kernel) -> str | None:
         if not hasattr(contact, "point") or not hasattr(contact, "normal"):
             return (f"contact {contact.name!r} has friction but is not a body point or sphere on a plane: its friction "
                     f"steps in Python")
-    if getattr(kernel.compiled, "dynamics", "dense") == "recursive":
-        return "contacts with friction step in Python with the recursive dynamics (the compiled friction solve is dense)"
+    compiled = kernel.compiled
+    if (getattr(formulation, "name", None) == "dae" and getattr(compiled, "dynamics", "dense") == "recursive"
+            and len(getattr(compiled, "geometric_rows", ()))):
+        return ("contacts with friction step in Python in the dae formulation with the recursive dynamics and "
+                "constraints (its compiled KKT solve has no friction rows); dynamics='dense' runs them compiled")
     return None
 
 

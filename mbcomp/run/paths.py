@@ -51,7 +51,7 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
     if kernel.topology.contacts and not formulation.compiled_contacts:
         return "the model has contacts"
     from mbcomp.formulations.friction_c import compiled_friction_problem
-    friction = compiled_friction_problem(kernel)
+    friction = compiled_friction_problem(kernel, formulation)
     if friction is not None:
         return friction
     if kernel.n_inputs:
