@@ -145,5 +145,5 @@ def test_formulations_agree_on_the_drop():
         res = system.simulate(0.4, solo.standing_state(system, clearance=0.002), np.zeros(system.nv),
                               t_eval=[0.0, 0.4])
         ends.append((res.events[0].time, res.q[-1]))
-    assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-9)
+    assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-7)   # (lagrange runs compiled, dae in Python: each its steps)
     np.testing.assert_allclose(ends[0][1], ends[1][1], atol=1e-7)

@@ -437,6 +437,13 @@ static int lag_friction_rhs(double t, const double *q, const double *qd, const d
     return 0;
 }
 
+/* A failed lagrange_rhs as the loop's status: a failed friction solve (Painleve) stops the
+   run (-2: Python reads the failure record), anything else is a failed trial state. */
+static int lag_failed(int status) {
+    if (status == MB_FR_PAINLEVE || status == MB_FR_INCONSISTENT) return -2;
+    return status < 0 ? status : LAG_TRIAL;
+}
+
 /* The multipliers of every equation of the last lag_friction_rhs. */
 static double *lag_friction_lam(void) {
     return mb_fr_aux() + NQ * (NQ + 1) / 2 + 2 * NQ + lag_nc;
@@ -652,7 +659,7 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     double *f = lag_eig + 0, *qdd = lag_eig + 2 * NQ, *res = lag_eig + 3 * NQ;
     double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
     int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
-    if (status) return status < 0 ? status : LAG_TRIAL;
+    if (status) return lag_failed(status);
     if (mb_fr_n > 0) {  /* with friction: the friction solve's multipliers (J^T lam is not all of M qdd - f) */
         const double *all = lag_friction_lam();
         for (int a = 0; a < nr; ++a) lam[a] = all[lag_rows[a]];
@@ -774,7 +781,7 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
     if (!event && mb_fr_n > 0) {  /* friction modes: from a solve at (t, y) */
         if (!(held && nr)) {
             status = lagrange_rhs(t, y, lag_eig, p, tau);
-            if (status) return status < 0 ? status : LAG_TRIAL;
+            if (status) return lag_failed(status);
         }
         event = mb_friction_event();
     }
