@@ -438,6 +438,13 @@ class Formulation:
         ``kernel`` and the start coordinates ``q0`` when the configuration depends on them."""
         yield
 
+    @property
+    def tree_state_rhs(self) -> bool:
+        """Whether the compiled right-hand side steps the tree state ``[q, v, z]`` (with
+        ``compiled_setup`` around it; ``compiled_session`` gives None): scipy's methods then
+        step that same C function (``run/compiled_rhs.py``).  True without constraints."""
+        return self.constraints is None
+
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
 

@@ -88,6 +88,12 @@ class DaeFormulation(Formulation):
         return None
 
     @property
+    def tree_state_rhs(self) -> bool:
+        """The compiled right-hand side solves the KKT system on the configured rows
+        (``compiled_setup``) and steps ``[q, v, z]``."""
+        return True
+
+    @property
     def compiled_contacts(self) -> bool:
         """Contacts run in the compiled loop (events handled between compiled stretches)."""
         return self.compiled_loop() is None

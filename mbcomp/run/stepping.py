@@ -26,6 +26,7 @@ from mbcomp.codegen.integrators import (EVENT, FINISHED, CollapseWatch, compiled
 from mbcomp.core.errors import ModelError, SimulationError, TrialStateError
 from mbcomp.core.run_options import RunOptions
 from mbcomp.formulations.impact import GAP_TOLERANCE
+from mbcomp.run.compiled_rhs import CompiledRhsWorkspace
 from mbcomp.run.drive_runtime import DriveTorque, DriveWorkspace
 from mbcomp.run.paths import why_not_compiled
 from mbcomp.run.stats import Counts
@@ -113,10 +114,18 @@ class ScipyStepping:
     #: The samples are known finite (else the driver checks them).
     finite_checked = False
 
-    def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts):
+    def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts,
+                 compiled_rhs: bool = True):
         self.kernel, self.formulation, self.options, self.counts = kernel, formulation, options, counts
         self.cls = solver_class(options.method)
         self.method = getattr(self.cls, "__name__", str(options.method))
+        #: The solver steps the compiled right-hand side (``run/compiled_rhs.py``): the model
+        #: could run in the compiled loops (only the method is scipy's), its formulation steps
+        #: the tree state there, and there are no contacts or drive elements.
+        self.compiled_rhs = bool(compiled_rhs and formulation.tree_state_rhs and not kernel.topology.contacts
+                                 and not kernel.compiled.drives.elements
+                                 and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
+        self.setup = contextlib.ExitStack()
         self.drive = None
         if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
             tau = self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float),
@@ -134,9 +143,11 @@ class ScipyStepping:
     # -- the driver's interface -------------------------------------------------------------------
     @contextlib.contextmanager
     def running(self, bar, interval: float):
-        """The block of the run (nothing to set up: the bar is updated step by step)."""
+        """The block of the run (the bar is updated step by step); the compiled
+        right-hand side's configuration (``begin``) is undone at its end."""
         self.bar = bar
-        yield
+        with self.setup:
+            yield
 
     def states(self) -> np.ndarray:
         """The drive elements' states at the sample just evaluated."""
@@ -145,13 +156,24 @@ class ScipyStepping:
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
         self.offsets = offsets
+        if self.compiled_rhs:  # e.g. the dae rows of the compiled KKT solve, for this run on this thread
+            self.setup.enter_context(self.formulation.compiled_setup(self.kernel.compiled.functions.lib,
+                                                                     kernel=self.kernel, q0=q0))
+        try:
+            self._begin(t0, q0, qd0, contacts, watched)
+        except BaseException:
+            self.setup.close()
+            raise
+
+    def _begin(self, t0, q0, qd0, contacts, watched) -> None:
         self.workspace = self._workspace(t0, q0, qd0, contacts)
         if self.workspace.y0.size == 0:
             if not watched:
                 return  # nothing to integrate: the driver evaluates the prescribed motion
             self.max_step = min(self.max_step, self.options.t_end / 500)  # nothing to integrate: step time to watch
-        if (self.method in IMPLICIT_METHODS and self.formulation.constraints is None
-                and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None):
+        if self.method in IMPLICIT_METHODS and (self.compiled_rhs or (
+                self.formulation.constraints is None
+                and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None)):
             tau = self.tau
             self.solver_options["jac"] = compiled_jacobian(
                 self.kernel, None if tau is None else self.kernel.tau(tau, 0.0, q0, qd0))
@@ -232,6 +254,9 @@ class ScipyStepping:
     # -- helpers -------------------------------------------------------------------------------------
     def _workspace(self, t0, q0, qd0, contacts):
         workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
+        if self.compiled_rhs:
+            tau = None if self.tau is None else self.kernel.tau(self.tau, t0, q0, qd0)
+            return CompiledRhsWorkspace(workspace, self.kernel, tau, self.method)
         return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
 
     def _fun(self, t, y):
