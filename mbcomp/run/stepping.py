@@ -147,7 +147,12 @@ class ScipyStepping:
         right-hand side's configuration (``begin``) is undone at its end."""
         self.bar = bar
         with self.setup:
-            yield
+            try:
+                yield
+            except SimulationError:
+                if self.compiled_rhs:  # the cause its C code recorded (a motor's law that was not finite)
+                    self.formulation.explain_compiled_failure(self.kernel.compiled.functions.lib)
+                raise
 
     def states(self) -> np.ndarray:
         """The drive elements' states at the sample just evaluated."""
