@@ -441,9 +441,10 @@ class Formulation:
     @property
     def tree_state_rhs(self) -> bool:
         """Whether the compiled right-hand side steps the tree state ``[q, v, z]`` (with
-        ``compiled_setup`` around it; ``compiled_session`` gives None): scipy's methods then
-        step that same C function (``run/compiled_rhs.py``).  True without constraints."""
-        return self.constraints is None
+        ``compiled_setup`` around it, or a ``contact_run`` per stretch between contact
+        events; ``compiled_session`` gives None): scipy's methods then step that same C
+        function (``run/compiled_rhs.py``).  True without constraints and contacts."""
+        return self.constraints is None and not self.compiled.topology.contacts
 
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")

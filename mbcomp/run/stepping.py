@@ -121,11 +121,12 @@ class ScipyStepping:
         self.method = getattr(self.cls, "__name__", str(options.method))
         #: The solver steps the compiled right-hand side (``run/compiled_rhs.py``): the model
         #: could run in the compiled loops (only the method is scipy's), its formulation steps
-        #: the tree state there, and there are no contacts or drive elements.
-        self.compiled_rhs = bool(compiled_rhs and formulation.tree_state_rhs and not kernel.topology.contacts
-                                 and not kernel.compiled.drives.elements
+        #: the tree state there, and there are no drive elements.  With contacts, each stretch
+        #: between events configures its rows through ``Formulation.contact_run``.
+        self.compiled_rhs = bool(compiled_rhs and formulation.tree_state_rhs and not kernel.compiled.drives.elements
                                  and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
         self.setup = contextlib.ExitStack()
+        self.stretch = None  #: the compiled rows of the stretch between contact events (compiled_rhs)
         self.drive = None
         if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
             tau = self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float),
@@ -161,7 +162,9 @@ class ScipyStepping:
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
         self.offsets = offsets
-        if self.compiled_rhs:  # e.g. the dae rows of the compiled KKT solve, for this run on this thread
+        if self.compiled_rhs and watched:  # each stretch between events configures its own rows
+            self.setup.callback(self._close_stretch)
+        elif self.compiled_rhs:  # e.g. the dae rows of the compiled KKT solve, for this run on this thread
             self.setup.enter_context(self.formulation.compiled_setup(self.kernel.compiled.functions.lib,
                                                                      kernel=self.kernel, q0=q0))
         try:
@@ -258,11 +261,23 @@ class ScipyStepping:
 
     # -- helpers -------------------------------------------------------------------------------------
     def _workspace(self, t0, q0, qd0, contacts):
-        workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
-        if self.compiled_rhs:
-            tau = None if self.tau is None else self.kernel.tau(self.tau, t0, q0, qd0)
-            return CompiledRhsWorkspace(workspace, self.kernel, tau, self.method)
-        return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
+        if not self.compiled_rhs:
+            workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
+            return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
+        tau = None if self.tau is None else np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)
+        if self.kernel.topology.contacts:  # the rows of the held contacts, configured in C until the next event
+            self._close_stretch()
+            self.stretch = self.formulation.contact_run(self.kernel, self.kernel.compiled.functions.lib, q0, qd0, tau,
+                                                        t0=t0, contacts=contacts, offsets=self.offsets)
+            workspace = self.stretch.workspace
+        else:
+            workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
+        return CompiledRhsWorkspace(workspace, self.kernel, tau, self.method)
+
+    def _close_stretch(self) -> None:
+        if self.stretch is not None:
+            stretch, self.stretch = self.stretch, None
+            stretch.close()
 
     def _fun(self, t, y):
         total = float(y.sum())
