@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mbcomp.run.compiled_rhs import CompiledRhsWorkspace
+from mbcomp.formulations.compiled_rhs import CompiledRhsWorkspace
 from test_cross_paths import initial_state, system_of
 
 

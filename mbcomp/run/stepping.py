@@ -26,7 +26,6 @@ from mbcomp.codegen.integrators import (EVENT, FINISHED, CollapseWatch, compiled
 from mbcomp.core.errors import ModelError, SimulationError, TrialStateError
 from mbcomp.core.run_options import RunOptions
 from mbcomp.formulations.impact import GAP_TOLERANCE
-from mbcomp.run.compiled_rhs import CompiledRhsWorkspace
 from mbcomp.run.drive_runtime import DriveTorque, DriveWorkspace
 from mbcomp.run.paths import why_not_compiled
 from mbcomp.run.stats import Counts
@@ -123,7 +122,7 @@ class ScipyStepping:
         #: could run in the compiled loops (only the method is scipy's), its formulation steps
         #: the tree state there, and there are no drive elements.  With contacts, each stretch
         #: between events configures its rows through ``Formulation.contact_run``.
-        self.compiled_rhs = bool(compiled_rhs and formulation.tree_state_rhs and not kernel.compiled.drives.elements
+        self.compiled_rhs = bool(compiled_rhs and not kernel.compiled.drives.elements
                                  and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
         self.setup = contextlib.ExitStack()
         self.stretch = None  #: the compiled rows of the stretch between contact events (compiled_rhs)
@@ -162,11 +161,8 @@ class ScipyStepping:
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
         self.offsets = offsets
-        if self.compiled_rhs and watched:  # each stretch between events configures its own rows
+        if self.compiled_rhs:  # the C configuration of the last stretch is undone at the end of the run
             self.setup.callback(self._close_stretch)
-        elif self.compiled_rhs:  # e.g. the dae rows of the compiled KKT solve, for this run on this thread
-            self.setup.enter_context(self.formulation.compiled_setup(self.kernel.compiled.functions.lib,
-                                                                     kernel=self.kernel, q0=q0))
         try:
             self._begin(t0, q0, qd0, contacts, watched)
         except BaseException:
@@ -179,9 +175,10 @@ class ScipyStepping:
             if not watched:
                 return  # nothing to integrate: the driver evaluates the prescribed motion
             self.max_step = min(self.max_step, self.options.t_end / 500)  # nothing to integrate: step time to watch
-        if self.method in IMPLICIT_METHODS and (self.compiled_rhs or (
-                self.formulation.constraints is None
-                and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None)):
+        if self.method in IMPLICIT_METHODS and self.compiled_rhs and self.stretch.jacobian is not None:
+            self.solver_options["jac"] = self.stretch.jacobian  # (in compiled code: one call, not 2 n)
+        elif (self.method in IMPLICIT_METHODS and self.formulation.constraints is None
+                and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None):
             tau = self.tau
             self.solver_options["jac"] = compiled_jacobian(
                 self.kernel, None if tau is None else self.kernel.tau(tau, 0.0, q0, qd0))
@@ -265,14 +262,10 @@ class ScipyStepping:
             workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
             return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
         tau = None if self.tau is None else np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)
-        if self.kernel.topology.contacts:  # the rows of the held contacts, configured in C until the next event
-            self._close_stretch()
-            self.stretch = self.formulation.contact_run(self.kernel, self.kernel.compiled.functions.lib, q0, qd0, tau,
-                                                        t0=t0, contacts=contacts, offsets=self.offsets)
-            workspace = self.stretch.workspace
-        else:
-            workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
-        return CompiledRhsWorkspace(workspace, self.kernel, tau, self.method)
+        self._close_stretch()
+        self.stretch = self.formulation.scipy_stretch(self.kernel, self.kernel.compiled.functions.lib, t0, q0, qd0, tau,
+                                                      contacts, self.offsets, self.method)
+        return self.stretch.workspace
 
     def _close_stretch(self) -> None:
         if self.stretch is not None:
