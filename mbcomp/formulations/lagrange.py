@@ -265,6 +265,9 @@ class LagrangeFormulation(Formulation):
         from mbcomp.formulations.compiled_rhs import CompiledReducedWorkspace, Stretch
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         run = ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
+        if self.compiled.topology.contacts:  # (armed, the C code evaluates the held contacts' gaps)
+            from mbcomp.formulations.impact import GAP_TOLERANCE
+            run.watch_contacts(kernel.contacts(q0, qd0).g, GAP_TOLERANCE)
         return Stretch(CompiledReducedWorkspace(run, method), run.close)
 
     def compiled_session(self, kernel, lib, q0, qd0, tau):
