@@ -123,6 +123,7 @@ class ScipyStepping:
         #: the tree state there, and there are no drive elements.  With contacts, each stretch
         #: between events configures its rows through ``Formulation.contact_run``.
         self.compiled_rhs = bool(compiled_rhs and not kernel.compiled.drives.elements
+                                 and (formulation.constraints is not None or kernel.topology.contacts)
                                  and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
         self.setup = contextlib.ExitStack()
         self.stretch = None  #: the compiled rows of the stretch between contact events (compiled_rhs)
