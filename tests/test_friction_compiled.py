@@ -237,3 +237,27 @@ def test_stick_slip_events_of_a_cart_with_a_pendulum(formulation, monkeypatch):
     np.testing.assert_allclose([e.time for e in compiled.events], [e.time for e in python.events], atol=1e-8)
     np.testing.assert_allclose(compiled.q[-1], python.q[-1], atol=1e-8)
     np.testing.assert_allclose(compiled.qd[-1], python.qd[-1], atol=1e-8)
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_the_compiled_friction_rhs_equals_the_python_friction_solve(formulation):
+    """The right-hand side with friction in C (``friction.h`` through the formulation's
+    ``scipy_stretch``) against the Python workspace's (``friction.friction_solve``), on the
+    cart with one edge sticking and one sliding, at perturbed speeds."""
+    system = cart_with_pendulum(formulation)
+    formulation_, kernel = system._formulation, system.kernel
+    q0, qd0 = formulation_.assemble(kernel, np.array([0.05, 0.0, 0.0, 0.4]), np.array([0.0, 0.3, 0.0, 2.0]))
+    closed = Closed((0, 1), stick=(0,), slip={1: np.array([1.0, 0.0, 0.0])})
+    lib = kernel.compiled.functions.lib
+    stretch = formulation_.scipy_stretch(kernel, lib, 0.0, q0, qd0, None, contacts=closed, offsets={}, method="test")
+    try:
+        compiled = stretch.workspace
+        python = compiled.run.workspace if formulation == "lagrange" else compiled.inner
+        rng = np.random.default_rng(7)
+        for _ in range(3):
+            y = python.y0.copy()
+            y[len(y) // 2:] += rng.normal(scale=0.2, size=len(y) - len(y) // 2)
+            expected, got = python.rhs(0.01, y), compiled.rhs(0.01, y)
+            np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    finally:
+        stretch.close()

@@ -60,10 +60,11 @@ class CompiledRhsWorkspace:
     compiled ``rhs_value``; ``tau`` constant generalised forces (nv values or None); ``method``
     names the stepping in errors.  Everything else is the inner one's."""
 
-    def __init__(self, inner, kernel, tau, method: str):
+    def __init__(self, inner, kernel, tau, method: str, failure=None):
         object.__setattr__(self, "inner", inner)
         d = self.__dict__
         d["kernel"], d["method"] = kernel, method
+        d["failure"] = failure  # () -> the error of a failed friction solve (Painleve) or None
         lib = kernel.compiled.functions.lib
         fn = lib.rhs_value
         fn.argtypes = [_VOID, _VOID, _DBL, _VOID, _VOID, _VOID]
@@ -85,6 +86,9 @@ class CompiledRhsWorkspace:
         f = np.empty_like(y)
         status = self.fn(pointer(self.kernel.p), self.tau_ptr, float(t), pointer(y), pointer(f), pointer(self.work))
         if status:
+            error = None if self.failure is None else self.failure()
+            if error is not None:
+                raise error
             rhs_failure(self.kernel, status, float(t), y, f"{self.method} on the compiled right-hand side")
         return f
 
@@ -136,6 +140,10 @@ class CompiledReducedWorkspace:
         y = np.ascontiguousarray(y, dtype=float)
         f = np.empty_like(y)
         status = self._rhs(float(t), pointer(y), pointer(f), pointer(self.run.kernel.p), self._tau)
+        if status:
+            error = self.run.friction_failure()  # (a failed friction solve: Painleve)
+            if error is not None:
+                raise error
         if status == TRIAL_FAILED:
             raise self._trial_failed(float(t), "a trial state")
         if status:

@@ -96,7 +96,8 @@ class DaeFormulation(Formulation):
         from mbcomp.codegen.integrators import compiled_jacobian
         from mbcomp.formulations.compiled_rhs import Stretch, CompiledRhsWorkspace
         run = DaeRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
-        return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method), run.close, compiled_jacobian(kernel, tau))
+        return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method, run.friction_failure), run.close,
+                       compiled_jacobian(kernel, tau))
 
     @property
     def compiled_contacts(self) -> bool:
