@@ -8,7 +8,7 @@ import numpy as np
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.tolerances import EVENT_FORCE_XTOL, EVENT_GAP_XTOL
 from mbcomp.formulations.friction import CONE_TOLERANCE, Closed, friction_of, plane_contact_rows
-from mbcomp.formulations.impact import GAP_TOLERANCE, solve_impact
+from mbcomp.formulations.impact import GAP_TOLERANCE, remove_slip, solve_impact
 from mbcomp.core.result import Event
 
 #: m/s: a sliding contact counts as stopped (a "stick" event) once its slip speed falls to
@@ -296,35 +296,41 @@ class ContactWatch:
                                          energy_loss=result.energy_loss))
         return result.qd, True
 
-    def open(self, contact, t=None, q=None, qd=None) -> None:
+    def open(self, contact, t=None, q=None, qd=None):
         """Act on what ``locate_release`` found at time ``t`` (state ``q, qd``): stop holding
         ``contact`` closed (its force reached zero: a ``"release"`` event), or for
         ``("slip", i)`` let the sticking contact slide along its force's opposite, or for
         ``("stick", i)`` let the sliding contact stick (``"stick"``), or slide the other
-        way when sticking needs more than the cone holds (``"slip"``)."""
+        way when sticking needs more than the cone holds (``"slip"``).  Returns the speeds
+        after it: at a stop, the slip left on the contacts that stopped (below
+        ``rest_speed``; ``STOP_SPEED`` on the one that stopped first) is removed
+        (``impact.remove_slip``)."""
         if isinstance(contact, tuple):
             kind, i = contact
             if kind == "slip":
                 excess = self.cone_excess(t, q, qd)
                 self.start_slip(t, i, excess[i][1] if i in excess else self._closed.slip.get(i, np.zeros(3)))
-                return
+                return qd
             # Every sliding contact that stopped with it tries to stick too (a box sliding
-            # on four corners stops on all four at once); settle() lets slide again those
-            # whose force the cone cannot hold.
+            # on four corners stops on all four at once): the slip they have left (below
+            # rest_speed; STOP_SPEED on contact i) is removed, and settle() lets slide again,
+            # from zero slip, those whose force the cone cannot hold.
             closed = self._closed
             stopped = {i} | {j for j, d in closed.slip.items()
                              if abs(self.slip_speed(q, qd, j, d)) < self.rest_speed
                              and float(np.linalg.norm(self.slip_velocity(q, qd, j))) < self.rest_speed}
             self._closed = Closed(closed, closed.stick | stopped,
                                   {j: d for j, d in closed.slip.items() if j not in stopped})
+            qd = remove_slip(self.kernel, self.formulation, t, q, qd, self._closed, stopped, self.offsets)
             before = len(self.events)
             self.settle(t, q, qd)
             slipped = {self.names.index(e.contact) for e in self.events[before:]}
             for j in sorted(stopped - slipped):
                 self.events.append(Event(time=float(t), contact=self.names[j], impulse=0.0, kind="stick"))
-            return
+            return qd
         self.persistent = tuple(i for i in self.persistent if i != contact)
         self.events.append(Event(time=float(t or 0.0), contact=self.names[contact], impulse=0.0, kind="release"))
+        return qd
 
     def release(self, t, q, qd) -> bool:
         """Open the persistent contacts whose force would pull (one at a time, most pulling
