@@ -38,8 +38,9 @@ tolerance; the time-stepping mode applies the same laws once per step, so impact
 to a step late (positions off by up to the impact speed times dt, penetration of that
 order) and resting contacts are exact.  MuJoCo's contacts are soft (a spring-damper in the
 constraint solver): here the stiffest one each step resolves, a contact lasting 20 steps
-(``solref = (-k, -b)``, ``solimp = 0.9999``), its damping calibrated once so that a head-on
-impact rebounds with e = 0.5 (as bench/contact.py does); its penetration is the spring's
+(``solref = (-k, -b)``, ``solimp = 0.9999``), its damping calibrated for each step and
+integrator so that a head-on impact at 1.4 m/s rebounds with e = 0.5 (as bench/contact.py
+does); its penetration is the spring's
 (about the impact speed times the contact's duration over pi), so it shrinks with the step;
 elliptic cone, impratio 10, RK4 (and implicitfast).  BLAS runs on one thread (MuJoCo runs on
 one core; on a shared machine OpenBLAS's threads made mbcomp's impacts five times slower).
@@ -161,8 +162,10 @@ def mbcomp_measures(res) -> dict:
     qd = res.qd.reshape(len(res.t), N, 6)
     out = observe(q[:, :, :3], qd[-1, :, :3], qd[-1, :, 3:])
     kinds = Counter(ev.kind for ev in res.events)
-    out.update(steps=res.stats.get("steps"), path=res.stats.get("path", ""),
-               events=", ".join(f"{k} {v}" for k, v in sorted(kinds.items())) or "none")
+    events = ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())) or "no events"
+    if res.stats.get("max_active") is not None:
+        events += f"; at most {res.stats['max_active']} contacts active at once"
+    out.update(steps=res.stats.get("steps"), path=res.stats.get("path", ""), events=events)
     return out
 
 
@@ -186,21 +189,23 @@ def mujoco_xml(dt: float, zeta: float, duration_steps: int = 20, n: int = N) -> 
             f'<geom type="plane" size="1 1 0.1" {contact}/>{walls}{bodies}</worldbody></mujoco>')
 
 
-def calibrate_zeta() -> float:
-    """The damping ratio for which MuJoCo's contact rebounds with restitution E: one sphere
-    hitting the floor head-on at 1 m/s without gravity (a contact of 200 steps of 1e-5 s),
-    bisection on the rebound speed (MuJoCo never lets a contact pull, so the linear
-    spring-damper's formula would rebound too much)."""
+def calibrate_zeta(dt: float, integrator: str = "RK4", speed: float = 1.4) -> float:
+    """The damping ratio for which MuJoCo's contact, as integrated at step ``dt`` (lasting 20
+    steps) by ``integrator``, rebounds with restitution E: one sphere hitting the floor head-on
+    at ``speed`` (m/s; the spheres here land at 1.0 to 1.7 m/s) without gravity, bisection on
+    the rebound speed (MuJoCo never lets a contact pull, and the steps discretise the contact,
+    so the linear spring-damper's formula would not give E)."""
     import mujoco
 
     def restitution(zeta):
-        model = mujoco.MjModel.from_xml_string(mujoco_xml(1e-5, zeta, 200, n=1))
+        xml = mujoco_xml(dt, zeta, n=1).replace('integrator="RK4"', f'integrator="{integrator}"')
+        model = mujoco.MjModel.from_xml_string(xml)
         model.opt.gravity[:] = 0.0
         data = mujoco.MjData(model)
-        data.qpos[2], data.qvel[:] = RADIUS + 1e-4, 0.0
-        data.qvel[2] = -1.0
-        mujoco.mj_step(model, data, nstep=600)
-        return float(data.qvel[2])
+        data.qpos[2], data.qvel[:] = RADIUS + 0.5 * speed * dt, 0.0
+        data.qvel[2] = -speed
+        mujoco.mj_step(model, data, nstep=60)
+        return float(data.qvel[2]) / speed
 
     low, high = 0.0, 0.95
     for _ in range(30):
@@ -274,7 +279,8 @@ def window(t_end: float, settings: list[tuple[str, str, float, object]], rounds:
             row.update(mbcomp_measures(run.result))
         else:
             integrator = run.label.split()[-1]
-            row.update(mujoco_measures(run.value, zeta, t_end, integrator))
+            row.update(mujoco_measures(run.value, zeta[(run.value, integrator)], t_end, integrator))
+            row["damping_ratio"] = zeta[(run.value, integrator)]
         rows.append(row)
     measured = [r for r in rows if "touched" in r]
     free = ~np.any([r["touched"] for r in measured], axis=0) if measured else np.zeros(N, bool)
@@ -325,11 +331,12 @@ def main(argv: list[str] | None = None) -> None:
     q0, qd0 = mbcomp_state()
     system.simulate(2e-3, q0, qd0)                                            # (first calls)
     system.simulate(2e-3, q0, qd0, contact_mode="timestepping", dt=1e-3)
-    zeta, version = None, None
+    mj = [(1e-3, "RK4"), (1e-4, "RK4"), (1e-4, "implicitfast")] + ([] if args.quick else [(3e-4, "RK4")])
+    zeta, version = {}, None
     try:
         import mujoco
         version = mujoco.__version__
-        zeta = calibrate_zeta()
+        zeta = {(dt, integrator): calibrate_zeta(dt, integrator) for dt, integrator in mj}
     except ImportError:
         print("mujoco is not installed (pip install mujoco): mbcomp only")
 
@@ -339,15 +346,13 @@ def main(argv: list[str] | None = None) -> None:
             out.append(("mbcomp events", "rtol=1e-6 (default)", 1e-6, mbcomp_run(system, t_end)))
         out.append(("mbcomp time stepping", "dt=1e-3", 1e-3,
                     mbcomp_run(system, t_end, contact_mode="timestepping", dt=1e-3)))
-        if zeta is not None:
-            mj = [(1e-3, "RK4"), (1e-4, "RK4"), (1e-4, "implicitfast")]
-            if not args.quick:
-                mj.insert(1, (3e-4, "RK4"))
-            out += [(f"MuJoCo {integrator}", f"dt={dt:g}", dt, mujoco_run(dt, zeta, t_end, integrator))
-                    for dt, integrator in mj]
+        if zeta:
+            out += [(f"MuJoCo {integrator}", f"dt={dt:g}", dt, mujoco_run(dt, zeta[(dt, integrator)], t_end, integrator))
+                    for dt, integrator in sorted(mj, key=lambda s: (s[1], -s[0]))]
         return out
 
-    print(f"mbcomp compile {compile_s:.2f} s; MuJoCo {version}, contact damping ratio {zeta} (rebound e = {E}); "
+    ratios = ", ".join(f"{integrator} dt={dt:g}: {value:.4f}" for (dt, integrator), value in zeta.items())
+    print(f"mbcomp compile {compile_s:.2f} s; MuJoCo {version}, contact damping ratios {ratios} (rebound e = {E}); "
           f"{os.cpu_count()} cores, load average {load:.2f} at the start; "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}", flush=True)
     log = lambda s: print(s, flush=True)  # noqa: E731
