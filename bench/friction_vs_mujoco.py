@@ -251,7 +251,8 @@ def main(argv: list[str] | None = None) -> None:
         if run.label == "mbcomp":
             paths[case] = path
         rows.append({"case": case, "tool": run.label, "setting": run.setting, "wall_s": run.wall, "cpu_s": run.cpu,
-                     "error": error(case, x, xd), "events": events if run.label == "mbcomp" else ""})
+                     "error": error(case, x, xd), "events": events if run.label == "mbcomp" else "",
+                     "path": path})
     write_csv(rows, "friction_vs_mujoco.csv")
     pair_rows = [p for case in CASES for p in pairs(rows, case)]
     write_csv(pair_rows, "friction_vs_mujoco_pairs.csv")
