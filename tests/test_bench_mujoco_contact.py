@@ -75,7 +75,7 @@ def test_observe_finds_overlaps_touches_and_the_energy_left():
 
 
 def test_mujoco_scenes_match_mbcomp_initial_states():
-    mujoco = pytest.importorskip("mujoco")
+    mujoco = pytest.importorskip("mujoco", exc_type=ImportError)
     model, data, reset = spheres.mujoco_setup(1e-3, 0.25)
     reset()
     q0, qd0 = spheres.mbcomp_state()
