@@ -52,10 +52,13 @@ DIRECTION_SPEED = 1e-9
 CONE_TOLERANCE = 1e-9
 CONE_FLOOR = 1e-12
 
-#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip along its
-#: direction falls below zero; a contact sliding at most this fast while sticking ones hold
-#: the body has nothing to stop (round-off of a slip held at zero).  C ``MB_STOP_SPEED``.
-STOP_SPEED = 1e-9
+#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip speed falls to
+#: this (or its slip along its direction crosses zero, whichever comes first); a contact set
+#: sliding slower than this (at a stick/slip transition) stops only when it slides back
+#: faster than this.  Ten times ``DIRECTION_SPEED``, below which the sliding law's
+#: direction ``v / |v|`` is not used; small enough that stopping early moves a stick time
+#: by ``STOP_SPEED / deceleration`` (~1e-9 s at 10 m/s^2).  C ``MB_STOP_SPEED``.
+STOP_SPEED = 1e-8
 
 #: m/s: the slip speed below which the slip direction at a step's start is not its own
 #: (the contact's direction is used instead) when a stop is watched for.  C ``MB_SLIP_FLOOR``.

@@ -33,7 +33,7 @@
 #define MB_FR_SLIP 2
 #define MB_FR_PAINLEVE 7
 #define MB_FR_INCONSISTENT 8
-static __thread int mb_fr_n = 0, mb_fr_cap = 0, mb_fr_stick = 0;
+static __thread int mb_fr_n = 0, mb_fr_cap = 0;
 static __thread const double *mb_fr_data;
 static __thread double *mb_fr_out, *mb_fr_scratch, *mb_fr_fail;
 static double mb_fr_u[1];
@@ -44,8 +44,7 @@ static double mb_fr_u[1];
    (friction_c.scratch_size). */
 int mb_friction_configure(int n, int cap, const double *data, double *out, double *scratch, double *fail) {
     mb_fr_n = n > 0 ? n : 0; mb_fr_cap = cap; mb_fr_data = data; mb_fr_out = out; mb_fr_scratch = scratch;
-    mb_fr_fail = fail; mb_fr_stick = 0;
-    for (int j = 0; j < mb_fr_n; ++j) if (data[(MB_FR_DATA + NQ) * j] == MB_FR_STICK) mb_fr_stick = 1;
+    mb_fr_fail = fail;
     return 0;
 }
 
@@ -285,10 +284,10 @@ static double mb_friction_along(int j, const double *q, const double *qd, const 
 
 /* The friction watch after a solve at an accepted step's end (out holds that solve): 1 when
    a sticking contact's force left the cone (|lam_t| - mu lam_n - tolerance > 0, as
-   ContactWatch.cone_excess) or a sliding contact's slip velocity along its direction at the
-   step's start is no longer positive (ContactWatch.locate_friction: not while sticking
-   contacts hold the body and it slides at most MB_STOP_SPEED either way), else 0 (and the
-   slip velocities become the accepted ones). */
+   ContactWatch.cone_excess) or a sliding contact stops (ContactWatch.locate_friction: its
+   slip along its direction at the step's start is no longer positive, or its slip speed
+   fell to MB_STOP_SPEED; one set sliding at most that fast stops only sliding back faster),
+   else 0 (and the slip velocities become the accepted ones). */
 static int mb_friction_event(void) {
     int event = 0;
     for (int j = 0; j < mb_fr_n; ++j) {
@@ -305,8 +304,11 @@ static int mb_friction_event(void) {
                 e1 = T[3] * dir[0] + T[4] * dir[1] + T[5] * dir[2];
             }
             const double along = e0 * o[3] + e1 * o[4];
-            if (along > 0.0) continue;
-            if (mb_fr_stick && speed <= MB_STOP_SPEED && along >= -MB_STOP_SPEED) continue;
+            if (speed <= MB_STOP_SPEED) {  /* set sliding at (nearly) zero slip: stops only sliding back */
+                if (along >= -MB_STOP_SPEED) continue;
+            } else if (along > 0.0 && sqrt(o[3] * o[3] + o[4] * o[4]) > MB_STOP_SPEED) {
+                continue;  /* still sliding forward, faster than MB_STOP_SPEED */
+            }
             event = 1;
         }
     }
