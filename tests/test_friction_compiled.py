@@ -214,8 +214,8 @@ def cart_with_pendulum(formulation: str, mu: float = 0.12):
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_stick_slip_events_of_a_cart_with_a_pendulum(formulation, monkeypatch):
     """The cart sticks, slips when its force reaches the cone (located by the C cone margin),
-    sticks again when it stops (the C slip speed) and slips again: every event, and the end
-    state, as Python stepping finds them."""
+    sticks again when it stops and slips again: every event, and the end state, as scipy's
+    stepping finds them."""
     from mbcomp.formulations import compiled_watch, dae_compiled
     system = cart_with_pendulum(formulation)
     located = []
@@ -232,7 +232,7 @@ def test_stick_slip_events_of_a_cart_with_a_pendulum(formulation, monkeypatch):
     assert_compiled(system, compiled)
     kinds = [e.kind for e in compiled.events]
     assert kinds == ["slip", "slip", "stick", "stick", "slip", "slip"]
-    assert {"cone_root", "slip_root"} <= set(located)   # (on the compiled loop's event steps, in C)
+    assert "cone_root" in located   # (on the compiled loop's event steps, in C; a stop by its slip speed in Python)
     assert [(e.kind, e.contact) for e in compiled.events] == [(e.kind, e.contact) for e in python.events]
     np.testing.assert_allclose([e.time for e in compiled.events], [e.time for e in python.events], atol=1e-8)
     np.testing.assert_allclose(compiled.q[-1], python.q[-1], atol=1e-8)
