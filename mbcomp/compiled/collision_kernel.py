@@ -18,8 +18,11 @@ body kinematics at each call:
 - the acceleration bias (``gddot = J qdd + bias``) is ``n . (a_b - a_a)`` at zero
   generalised acceleration, plus ``2 (w x n) . (v_b - v_a)`` for a face normal turning with
   its body, or ``(|dv|^2 - (n . dv)^2) / |pb - pa|`` for a normal along the line between two
-  rounded features (exact for spheres; for a point sliding on a capsule's axis the sliding
-  term is left out).
+  rounded features, with the terms of points sliding along a capsule's axis or a box's edge
+  and of two edges' normal turning (``collide.turning_term``: exact).
+
+The compiled loops compute the same numbers in C (``c/collide.c``, configured per compiled
+stretch by ``CollisionKernel.compiled_stretch``: ``mbcomp.compiled.collision_c``).
 """
 from __future__ import annotations
 
@@ -387,7 +390,11 @@ class CollisionKernel:
         line = (np.einsum("ij,ij->i", dv, dv) - along * along) / dist
         w = np.where((owner == collide.OWNER_A)[:, None], wa, wb)
         face = 2.0 * np.einsum("ij,ij->i", collide.cross(w, n), dv)
-        return value + np.where(owner == collide.OWNER_LINE, line, face)
+        out = value + np.where(owner == collide.OWNER_LINE, line, face)
+        for k, f in enumerate(feats):  # sliding points and edge pairs: their own terms
+            if f.owner == collide.OWNER_EDGE or f.slide_a is not None or f.slide_b is not None:
+                out[k] = value[k] + collide.turning_term(f, dv[k], wa[k], wb[k])
+        return out
 
     def gap_of(self, q: np.ndarray, qd: np.ndarray, index: int) -> float:
         """Contact ``index``'s gap (m) alone: a collision feature's exact gap from its own pair
