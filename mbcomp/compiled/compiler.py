@@ -71,8 +71,13 @@ class CompiledModel:
         #: The lagrange formulation's reduced loop is compiled in (constraints or contacts, with
         #: quaternions stepped in their chart; drive states only without contacts: see
         #: formulations/lagrange_c.py).
-        self.reduced_loop = ((self.constraint_set is not None or bool(self.topology.contacts))
-                             and not (self.drives.nz and self.topology.contacts))
+        from mbcomp.spec.components.collision import Collision
+        #: Contact rows in the compiled loops: the model's contacts, or the features of its
+        #: collisions (measured in C: codegen/c/collide.c).
+        self.contact_rows = bool(self.topology.contacts) or any(
+            isinstance(c, Collision) for c in self.topology.components.values())
+        self.reduced_loop = ((self.constraint_set is not None or self.contact_rows)
+                             and not (self.drives.nz and self.contact_rows))
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
@@ -217,10 +222,10 @@ class CompiledModel:
         lazy_dense = self.lazy_dense if lazy_dense is None else lazy_dense
         reduced_loop = self.reduced_loop if reduced_loop is None else reduced_loop
         reduced = "#define REDUCED_LOOP 1\n" if reduced_loop else ""
-        if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
+        if self.constraint_set is not None or self.contact_rows:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
         return (reduced + sizes.header() + (codegen.c_dense_stub() if lazy_dense else "")
-                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree
+                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree + codegen.c_collide()
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"

@@ -142,6 +142,10 @@ class DaeRun(ContactWatching):
         else:  # the tree's own accelerations
             _bind_configure(lib)(-1, None, None, None, 0.0, 0.0, 0.0, 0.0)
         self.nc = nc
+        # collision features: the C narrow phase on this stretch's candidates (compiled/collision_c.py)
+        self.collisions = kernel.compiled_stretch(lib, q0, qd0, self.contacts)
+        if self.collisions is not None:
+            self.step_cap = self.collisions.step_cap
 
     def _rows(self, t0, q0):
         """The KKT rows at the stretch's start: the nominal rows without held contacts, else
@@ -173,6 +177,8 @@ class DaeRun(ContactWatching):
     def close(self) -> None:
         if self.dae_rows is not None:
             self.dae_rows.close()
+        if self.collisions is not None:
+            self.collisions.close()
         if self.event is not None:
             self.lib.dae_watch(0, None, None, 0.0, None)
 

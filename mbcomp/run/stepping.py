@@ -384,7 +384,8 @@ class CompiledStepping:
             y_out = None if o.t_eval is None else np.empty((len(t_out), kernel.nq + n))
             i_out = np.array([recorder.next], dtype=np.int64)
             status, steps_t, steps_y, y, f = dop853_segment(
-                kernel, segment.loop(lib), self.hook, segment, o.replace(method="DOP853", max_step=self.max_step),
+                kernel, segment.loop(lib), self.hook, segment,
+                o.replace(method="DOP853", max_step=min(self.max_step, segment.step_cap)),
                 state, y, np.empty_like(y), self.tau_ptr, counts, t_out, i_out, y_out, budget=self.budget,
                 stored=len(recorder.t))
             self.counts.nfev, self.counts.steps, self.counts.rejected = (int(c) for c in counts)
