@@ -27,7 +27,7 @@ import numpy as np
 from mbcomp.core import collide
 
 #: Candidate pairs: bounding spheres within this many times the largest bounding radius.
-STRETCH_MARGIN = 1.0
+STRETCH_MARGIN = 4.0
 #: A step moves no shape relative to another by more than this fraction of the thinnest
 #: shape's half thickness (as ``collision_kernel.STEP_FRACTION``).
 STEP_FRACTION = 0.5

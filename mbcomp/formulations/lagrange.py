@@ -225,7 +225,7 @@ class LagrangeFormulation(Formulation):
     def compiled_methods(self) -> tuple[str, ...]:
         """The compiled loops this formulation can step in: DOP853 only with constraints or
         contacts (the reduced loop has no fixed-step variant)."""
-        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.topology.contacts else ("DOP853",)
+        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.contact_rows else ("DOP853",)
 
     @property
     def compiled_contacts(self) -> bool:
@@ -237,7 +237,7 @@ class LagrangeFormulation(Formulation):
         if self.constraints is None:
             return None
         topology = self.compiled.topology
-        if self.compiled.drives.nz and topology.contacts:
+        if self.compiled.drives.nz and self.compiled.contact_rows:
             return "the lagrange formulation steps models with drive states and contacts in Python"
         from mbcomp.codegen.expressions_c import NotCompilable
         from mbcomp.formulations.lagrange_compiled import motor_programs
