@@ -85,7 +85,7 @@ class CompiledModel:
         self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}", formulation)
         #: The C library leaves out the dense dynamics (mass matrix, forces), which the
         #: recursive right-hand side never calls, and builds them on first use (``dense_library``).
-        self.lazy_dense = "dynamics" in recursive.cold_functions(self.dynamics, self.topology)
+        self.lazy_dense = "dynamics" in self._cold_dynamics()
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
                                              len(self.topology.contacts), self.drives.nz)
@@ -110,6 +110,11 @@ class CompiledModel:
             from mbcomp.core.errors import CompileError
             raise CompileError(f"Model {self.model_name!r}", build_failure(exc)) from None
         self.compile_time = time.perf_counter() - started
+
+    def _cold_dynamics(self) -> tuple[str, ...]:
+        """``recursive.cold_functions``, none with collision features (whose contact rows the
+        compiled loops hold with the dense dynamics, as a model's own contacts)."""
+        return () if self.contact_rows else recursive.cold_functions(self.dynamics, self.topology)
 
     def _check_names(self) -> None:
         """The naming rule (``mbcomp.core.names``): no coordinate, speed column, state or parameter
@@ -280,7 +285,7 @@ class CompiledModel:
         # Built apart, later: the dense dynamics of lazy_dense and the output functions.
         apart = OUTPUT_FUNCTIONS + (("dynamics",) if self.lazy_dense else ())
         functions = {f: outs for f, outs in self._functions().items() if f not in apart}
-        cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
+        cold = COLD_FUNCTIONS + self._cold_dynamics()
         build = CBuild(compiler)
         try:
             # The templates compile on another core while sympy generates the program; each

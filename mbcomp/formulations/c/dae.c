@@ -300,9 +300,13 @@ static int dae_event(double t, const double *y, const double *p) {
         const double g0 = dae_gaps[k], g1 = k < own ? kc[CONTACTS_GAP_OFF + k] : mb_collide_gap_of(k - DAE_NK);
         if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -dae_gap_tol && -dae_gap_tol < g0)) event = 1;
     }
-    if (!event)
+    if (!event) {  /* a held force pulling (beyond rounding: MB_FORCE_ROUNDING) */
+        double most = 0.0;
         for (int k = 0; k < dae_nr; ++k)
-            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < 0.0) event = 1;
+            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && fabs(dae_lam[k]) > most) most = fabs(dae_lam[k]);
+        for (int k = 0; k < dae_nr; ++k)
+            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < -MB_FORCE_ROUNDING * most) event = 1;
+    }
     if (!event && features && mb_collide_leaves()) event = 1;  /* a new broad phase: Python finds no event */
     if (!event)
         for (int k = 0; k < dae_nk; ++k) {

@@ -724,8 +724,11 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
         double *lam;
         status = lag_held_forces(t, y, p, tau, &lam);
         if (status) return status;
+        double most = 0.0;  /* a held force pulling (beyond rounding: MB_FORCE_ROUNDING) */
         for (int a = 0; a < nr; ++a)
-            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
+            if (lag_geo[lag_rows[a]] <= -2 && fabs(lam[a]) > most) most = fabs(lam[a]);
+        for (int a = 0; a < nr; ++a)
+            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < -MB_FORCE_ROUNDING * most) event = 1;
     }
     if (!event && features && mb_collide_leaves()) event = 1;  /* a new broad phase: Python finds no event */
     if (!event)
