@@ -102,8 +102,6 @@ def test_both_formulations_give_the_same_motion(name):
 NEEDS_PYTHON: dict[str, str] = {
     "sliding_ball": "Coulomb friction steps in Python (the compiled loops have no friction law)",
     "box_on_slope": "Coulomb friction steps in Python (the compiled loops have no friction law)",
-    "ball_on_box": "colliding shapes are measured and located in Python (docs/contacts.md)",
-    "newtons_cradle": "colliding shapes are measured and located in Python (docs/contacts.md)",
 }
 
 
