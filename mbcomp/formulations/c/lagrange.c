@@ -435,6 +435,20 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    if (nr == 0 && lag_nc == 0 && ni == n && !HAS_DRIVES) {
+        /* no row held (colliding shapes apart): the tree's own accelerations, by the recursive
+           program where the model has it, instead of the dense reduced solve */
+        double *qdd = lag_eig;
+        if (accelerations(q, qd, p, lag_u, tau, qdd, lag_dyn)) return 1;
+        for (int k = 0; k < ni; ++k) f[nqi + k] = qdd[lag_ind[k]];
+        if (MB_HAS_QUAT) {
+            lag_chart_rate(lag_x, qd, lag_rate);
+            for (int k = 0; k < nqi; ++k) f[k] = lag_rate[lag_qind[k]];
+        } else {
+            for (int k = 0; k < nqi; ++k) f[k] = qd[lag_qind[k]];
+        }
+        return 0;
+    }
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
