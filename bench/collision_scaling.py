@@ -18,7 +18,10 @@ features measured in C, ``codegen/c/collide.c``, against the Python narrow phase
 library's ``newtons_cradle`` and ``ball_on_box`` in both formulations, and N = 10, 30
 spheres dropped under gravity into a box of planes (restitution 0.9; free joints: the
 lagrange formulation), simulated time in s, medians of ``--repeats`` runs taken in turn
-(the same machine state for both); writes bench/results/collision_paths.csv.
+(the same machine state for both); writes bench/results/collision_paths.csv.  With 30
+free bodies an impact factors the 180 x 180 mass matrix in Python (LAPACK): on a loaded
+machine run it with ``OPENBLAS_NUM_THREADS=1``, or BLAS threads waiting for cores cost
+more than everything else.
 """
 from __future__ import annotations
 
@@ -108,10 +111,13 @@ def path_cases():
     return cases
 
 
-def compare_paths(repeats: int) -> list[dict]:
-    """Median wall times (s) of the compiled loop and of scipy's stepping, runs in turn."""
+def compare_paths(repeats: int, only: str = "") -> list[dict]:
+    """Median wall times (s) of the compiled loop and of scipy's stepping, runs in turn (the
+    cases whose label contains ``only``)."""
     rows = []
     for label, system, q0, qd0, t_end in path_cases():
+        if only not in label:
+            continue
         system.simulate(t_end, q0, qd0)                            # (first calls, imports)
         system.simulate(min(t_end, 0.2), q0, qd0, integrator="scipy")
         times = {"compiled": [], "scipy": []}
@@ -135,9 +141,10 @@ def main(argv=None) -> None:
     parser.add_argument("--t-end", type=float, default=1.0)
     parser.add_argument("--paths", action="store_true", help="compiled loop against scipy's stepping")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--only", default="", help="--paths: only the cases whose label contains this")
     args = parser.parse_args(argv)
     if args.paths:
-        write_csv(compare_paths(args.repeats), "collision_paths.csv")
+        write_csv(compare_paths(args.repeats, args.only), "collision_paths.csv")
         return
     rows = []
     for n in args.sizes:
