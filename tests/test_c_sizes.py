@@ -13,7 +13,10 @@ from mbcomp.core.statemap import StateMap
 
 
 def _templates(model, **options):
-    compiled = model.compile(backend="python", cache=False, **options)._compiled
+    return _text_and_sizes(model.compile(backend="python", cache=False, **options)._compiled)
+
+
+def _text_and_sizes(compiled):
     return compiled._c_templates(compiled._c_sizes()), compiled._c_sizes()
 
 
@@ -49,10 +52,10 @@ def test_what_a_model_has_is_read_at_run_time_so_the_library_compiles_two_kinds(
     kinds: dict[str, list] = {}
     for path in sorted((Path(__file__).resolve().parents[1] / "library").glob("*.toml")):
         for formulation in ("lagrange", "dae"):
-            model = mb.load(path)
-            if model.compile(backend="python", cache=False, formulation=formulation)._compiled.dynamics != "dense":
+            compiled = mb.load(path).compile(backend="python", cache=False, formulation=formulation)._compiled
+            if compiled.dynamics != "dense":
                 continue
-            text, sizes = _templates(model, formulation=formulation)
+            text, sizes = _text_and_sizes(compiled)   # (of that compile: one derivation per model)
             kinds.setdefault(text, []).append(sizes.values)
     assert len(kinds) == 2
     has = {name: {tuple(sorted({v[name] for v in members})) for members in kinds.values()}

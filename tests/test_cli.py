@@ -1,5 +1,6 @@
-"""The ``mbcomp`` command: end to end as a subprocess (``python -m mbcomp.face.cli``), and the
-many small variations in process through ``mbcomp.face.cli.main`` (same code, no start-up cost)."""
+"""The ``mbcomp`` command: end to end as a subprocess (``python -m mbcomp.face.cli``: a run
+writing CSV, the library listing, a malformed file), and the many variations in process
+through ``mbcomp.face.cli.main`` (same code, no start-up cost)."""
 from __future__ import annotations
 
 import csv
@@ -119,14 +120,15 @@ def test_run_options_override_the_file(main, pendulum, tmp_path):
     assert "RK45" in proc.stdout
 
 
-def test_run_accepts_a_library_model_name(env, tmp_path):
-    proc = mbcomp(env, "run", "double_pendulum", "--t-end", "0.1", "--samples", "3", cwd=tmp_path)
+def test_run_accepts_a_library_model_name(main, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    proc = main("run", "double_pendulum", "--t-end", "0.1", "--samples", "3")
     assert proc.returncode == 0, proc.stderr
     assert "phi1" in proc.stdout and "theta2" in proc.stdout
 
 
-def test_info_prints_coordinates_and_equations(env, pendulum):
-    proc = mbcomp(env, "info", pendulum)
+def test_info_prints_coordinates_and_equations(main, pendulum):
+    proc = main("info", pendulum)
     assert proc.returncode == 0, proc.stderr
     assert "swing" in proc.stdout
     assert "degrees of freedom  1" in proc.stdout
@@ -223,10 +225,10 @@ def test_unwritable_output_is_a_message(main, pendulum, tmp_path):
 
 
 @pytest.mark.skipif(not HAS_PLOTTING, reason="mbcomp.face.plotting is not available")
-def test_plot_and_animation(env, pendulum, tmp_path):
+def test_plot_and_animation(main, pendulum, tmp_path):
     import matplotlib.image
     png, gif = tmp_path / "plot.png", tmp_path / "anim.gif"
-    proc = mbcomp(env, "run", pendulum, "--samples", "6", "--plot", png, "--animate", gif, timeout=300)
+    proc = main("run", pendulum, "--samples", "6", "--plot", png, "--animate", gif)
     assert proc.returncode == 0, proc.stderr
     image = matplotlib.image.imread(png)
     assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100

@@ -7,7 +7,8 @@
   ``MPLBACKEND=Agg``; each asserts its own physics, so a zero exit status is the check.
 - The blocks of one docs page run in order in one fresh namespace (a page reads like a
   session), in a temporary working directory that holds a link to ``library/`` (the pages
-  are written as if run from the repository root).  A block whose first line is
+  are written as if run from the repository root).  The blocks of a ``STANDALONE`` page
+  each run in a fresh namespace of their own: each is a complete example.  A block whose first line is
   ``# not run`` (optionally followed by the reason) is skipped: it needs something the test machine may lack (ffmpeg, a
   cluster).
 """
@@ -33,6 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 DOCS = sorted((ROOT / "docs").glob("*.md"))
 SKIP_MARK = "# not run"
+#: Pages whose every block is a complete example (runs in a namespace of its own).
+STANDALONE = ("contacts.md",)
 FENCE = re.compile(r"^(\s*)```python\s*$")
 
 
@@ -126,6 +129,8 @@ def test_docs_code_blocks_run(page, tmp_path, monkeypatch, cache_dir, example_ru
         for line, source in blocks:
             if is_skipped(source):
                 continue
+            if page.name in STANDALONE:
+                namespace = {"__name__": f"docs_{page.stem}"}
             code = compile(source, f"{page.relative_to(ROOT)}:{line}", "exec")
             try:
                 exec(code, namespace)  # noqa: S102 - our own documentation

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import functools
 import math
-import pathlib
-import re
 
 import numpy as np
 import pytest
@@ -678,15 +676,4 @@ def test_persistent_contact_lets_go_when_another_impact_lifts_it(formulation):
     np.testing.assert_allclose(qd_after, free.qd, rtol=1e-9)
 
 
-# ----------------------------------------------------------------------------------------------
-# The documentation's example runs
-# ----------------------------------------------------------------------------------------------
-def test_docs_example_runs(tmp_path, monkeypatch):
-    docs = pathlib.Path(__file__).resolve().parents[1] / "docs" / "contacts.md"
-    if not docs.is_file():
-        pytest.skip("docs/contacts.md not present")
-    blocks = re.findall(r"```python\n(.*?)```", docs.read_text(encoding="utf-8"), re.S)
-    assert blocks, "docs/contacts.md has no python example"
-    monkeypatch.chdir(tmp_path)
-    for block in blocks:
-        exec(compile(block, str(docs), "exec"), {"__name__": "docs_example"})
+# (The examples of docs/contacts.md run, each block on its own, in tests/test_examples.py.)

@@ -523,10 +523,13 @@ def test_compiled_stepping_equals_scipy_stepping(name, formulation):
     assert [compiled.stats["integrator"], stepped.stats["integrator"]] == \
         ["compiled", "none" if system.ndof == 0 and formulation == "lagrange" else "scipy"]
     if not system.topology.contacts:  # at contact events the compiled loop restarts its steps
-        # (the compiled dae loop evaluates once more after each step its projection moved:
-        # up to one per step, which a short run of few steps, such as a steady ride, shows)
-        projections = compiled.stats["steps"] if formulation == "dae" else 0
-        assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"] + projections
+        if formulation == "dae":
+            # The compiled dae loop projects after a step and evaluates once more where that
+            # moved the state: the step sizes follow the projected states, so its steps (not
+            # its evaluations) are compared; a steady ride takes a handful, one either way.
+            assert abs(compiled.stats["steps"] - stepped.stats["steps"]) <= 0.1 * stepped.stats["steps"] + 1
+        else:
+            assert abs(compiled.stats["nfev"] - stepped.stats["nfev"]) <= 0.1 * stepped.stats["nfev"]
     assert compiled.extra_states == stepped.extra_states == tuple(system.extra_states)
     columns = [("q", compiled.q, stepped.q), ("qd", compiled.qd, stepped.qd)]
     columns += [(state, compiled[state], stepped[state]) for state in system.extra_states]

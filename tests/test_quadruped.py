@@ -6,6 +6,7 @@ foot centre below the base plus the foot radius; the least-norm vertical foot fo
 wrench balances the weight); the simulation must hold them, with the feet stuck and no drift.
 Skipped without example-robot-data.
 """
+import functools
 import importlib.util
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -21,14 +22,46 @@ _spec.loader.exec_module(solo)
 if solo.urdf_path() is None:
     pytest.skip("example-robot-data is not installed", allow_module_level=True)
 
-pytestmark = pytest.mark.slow   # compiling the 18-speed robot takes ~20 s per formulation
+# Compiling the 18-speed robot takes ~20 s per formulation; its tests stay on one worker,
+# which builds each formulation's robot and runs each drop once (a worker of its own would
+# build and run them again).
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("solo12")]
 G = 9.81
 FORMULATIONS = ("lagrange", "dae")
 
 
+@functools.cache
+def built(formulation: str):
+    """The robot of ``formulation`` (built once for the module's tests)."""
+    return solo.solo12(formulation)
+
+
+@functools.cache
+def dropped(formulation: str):
+    """Pure PD (no feed-forward), dropped with the feet 2 mm above the floor, run 0.4 s:
+    ``(system, q0, result)``, run once for the module's tests."""
+    pd_only = built(formulation).with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
+    q0 = solo.standing_state(pd_only, clearance=0.002)
+    t = np.linspace(0.0, 0.4, 81)
+    return pd_only, q0, pd_only.simulate(0.4, q0, np.zeros(pd_only.nv), t_eval=t)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _forget_the_robots():
+    """The module's robots and runs are released when its tests are done."""
+    yield
+    built.cache_clear()
+    dropped.cache_clear()
+
+
 @pytest.fixture(scope="module", params=FORMULATIONS)
-def robot(request):
-    return solo.solo12(request.param)
+def formulation(request):
+    return request.param
+
+
+@pytest.fixture(scope="module")
+def robot(formulation):
+    return built(formulation)
 
 
 @pytest.fixture(scope="module")
@@ -75,12 +108,9 @@ def test_the_feet_carry_the_weight_as_the_statics_say(standing_runs):
 
 
 @pytest.fixture(scope="module")
-def drop_runs(robot):
+def drop_runs(formulation):
     """Pure PD (no feed-forward), dropped with the feet 2 mm above the floor, run 0.4 s."""
-    pd_only = robot.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
-    q0 = solo.standing_state(pd_only, clearance=0.002)
-    t = np.linspace(0.0, 0.4, 81)
-    return pd_only, q0, pd_only.simulate(0.4, q0, np.zeros(robot.nv), t_eval=t)
+    return dropped(formulation)
 
 
 def test_dropped_it_lands_on_four_feet_and_settles(drop_runs):
@@ -140,10 +170,8 @@ def test_formulations_agree_on_the_drop():
     """Lagrange and DAE: the same landing time and the same rest state (to 1e-7)."""
     ends = []
     for formulation in FORMULATIONS:
-        system = solo.solo12(formulation)
-        system = system.with_parameters({f"{name}_pd.value.constant4.value": 0.0 for name in solo.POSTURE})
-        res = system.simulate(0.4, solo.standing_state(system, clearance=0.002), np.zeros(system.nv),
-                              t_eval=[0.0, 0.4])
+        res = dropped(formulation)[2]        # the drop the other tests check, run once
+        assert res.t[-1] == 0.4
         ends.append((res.events[0].time, res.q[-1]))
     assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-9)
     np.testing.assert_allclose(ends[0][1], ends[1][1], atol=1e-7)

@@ -145,6 +145,11 @@ def write_file(tmp_path, model, section, name, key, bad, role=None):
     return path
 
 
+#: The tests that use ``systems`` stay on one worker (pytest-xdist): each worker would compile
+#: every kind's system again.
+ONE_WORKER = pytest.mark.xdist_group("same-validation")
+
+
 @pytest.fixture(scope="module")
 def systems():
     """One compiled system per kind (the python backend: no C compile needed for parameters)."""
@@ -160,6 +165,7 @@ def systems():
     return out
 
 
+@ONE_WORKER
 @pytest.mark.parametrize("kind, attr, bad", list(cases()))
 def test_same_verdict_everywhere(kind, attr, bad, systems, tmp_path):
     m, cls, name, kwargs = build(kind)
@@ -207,6 +213,7 @@ def test_same_verdict_everywhere(kind, attr, bad, systems, tmp_path):
             assert f"{where}: {expected}" in message, (expected, message)
 
 
+@ONE_WORKER
 @pytest.mark.parametrize("kind", sorted(set(EXAMPLES) | set(SPHERICAL_LIKE)))
 def test_good_values_round_trip_through_a_file(kind, systems, tmp_path):
     model, system = systems[kind]

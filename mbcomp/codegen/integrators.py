@@ -385,6 +385,12 @@ def _diagnose(kernel, t: float, y: np.ndarray, method: str) -> None:
         pass
 
 
+def rhs_failure(kernel, status: int, t: float, y: np.ndarray, method: str) -> None:
+    """Raise for a nonzero status of the compiled right-hand side at ``(t, y)`` (``RankLost``
+    when the dae rows lost rank, else the singular mass matrix, with its cause when known)."""
+    _fail(kernel, RANK_LOST if status == RANK_LOST else SINGULAR, t, y, method)
+
+
 def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int | None = None,
           t_end: float | None = None):
     n = kernel.nq

@@ -439,6 +439,20 @@ class Formulation:
         ``kernel`` and the start coordinates ``q0`` when the configuration depends on them."""
         yield
 
+    def scipy_stretch(self, kernel, lib, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts: tuple = (),
+                      offsets: dict | None = None, method: str = ""):
+        """scipy's stepping of the compiled right-hand side from the consistent ``(q0, qd0)`` at
+        ``t0`` with the held ``contacts`` (``tau``: constant generalised forces or None): a
+        ``compiled_rhs.Stretch`` whose ``workspace`` calls the C functions the compiled loops
+        step; ``close()`` undoes the configuration.  Only asked for where the compiled loop
+        could run the model (``run/paths.why_not_compiled``).  Here: the tree state without
+        constraints and contacts, configured by ``compiled_setup``."""
+        from mbcomp.formulations.compiled_rhs import tree_stretch
+        workspace = self.start(kernel, t0, q0, qd0, tau, contacts)
+        if offsets is not None:
+            workspace.offsets = offsets
+        return tree_stretch(self, kernel, workspace, tau, method, self.compiled_setup(lib, kernel=kernel, q0=q0))
+
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
 

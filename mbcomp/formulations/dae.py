@@ -87,6 +87,17 @@ class DaeFormulation(Formulation):
             return "no consistent configuration was found at compile time"
         return None
 
+    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method=""):
+        """The compiled KKT solve on the tree state (``Formulation.scipy_stretch``): the rows of
+        the constraints (``compiled_setup``) or, with contacts, of the stretch between events
+        (``DaeRun``: the held contacts' rows too)."""
+        if not self.compiled.topology.contacts:
+            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
+        from mbcomp.codegen.integrators import compiled_jacobian
+        from mbcomp.formulations.compiled_rhs import Stretch, CompiledRhsWorkspace
+        run = DaeRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
+        return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method), run.close, compiled_jacobian(kernel, tau))
+
     @property
     def compiled_contacts(self) -> bool:
         """Contacts run in the compiled loop (events handled between compiled stretches)."""

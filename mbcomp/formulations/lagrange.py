@@ -256,6 +256,20 @@ class LagrangeFormulation(Formulation):
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         return ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
 
+    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method=""):
+        """The compiled reduced right-hand side (``Formulation.scipy_stretch``): with
+        constraints or contacts, a ``ReducedRun``'s configuration stepped by scipy
+        (``compiled_rhs.CompiledReducedWorkspace``)."""
+        if self.constraints is None and not self.compiled.topology.contacts:
+            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
+        from mbcomp.formulations.compiled_rhs import CompiledReducedWorkspace, Stretch
+        from mbcomp.formulations.lagrange_compiled import ReducedRun
+        run = ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
+        if self.compiled.topology.contacts:  # (armed, the C code evaluates the held contacts' gaps)
+            from mbcomp.formulations.impact import GAP_TOLERANCE
+            run.watch_contacts(kernel.contacts(q0, qd0).g, GAP_TOLERANCE)
+        return Stretch(CompiledReducedWorkspace(run, method), run.close)
+
     def compiled_session(self, kernel, lib, q0, qd0, tau):
         """The Python side of the compiled reduced loop (None without constraints)."""
         if self.constraints is None:

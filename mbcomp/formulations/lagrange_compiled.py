@@ -150,6 +150,11 @@ class ReducedRun(ContactWatching):
         return _Locator(self, t_old, y_old)
 
     # -- configuration ---------------------------------------------------------------------------
+    def reconfigure(self) -> None:
+        """Hand the run's Python workspace's partition (and chart) to the C code again (after
+        it chose them anew)."""
+        self._configure()
+
     def _configure(self) -> None:
         ws = self.workspace
         self.rows = np.ascontiguousarray(ws.rows, dtype=np.int64)

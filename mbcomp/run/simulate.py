@@ -208,8 +208,12 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
             path = IntegrationPath("scipy", "the compiled loop met a singular position of the constraints")
     elif options.integrator == "compiled":
         raise ModelError("simulate", f"integrator='compiled' is not possible: {path.reason}")
-    return run_steps(ScipyStepping(kernel, formulation, options, tau, z0, Counts()), kernel, formulation, options,
-                 q0, qd0, path, budget)
+    try:
+        return run_steps(ScipyStepping(kernel, formulation, options, tau, z0, Counts()), kernel, formulation,
+                         options, q0, qd0, path, budget)
+    except RankLost:  # (the compiled right-hand side met a singular position: the Python solve handles it)
+        return run_steps(ScipyStepping(kernel, formulation, options, tau, z0, Counts(), compiled_rhs=False), kernel,
+                         formulation, options, q0, qd0, path, budget)
 
 
 def run_steps(stepping: Stepping, kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray,

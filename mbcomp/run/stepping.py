@@ -113,10 +113,20 @@ class ScipyStepping:
     #: The samples are known finite (else the driver checks them).
     finite_checked = False
 
-    def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts):
+    def __init__(self, kernel, formulation, options: RunOptions, tau: Any, z0: np.ndarray, counts: Counts,
+                 compiled_rhs: bool = True):
         self.kernel, self.formulation, self.options, self.counts = kernel, formulation, options, counts
         self.cls = solver_class(options.method)
         self.method = getattr(self.cls, "__name__", str(options.method))
+        #: The solver steps the compiled right-hand side (``run/compiled_rhs.py``): the model
+        #: could run in the compiled loops (only the method is scipy's), its formulation steps
+        #: the tree state there, and there are no drive elements.  With contacts, each stretch
+        #: between events configures its rows through ``Formulation.contact_run``.
+        self.compiled_rhs = bool(compiled_rhs and not kernel.compiled.drives.elements
+                                 and (formulation.constraints is not None or kernel.topology.contacts)
+                                 and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
+        self.setup = contextlib.ExitStack()
+        self.stretch = None  #: the compiled rows of the stretch between contact events (compiled_rhs)
         self.drive = None
         if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
             tau = self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float),
@@ -134,9 +144,16 @@ class ScipyStepping:
     # -- the driver's interface -------------------------------------------------------------------
     @contextlib.contextmanager
     def running(self, bar, interval: float):
-        """The block of the run (nothing to set up: the bar is updated step by step)."""
+        """The block of the run (the bar is updated step by step); the compiled
+        right-hand side's configuration (``begin``) is undone at its end."""
         self.bar = bar
-        yield
+        with self.setup:
+            try:
+                yield
+            except SimulationError:
+                if self.compiled_rhs:  # the cause its C code recorded (a motor's law that was not finite)
+                    self.formulation.explain_compiled_failure(self.kernel.compiled.functions.lib)
+                raise
 
     def states(self) -> np.ndarray:
         """The drive elements' states at the sample just evaluated."""
@@ -145,12 +162,23 @@ class ScipyStepping:
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
         self.offsets = offsets
+        if self.compiled_rhs:  # the C configuration of the last stretch is undone at the end of the run
+            self.setup.callback(self._close_stretch)
+        try:
+            self._begin(t0, q0, qd0, contacts, watched)
+        except BaseException:
+            self.setup.close()
+            raise
+
+    def _begin(self, t0, q0, qd0, contacts, watched) -> None:
         self.workspace = self._workspace(t0, q0, qd0, contacts)
         if self.workspace.y0.size == 0:
             if not watched:
                 return  # nothing to integrate: the driver evaluates the prescribed motion
             self.max_step = min(self.max_step, self.options.t_end / 500)  # nothing to integrate: step time to watch
-        if (self.method in IMPLICIT_METHODS and self.formulation.constraints is None
+        if self.method in IMPLICIT_METHODS and self.compiled_rhs and self.stretch.jacobian is not None:
+            self.solver_options["jac"] = self.stretch.jacobian  # (in compiled code: one call, not 2 n)
+        elif (self.method in IMPLICIT_METHODS and self.formulation.constraints is None
                 and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None):
             tau = self.tau
             self.solver_options["jac"] = compiled_jacobian(
@@ -231,8 +259,19 @@ class ScipyStepping:
 
     # -- helpers -------------------------------------------------------------------------------------
     def _workspace(self, t0, q0, qd0, contacts):
-        workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
-        return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
+        if not self.compiled_rhs:
+            workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
+            return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
+        tau = None if self.tau is None else np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)
+        self._close_stretch()
+        self.stretch = self.formulation.scipy_stretch(self.kernel, self.kernel.compiled.functions.lib, t0, q0, qd0, tau,
+                                                      contacts, self.offsets, self.method)
+        return self.stretch.workspace
+
+    def _close_stretch(self) -> None:
+        if self.stretch is not None:
+            stretch, self.stretch = self.stretch, None
+            stretch.close()
 
     def _fun(self, t, y):
         total = float(y.sum())

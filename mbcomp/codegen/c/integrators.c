@@ -99,6 +99,16 @@ static double rms(const double *v, int n) {
 }
 
 @LOOPS@
+/* The right-hand side f = [q', v', z'] at (t, y) (NY values): the function the compiled loops
+   step, for scipy's stepping of the compiled model (the dae rows this thread configured
+   included).  Returns the rhs() status (-5: the dae rows lost rank). */
+int rhs_value(const double *p, const double *tau, double t, const double *y, double *f, double *work) {
+    return rhs(t, y, f, p, tau, work);
+}
+
+/* Doubles of the work array rhs_value needs. */
+long rhs_work_size(void) { return NWORK; }
+
 /* Jacobian d f / d y (NY x NY, row-major) by forward differences, for implicit methods. */
 int rhs_jacobian(const double *p, const double *tau, double t, const double *y, double *J) {
     double *f0 = malloc(sizeof(double) * NY), *f1 = malloc(sizeof(double) * NY);
