@@ -91,7 +91,7 @@ class DaeFormulation(Formulation):
         """The compiled KKT solve on the tree state (``Formulation.scipy_stretch``): the rows of
         the constraints (``compiled_setup``) or, with contacts, of the stretch between events
         (``DaeRun``: the held contacts' rows too)."""
-        if not self.compiled.topology.contacts:
+        if not self.compiled.contact_rows:   # (contacts or collision features)
             return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
         from mbcomp.codegen.integrators import compiled_jacobian
         from mbcomp.formulations.compiled_rhs import Stretch, CompiledRhsWorkspace

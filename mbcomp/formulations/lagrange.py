@@ -260,12 +260,12 @@ class LagrangeFormulation(Formulation):
         """The compiled reduced right-hand side (``Formulation.scipy_stretch``): with
         constraints or contacts, a ``ReducedRun``'s configuration stepped by scipy
         (``compiled_rhs.CompiledReducedWorkspace``)."""
-        if self.constraints is None and not self.compiled.topology.contacts:
+        if self.constraints is None and not self.compiled.contact_rows:   # (contacts or collision features)
             return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
         from mbcomp.formulations.compiled_rhs import CompiledReducedWorkspace, Stretch
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         run = ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
-        if self.compiled.topology.contacts:  # (armed, the C code evaluates the held contacts' gaps)
+        if self.compiled.contact_rows:  # (armed, the C code evaluates the held contacts' gaps)
             from mbcomp.formulations.impact import GAP_TOLERANCE
             run.watch_contacts(kernel.contacts(q0, qd0).g, GAP_TOLERANCE)
         return Stretch(CompiledReducedWorkspace(run, method), run.close)
