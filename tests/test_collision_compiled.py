@@ -184,6 +184,8 @@ def test_box_rests_on_a_plane_on_four_corners_without_drift(formulation):
     assert res.stats["path"] == "compiled" and res.t[-1] == 10.0
     assert len(res.persistent_contacts) == 4
     assert np.abs(res.q - [0.0, 0.1, 0.0]).max() < 1e-10
+    scipy = system.simulate(2.0, [0.0, 0.1, 0.0], [0.0, 0.0, 0.0], integrator="scipy")   # (the compiled rows, stepped by scipy)
+    assert len(scipy.persistent_contacts) == 4 and np.abs(scipy.q - [0.0, 0.1, 0.0]).max() < 1e-10
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
