@@ -14,9 +14,10 @@ is an exact equilibrium: the base stands at ``z = -(lowest foot centre below the
 Put down touching the floor at rest, it stands there: no event, no drift, the feet carry
 the statics' forces.  With the PD alone (feed-forward 0) dropped from 2 mm, the four feet
 land together (one simultaneous frictional impact), stick, and the knees give until the PD
-torques hold the weight: the base settles 2.8 mm below the kinematic height.  (Dropped with
-the feed-forward on, the legs stretch during the fall and the feet land unevenly: that run
-slows to a crawl in the stick/slip event handling; see docs/contacts.md.)
+torques hold the weight: the base settles 2.8 mm below the kinematic height.  Dropped with
+the feed-forward on, the legs stretch during the fall (1.5 mm) and the front feet land
+18 us before the hind ones, slide on for 1.4 us and stick; the robot stands on the feet
+where they landed, 0.5 mm above the kinematic height (docs/contacts.md).
 
 Needs ``example-robot-data`` (``pip install "mbcomp[robots]"``).
 

@@ -175,3 +175,71 @@ def test_formulations_agree_on_the_drop():
         ends.append((res.events[0].time, res.q[-1]))
     assert ends[0][0] == pytest.approx(ends[1][0], rel=1e-9)
     np.testing.assert_allclose(ends[0][1], ends[1][1], atol=1e-7)
+
+
+@pytest.fixture(scope="module")
+def feed_forward_drop(robot):
+    """PD and feed-forward on (kp = 20 N m/rad, kd = 0.5 N m s/rad), dropped with the feet
+    2 mm above the floor, run 0.3 s.  In the fall the feed-forward, unbalanced, stretches
+    the legs; the front feet land first, slide, and stop on a slip that turns as it decays
+    (this collapsed the step size before stops were found by the slip speed)."""
+    q0 = solo.standing_state(robot, clearance=0.002)
+    return robot, q0, robot.simulate(0.3, q0, np.zeros(robot.nv))      # (every step and event state)
+
+
+def test_dropped_with_feed_forward_it_lands_on_four_feet_and_stands(feed_forward_drop):
+    """Four impacts (front pair, then hind pair), the front feet stop sliding and stick, no
+    foot lets go; no penetration; at the end the feet carry m g and the statics hold:
+    ``h(q) = J^T F + kp (target - q) + tau_ff`` on the joints and ``h = J^T F`` on the base."""
+    robot, q0, res = feed_forward_drop
+    feet = [f"{leg}_foot" for leg in solo.LEGS]
+    assert sorted(e.contact for e in res.events if e.kind == "impact") == sorted(feet)
+    assert [e.kind for e in res.events].count("release") == 0
+    assert sorted(res.persistent_contacts) == sorted(feet)
+    for q in res.q:
+        assert min(robot.gaps(q).values()) >= -1e-9
+    mass = sum(float(node.get("value")) for node in ET.parse(solo.urdf_path()).iter("mass"))
+    total = sum(res.contact_forces[name][-1] for name in feet)
+    np.testing.assert_allclose(total, [0.0, 0.0, mass * G], rtol=0, atol=1e-5 * mass * G)
+    q, nv = res.q[-1], robot.nv
+    generalised = np.zeros(nv)
+    for leg in solo.LEGS:
+        force = res.contact_forces[f"{leg}_foot"][-1]          # acts at the touching point
+        below = robot.body_state(f"{leg}_LOWER_LEG", q).rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+        touching = np.asarray(solo.foot_point(leg)) + below
+        for k in range(nv):
+            e = np.zeros(nv)
+            e[k] = 1.0
+            generalised[k] += force @ robot.body_state(f"{leg}_LOWER_LEG", q, e, point=touching).velocity
+    p = robot.parameters
+    pd = np.array([p[f"{name}_pd.value.constant1.value"] * (solo.POSTURE[name] - q[robot.coords.index(name)])
+                   + p[f"{name}_pd.value.constant4.value"] for name in robot.coords[7:]])
+    hold = robot.holding_forces(q)
+    np.testing.assert_allclose(hold[6:], pd + generalised[6:], atol=1e-4)
+    np.testing.assert_allclose(hold[:6], generalised[:6], atol=1e-4)
+    for leg in solo.LEGS:                     # stuck: the touching material points stand still
+        below = robot.body_state(f"{leg}_LOWER_LEG", q).rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
+        touching = np.asarray(solo.foot_point(leg)) + below
+        v = robot.body_state(f"{leg}_LOWER_LEG", q, res.qd[-1], point=touching).velocity
+        assert np.hypot(v[0], v[1]) < 1e-6, leg
+
+
+def test_dropped_with_feed_forward_it_settles_near_the_standing_height(feed_forward_drop):
+    """The feet stick where the stretched legs put them down, not on the standing footprint,
+    so the robot settles in a posture near, not at, the standing one: the base ends above the
+    kinematic height by less than the legs had stretched at touchdown (base height minus
+    foot-centre height, over the standing one), and no lower than it (the feed-forward
+    carries the weight: no sag)."""
+    robot, q0, res = feed_forward_drop
+    standing = solo.standing_state(robot)[2]
+    touchdown = res.events[0].time
+    k = int(np.flatnonzero(res.t == touchdown)[0])
+    lowest = min(robot.body_state(f"{leg}_LOWER_LEG", res.q[k], point=solo.foot_point(leg)).position[2]
+                 for leg in solo.LEGS)
+    stretch = (res.q[k, 2] - lowest) - (standing - solo.FOOT_RADIUS)
+    assert 0.5e-3 < stretch < 3e-3                               # ~1.5 mm at kp = 20
+    z = res["base_link_free_z"]
+    assert standing < z[-1] < standing + stretch
+    late = res.t >= 0.25
+    assert np.abs(z[late] - z[-1]).max() < 1e-6                  # settled
+    assert np.abs(res.qd[-1]).max() < 1e-4

@@ -470,7 +470,9 @@ def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPS
                     f"and the forces)")
     return (f"{who}: step size collapsed at t = {t:.6g} s: at the pace of the last {window} steps the rest of "
             f"the run would need more than {projected:.2g} steps; the state is growing without bound{largest} "
-            f"(check the initial state and the forces)")
+            f"(check the initial state and the forces), or a stiff force law (strong damping on light links) or "
+            f"contacts switching back and forth demand ever shorter explicit steps (then try an implicit method, "
+            f"method='Radau', or with contacts contact_mode='timestepping')")
 
 
 class RankLost(Exception):

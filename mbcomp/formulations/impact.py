@@ -165,3 +165,29 @@ def cone_impact_solve(kernel, formulation, t, q, qd, touching, involved, coeffic
             tangential[contacts[i].name] = cr.basis[r, 1:].T @ P[k + 1:k + 3]
     loss = 0.5 * (qd @ M @ qd - qd_plus @ M @ qd_plus)
     return Impact(qd_plus, impulses, float(loss), tuple(closed), tangential)
+
+
+def remove_slip(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, closed, stick, offsets=None) -> np.ndarray:
+    """Speeds after the slip left on the sticking contacts ``stick`` is removed, at a stick
+    transition: the kinetic-metric projection ``qd+ = qd + M^-1 J^T P`` onto ``J_t qd+ = 0``
+    for the two tangential rows of each contact in ``stick``, with every bilateral constraint's
+    and every closed contact's normal speed (``closed``) unchanged.  A stop is located where
+    the slip speed falls to a small threshold (``events.STOP_SPEED``), so this is the
+    tangential impulse that sliding on for the last few nanoseconds would have applied;
+    redundant rows share it by least norm."""
+    stick = [i for i in closed if i in set(stick)]
+    if not stick:
+        return qd
+    M, _ = kernel.dynamics(t, q, np.zeros_like(qd))
+    Minv = kernel.inverse(kernel.factor(M, q))
+    bilateral = formulation.constraint_values(kernel, t, q, np.zeros_like(qd), offsets)
+    rows = plane_contact_rows(kernel, q, qd, list(closed))
+    tangent = [rows.tangent[r] for r, i in enumerate(closed) if i in stick]
+    J = np.vstack([bilateral.J, rows.normal] + tangent)
+    target = J @ qd
+    target[J.shape[0] - 2 * len(stick):] = 0.0
+    independent = formulation.rows_of(J)
+    J, target = J[independent], target[independent]
+    Minv_JT = Minv @ J.T
+    P = np.linalg.lstsq(J @ Minv_JT, target - J @ qd, rcond=1e-10)[0]
+    return qd + Minv_JT @ P

@@ -8,12 +8,16 @@ import numpy as np
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.tolerances import EVENT_FORCE_XTOL, EVENT_GAP_XTOL, FORCE_ROUNDING
 from mbcomp.formulations.friction import CONE_TOLERANCE, Closed, friction_of, plane_contact_rows
-from mbcomp.formulations.impact import GAP_TOLERANCE, solve_impact
+from mbcomp.formulations.impact import GAP_TOLERANCE, remove_slip, solve_impact
 from mbcomp.core.result import Event
 
-#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip along its
-#: direction falls below minus this; above it, round-off of a slip held at zero.
-STOP_SPEED = 1e-9
+#: m/s: a sliding contact counts as stopped (a "stick" event) once its slip speed falls to
+#: this (or its slip along its direction crosses zero, whichever comes first); a contact set
+#: sliding slower than this (at a stick/slip transition) stops only when it slides back
+#: faster than this.  Ten times ``friction.DIRECTION_SPEED``, below which the sliding law's
+#: direction ``v / |v|`` is not used; small enough that stopping early moves a stick time
+#: by ``STOP_SPEED / deceleration`` (~1e-9 s at 10 m/s^2).
+STOP_SPEED = 1e-8
 
 
 class ContactWatch:
@@ -210,16 +214,31 @@ class ContactWatch:
                           brentq(margin, t_old, t_new, xtol=EVENT_FORCE_XTOL, rtol=4 * np.finfo(float).eps), ("slip", i)))
         for i in closed.slip:
             q_old, qd_old = state(t_old)
-            rows = plane_contact_rows(self.kernel, q_old, qd_old, [i])
-            v = rows.basis[0, 1:].T @ (rows.tangent[0] @ qd_old)
+            v = self.slip_velocity(q_old, qd_old, i)
             speed = float(np.linalg.norm(v))
             direction = v / speed if speed > 1e-12 else closed.slip[i]
             along_new = self.slip_speed(q_new, qd_new, i, direction)
-            if along_new > 0.0:
-                continue
-            # A contact sliding at zero speed from the step's start to its end at the cone's
-            # edge while sticking ones hold the body (redundant contacts) has nothing to stop.
-            if closed.stick and speed <= STOP_SPEED and along_new >= -STOP_SPEED:
+            if speed <= STOP_SPEED:
+                # Set sliding at (nearly) zero slip: by a stick/slip transition, or held by
+                # redundant sticking contacts at the cone's edge.  Nothing to stop unless it
+                # slides back against its direction.
+                if along_new >= -STOP_SPEED:
+                    continue
+            elif along_new > 0.0:
+                # Still sliding forward.  In the plane the slip velocity may turn as it
+                # decays (several contacts coupled), so its component along the step's start
+                # direction need not cross zero: the contact stops where its slip speed
+                # falls to STOP_SPEED (below it the sliding law's direction v / |v| is
+                # ill-conditioned and an explicit integrator chatters there).
+                if float(np.linalg.norm(self.slip_velocity(q_new, qd_new, i))) > STOP_SPEED:
+                    continue
+
+                def slower(s, i=i):
+                    return float(np.linalg.norm(self.slip_velocity(*state(s), i))) - STOP_SPEED
+
+                found.append((t_new if slower(t_new) > 0.0 else
+                              brentq(slower, t_old, t_new, xtol=EVENT_GAP_XTOL, rtol=4 * np.finfo(float).eps),
+                              ("stick", i)))
                 continue
 
             def along(s, i=i, direction=direction):
@@ -277,35 +296,41 @@ class ContactWatch:
                                          energy_loss=result.energy_loss))
         return result.qd, True
 
-    def open(self, contact, t=None, q=None, qd=None) -> None:
+    def open(self, contact, t=None, q=None, qd=None):
         """Act on what ``locate_release`` found at time ``t`` (state ``q, qd``): stop holding
         ``contact`` closed (its force reached zero: a ``"release"`` event), or for
         ``("slip", i)`` let the sticking contact slide along its force's opposite, or for
         ``("stick", i)`` let the sliding contact stick (``"stick"``), or slide the other
-        way when sticking needs more than the cone holds (``"slip"``)."""
+        way when sticking needs more than the cone holds (``"slip"``).  Returns the speeds
+        after it: at a stop, the slip left on the contacts that stopped (below
+        ``rest_speed``; ``STOP_SPEED`` on the one that stopped first) is removed
+        (``impact.remove_slip``)."""
         if isinstance(contact, tuple):
             kind, i = contact
             if kind == "slip":
                 excess = self.cone_excess(t, q, qd)
                 self.start_slip(t, i, excess[i][1] if i in excess else self._closed.slip.get(i, np.zeros(3)))
-                return
+                return qd
             # Every sliding contact that stopped with it tries to stick too (a box sliding
-            # on four corners stops on all four at once); settle() lets slide again those
-            # whose force the cone cannot hold.
+            # on four corners stops on all four at once): the slip they have left (below
+            # rest_speed; STOP_SPEED on contact i) is removed, and settle() lets slide again,
+            # from zero slip, those whose force the cone cannot hold.
             closed = self._closed
             stopped = {i} | {j for j, d in closed.slip.items()
                              if abs(self.slip_speed(q, qd, j, d)) < self.rest_speed
                              and float(np.linalg.norm(self.slip_velocity(q, qd, j))) < self.rest_speed}
             self._closed = Closed(closed, closed.stick | stopped,
                                   {j: d for j, d in closed.slip.items() if j not in stopped})
+            qd = remove_slip(self.kernel, self.formulation, t, q, qd, self._closed, stopped, self.offsets)
             before = len(self.events)
             self.settle(t, q, qd)
             slipped = {self.names.index(e.contact) for e in self.events[before:]}
             for j in sorted(stopped - slipped):
                 self.events.append(Event(time=float(t), contact=self.names[j], impulse=0.0, kind="stick"))
-            return
+            return qd
         self.persistent = tuple(i for i in self.persistent if i != contact)
         self.events.append(Event(time=float(t or 0.0), contact=self.names[contact], impulse=0.0, kind="release"))
+        return qd
 
     def release(self, t, q, qd) -> bool:
         """Open the persistent contacts whose force would pull (one at a time, most pulling

@@ -323,7 +323,7 @@ def _contact_step(watch, workspace, solver, recorder, gaps_old):
             watch.persistent = tuple(sorted(set(watch.persistent) | set(closing)))
         watch.settle(te, q, qd)  # friction modes of the contacts closed now
     else:
-        watch.open(release[1], te, q, qd)
+        qd = watch.open(release[1], te, q, qd)  # (a stick removes the slip left: new speeds)
         watch.release(te, q, qd)
     recorder.add_event_state(te, q, qd)
     return te, (te, q, qd), None, watch.gaps(q, qd).g
