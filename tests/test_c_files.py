@@ -26,10 +26,11 @@ C_LINE = re.compile(r";\s*$|^\s*[{}]\s*$|\bdouble\b|\bint\s+\w+\s*[=(;]")
 WARNINGS = ("-std=gnu99", "-Wall", "-Wextra", "-Werror")
 #: (library model, formulation, dynamics): a tree, a tree by the recursive program, a loop
 #: stepped by the lagrange loop (REDUCED_LOOP), a loop by the dae KKT solve on the recursive
-#: program, contacts, a quaternion joint, a motor.
+#: program, contacts, a quaternion joint, a motor, colliding shapes (the lagrange loop holding them).
 MODELS = [("double_pendulum", "lagrange", "dense"), ("five_link_pendulum", "lagrange", "recursive"),
           ("four_bar", "lagrange", "auto"), ("four_bar", "dae", "recursive"), ("bouncing_ball", "dae", "auto"),
-          ("spinning_top", "lagrange", "auto"), ("double_pendulum_motor", "dae", "auto")]
+          ("spinning_top", "lagrange", "auto"), ("double_pendulum_motor", "dae", "auto"),
+          ("newtons_cradle", "lagrange", "auto")]
 
 
 def c_blocks(path: Path) -> list[tuple[int, int]]:

@@ -121,10 +121,11 @@ def test_box_box_corner_on_a_face():
     lower = box((0, 0, 0), (1.0, 1.0, 0.5))
     upper = box((0.1, 0.0, 0.5 + 0.2 + 0.01), (0.2, 0.2, 0.2))
     feats = collide.features(lower, upper)
-    assert len(feats) == 16
-    gaps = sorted(f.gap for f in feats)
-    assert np.allclose(gaps[:4], 0.01)               # the upper box's 4 bottom corners
-    assert all(np.allclose(f.normal, [0, 0, 1]) for f in feats if abs(f.gap - 0.01) < 1e-12)
+    assert len(feats) == 25                          # 8 + 8 corners, 9 pairs of edge directions
+    gaps = sorted(f.gap for f in feats[:16])
+    assert np.allclose(gaps[:4], 0.01) and gaps[4] > 0.01 + 1e-9   # the upper box's 4 bottom corners
+    assert min(f.gap for f in feats[16:]) >= 0.01 - 1e-12           # no edge pair closer than the corners
+    assert all(np.allclose(f.normal, [0, 0, 1]) for f in feats[:16] if abs(f.gap - 0.01) < 1e-12)
 
 
 @pytest.mark.parametrize("seed", range(5))

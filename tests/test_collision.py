@@ -242,10 +242,12 @@ def test_bad_collisions_are_named():
         mb.Collision("e", plain, m.ground, restitution=1.5)
 
 
-def test_integration_path_says_collisions_step_in_python():
-    system = _two_spheres().compile()
-    path = system.integration_path()
-    assert path != "compiled" and "the model has collisions" in path
+def test_integration_path_of_collisions():
+    """Colliding shapes step in the compiled loops (their features measured in C:
+    codegen/c/collide.c); the dae formulation steps contacts on free joints in Python."""
+    assert _two_spheres().compile().integration_path() == "compiled"
+    path = _two_spheres().compile(formulation="dae").integration_path()
+    assert path.startswith("scipy: ") and "ball or free joints" in path
 
 
 def test_collisions_are_saved_and_read_back(tmp_path):

@@ -100,8 +100,6 @@ def test_both_formulations_give_the_same_motion(name):
 
 #: Library models that genuinely need Python stepping: name -> reason.
 NEEDS_PYTHON: dict[str, str] = {
-    "ball_on_box": "colliding shapes are measured and located in Python (docs/contacts.md)",
-    "newtons_cradle": "colliding shapes are measured and located in Python (docs/contacts.md)",
 }
 
 

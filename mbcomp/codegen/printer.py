@@ -448,6 +448,14 @@ def c_output_stubs(names) -> str:
     return "".join(c_late_stub(name, f"{name.upper()}_SIZE", f"set_{name}_impl") for name in names)
 
 
+def c_collide() -> str:
+    """C of the collision features' narrow phase in the compiled loops (``c/collide.c``):
+    gaps, Jacobian rows and acceleration biases of the candidate features from the body
+    kinematics, configured per thread by ``mbcomp.compiled.collision_c``.  In every model's
+    templates (a model without collisions never configures it)."""
+    return c_text.read("mbcomp.codegen", "collide.c") + "\n\n"
+
+
 def c_accelerations(nq: int | None = None) -> str:
     """C source of ``int accelerations(q, qd, p, u, tau, qdd, work)``: the tree's
     ``M qdd = f + tau`` solved by an in-place Cholesky factorisation of the packed

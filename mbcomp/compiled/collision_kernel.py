@@ -18,8 +18,11 @@ body kinematics at each call:
 - the acceleration bias (``gddot = J qdd + bias``) is ``n . (a_b - a_a)`` at zero
   generalised acceleration, plus ``2 (w x n) . (v_b - v_a)`` for a face normal turning with
   its body, or ``(|dv|^2 - (n . dv)^2) / |pb - pa|`` for a normal along the line between two
-  rounded features (exact for spheres; for a point sliding on a capsule's axis the sliding
-  term is left out).
+  rounded features, with the terms of points sliding along a capsule's axis or a box's edge
+  and of two edges' normal turning (``collide.turning_term``: exact).
+
+The compiled loops compute the same numbers in C (``c/collide.c``, configured per compiled
+stretch by ``CollisionKernel.compiled_stretch``: ``mbcomp.compiled.collision_c``).
 """
 from __future__ import annotations
 
@@ -355,6 +358,51 @@ class CollisionKernel:
         J = RowMatrix(nk, np.asarray(own.J).reshape(self.n_own, nv), rows, block)
         return ConstraintValues(g, J, np.zeros(nk), bias)
 
+    def body_masks(self) -> np.ndarray:
+        """(bodies, nv): 1 where a speed moves the body (its column enters the body's velocity)."""
+        return self._masks()
+
+    def bounding_state(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per entry: its bounding sphere's centre (world, m), the speed bound of its points
+        (m/s: the centre's speed plus the angular speed times the bounding radius), and
+        whether it moves (a finite shape on a moving body)."""
+        fields, _ = self._bodies(q, qd)
+        R = np.concatenate((fields["rotation"], np.eye(3)[None]), axis=0)      # row -1: the ground
+        O = np.concatenate((fields["origin"], np.zeros((1, 3))), axis=0)
+        V = np.concatenate((fields["velocity"], np.zeros((1, 6))), axis=0)
+        centres = O[self.entry_body] + np.einsum("eij,ej->ei", R[self.entry_body], self.entry_local)
+        Ve = V[self.entry_body]
+        w = Ve[:, :3]
+        speeds = np.linalg.norm(Ve[:, 3:] + collide.cross(w, centres), axis=1) + np.linalg.norm(w, axis=1) * self.entry_radius
+        return centres, speeds, self.finite & (self.entry_body >= 0)
+
+    def near_pair_indices(self, centres: np.ndarray, margin: float) -> list[int]:
+        """Indices of the pairs that may touch within ``margin`` (m): bounding spheres within
+        it (k-d tree), a bounding sphere within it of a fixed plane, and every pair with a
+        plane on a moving body."""
+        finite = np.flatnonzero(self.finite)
+        near = collide.near_pairs(centres[finite], self.entry_radius[finite], margin) if len(finite) else set()
+        chosen = []
+        if len(self.plane_pairs):
+            planes, others = self.plane_side[:, 0], self.plane_side[:, 1]
+            moving = self.entry_body[planes] >= 0
+            n = self.entry_normal[planes]   # (fixed planes: the ground's frame is the world)
+            height = np.einsum("ij,ij->i", n, centres[others] - centres[planes]) - self.entry_radius[others]
+            chosen.extend(self.plane_pairs[(height <= margin) | moving].tolist())
+        for i, j in near:
+            a, b = int(finite[i]), int(finite[j])
+            k = self.pair_of.get((a, b), self.pair_of.get((b, a)))
+            if k is not None:
+                chosen.append(k)
+        return chosen
+
+    def compiled_stretch(self, lib, q: np.ndarray, qd: np.ndarray, held=()):
+        """The C narrow phase configured for a compiled stretch from ``(q, qd)`` with the held
+        contacts ``held`` (``collision_c.CollisionStretch``: close it after the stretch)."""
+        from mbcomp.compiled.collision_c import CollisionStretch
+        self.base.kinematics(q, qd)   # (loads the kinematics the C calls)
+        return CollisionStretch(self, lib, q, qd, held)
+
     def _masks(self) -> np.ndarray:
         masks = self.__dict__.get("_mask_cache")
         if masks is None:
@@ -387,7 +435,11 @@ class CollisionKernel:
         line = (np.einsum("ij,ij->i", dv, dv) - along * along) / dist
         w = np.where((owner == collide.OWNER_A)[:, None], wa, wb)
         face = 2.0 * np.einsum("ij,ij->i", collide.cross(w, n), dv)
-        return value + np.where(owner == collide.OWNER_LINE, line, face)
+        out = value + np.where(owner == collide.OWNER_LINE, line, face)
+        for k, f in enumerate(feats):  # sliding points and edge pairs: their own terms
+            if f.owner == collide.OWNER_EDGE or f.slide_a is not None or f.slide_b is not None:
+                out[k] = value[k] + collide.turning_term(f, dv[k], wa[k], wb[k])
+        return out
 
     def gap_of(self, q: np.ndarray, qd: np.ndarray, index: int) -> float:
         """Contact ``index``'s gap (m) alone: a collision feature's exact gap from its own pair

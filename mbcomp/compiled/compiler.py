@@ -71,8 +71,13 @@ class CompiledModel:
         #: The lagrange formulation's reduced loop is compiled in (constraints or contacts, with
         #: quaternions stepped in their chart; drive states only without contacts: see
         #: formulations/lagrange_c.py).
-        self.reduced_loop = ((self.constraint_set is not None or bool(self.topology.contacts))
-                             and not (self.drives.nz and self.topology.contacts))
+        from mbcomp.spec.components.collision import Collision
+        #: Contact rows in the compiled loops: the model's contacts, or the features of its
+        #: collisions (measured in C: codegen/c/collide.c).
+        self.contact_rows = bool(self.topology.contacts) or any(
+            isinstance(c, Collision) for c in self.topology.components.values())
+        self.reduced_loop = ((self.constraint_set is not None or self.contact_rows)
+                             and not (self.drives.nz and self.contact_rows))
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)
@@ -80,7 +85,7 @@ class CompiledModel:
         self.dynamics = recursive.choose(dynamics, self.topology, f"Model {self.model_name!r}", formulation)
         #: The C library leaves out the dense dynamics (mass matrix, forces), which the
         #: recursive right-hand side never calls, and builds them on first use (``dense_library``).
-        self.lazy_dense = "dynamics" in recursive.cold_functions(self.dynamics, self.topology)
+        self.lazy_dense = "dynamics" in self._cold_dynamics()
         #: Where each output quantity sits in the generated functions' packed outputs.
         self.output_layout = OutputLayout.of(self.topology.nv, len(self.topology.bodies), len(self.geometric_rows),
                                              len(self.topology.contacts), self.drives.nz)
@@ -105,6 +110,11 @@ class CompiledModel:
             from mbcomp.core.errors import CompileError
             raise CompileError(f"Model {self.model_name!r}", build_failure(exc)) from None
         self.compile_time = time.perf_counter() - started
+
+    def _cold_dynamics(self) -> tuple[str, ...]:
+        """``recursive.cold_functions``, none with collision features (whose contact rows the
+        compiled loops hold with the dense dynamics, as a model's own contacts)."""
+        return () if self.contact_rows else recursive.cold_functions(self.dynamics, self.topology)
 
     def _check_names(self) -> None:
         """The naming rule (``mbcomp.core.names``): no coordinate, speed column, state or parameter
@@ -217,10 +227,10 @@ class CompiledModel:
         lazy_dense = self.lazy_dense if lazy_dense is None else lazy_dense
         reduced_loop = self.reduced_loop if reduced_loop is None else reduced_loop
         reduced = "#define REDUCED_LOOP 1\n" if reduced_loop else ""
-        if self.constraint_set is not None or self.topology.contacts:  # the dae KKT solve (formulations/dae_c.py)
+        if self.constraint_set is not None or self.contact_rows:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
         return (reduced + sizes.header() + (codegen.c_dense_stub() if lazy_dense else "")
-                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree
+                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree + codegen.c_collide()
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"
@@ -275,7 +285,7 @@ class CompiledModel:
         # Built apart, later: the dense dynamics of lazy_dense and the output functions.
         apart = OUTPUT_FUNCTIONS + (("dynamics",) if self.lazy_dense else ())
         functions = {f: outs for f, outs in self._functions().items() if f not in apart}
-        cold = COLD_FUNCTIONS + recursive.cold_functions(self.dynamics, self.topology)
+        cold = COLD_FUNCTIONS + self._cold_dynamics()
         build = CBuild(compiler)
         try:
             # The templates compile on another core while sympy generates the program; each

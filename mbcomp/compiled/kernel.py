@@ -104,6 +104,11 @@ class Kernel:
         out = self.layout.unpack("energy", self.call("energy", q, qd))
         return float(out["kinetic"]), float(out["potential"])
 
+    def compiled_stretch(self, lib, q: np.ndarray, qd: np.ndarray, held=()):
+        """What a compiled stretch of contact watching configures beyond the model's own
+        contacts (a ``CollisionKernel``'s collision features); None here."""
+        return None
+
     def kinematics(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per body rows (``layout.BODY_FIELDS``: rotation, origin, velocity ``(w, v0)``,
         acceleration bias; split them with ``layout.body_fields``), and the world-frame motion

@@ -77,13 +77,21 @@ PAINLEVE = 1e-9
 #: count as inconsistent.  C ``MB_FRICTION_RESIDUAL``.
 FRICTION_RESIDUAL = 1e-6
 
+#: A held contact's normal force counts as pulling in the compiled loops' contact watch
+#: when below minus this fraction of the largest held force: redundant held rows (a box's
+#: four corners on a plane) leave one multiplier at zero, which rounding makes -1e-16
+#: relative, and a watch stopping there would stop at every step.  C name
+#: ``MB_FORCE_ROUNDING``.
+FORCE_ROUNDING = 1e-9
+
 #: ``{C name: value}`` of every constant the C files read.
 C_NAMES = {"MB_PIVOT_TOLERANCE": PIVOT_TOLERANCE, "MB_RANK_TOLERANCE": RANK_TOLERANCE,
            "MB_REST_SPEED": REST_SPEED, "MB_PROJECTION_RESIDUAL": PROJECTION_RESIDUAL,
            "MB_STICK_RATE": STICK_RATE, "MB_DIRECTION_SPEED": DIRECTION_SPEED,
            "MB_CONE_TOLERANCE": CONE_TOLERANCE, "MB_CONE_FLOOR": CONE_FLOOR, "MB_STOP_SPEED": STOP_SPEED,
            "MB_SLIP_FLOOR": SLIP_FLOOR, "MB_FRICTION_RCOND": FRICTION_RCOND, "MB_PAINLEVE": PAINLEVE,
-           "MB_FRICTION_RESIDUAL": FRICTION_RESIDUAL}
+           "MB_FRICTION_RESIDUAL": FRICTION_RESIDUAL,
+           "MB_FORCE_ROUNDING": FORCE_ROUNDING}
 
 
 def c_defines() -> str:

@@ -159,7 +159,8 @@ class Formulation:
     def row_names(self, rows, contacts=()) -> list[str]:
         """Names of the constraints (or contacts) owning the given equation rows."""
         names = [] if self.constraints is None else list(self.constraints.owner)
-        names += [self.compiled.topology.contacts[i].name for i in contacts]
+        own = self.compiled.topology.contacts   # (collision features follow the model's own contacts)
+        names += [own[i].name if i < len(own) else f"collision feature {i - len(own)}" for i in contacts]
         return sorted({names[r] for r in rows if r < len(names)})
 
     def motor_offsets(self, q0: np.ndarray, t0: float) -> dict:

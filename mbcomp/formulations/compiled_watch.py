@@ -30,6 +30,8 @@ class ContactWatching(LoopSession):
     function of the formulation (``dae_watch``, ``lagrange_watch``)."""
 
     WATCH = ""
+    #: The longest step (s) of the stretch (collision features: ``CollisionStretch.step_cap``).
+    step_cap = float("inf")
 
     def watch_contacts(self, gaps: np.ndarray, gap_tolerance: float) -> None:
         """Check every accepted step for contact events: ``gaps`` of every contact at the

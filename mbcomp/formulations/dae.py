@@ -70,7 +70,7 @@ class DaeFormulation(Formulation):
         return c_dae_accelerations(nv, ng)
 
     def compiled_loop(self) -> str | None:
-        if self.constraints is None and not self.compiled.topology.contacts:
+        if self.constraints is None and not self.compiled.contact_rows:
             return None
         if self.projection:
             return "projection=True steps in Python"
@@ -78,7 +78,7 @@ class DaeFormulation(Formulation):
             if program is None:
                 return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
                         f"which is evaluated in Python")
-        if self.compiled.topology.contacts:
+        if self.compiled.contact_rows:  # (contacts or collision features)
             if not self.compiled.topology.state_map.identity:
                 return "the dae formulation steps contacts on ball or free joints in Python"
             if self.compiled.drives.elements:
@@ -91,7 +91,7 @@ class DaeFormulation(Formulation):
         """The compiled KKT solve on the tree state (``Formulation.scipy_stretch``): the rows of
         the constraints (``compiled_setup``) or, with contacts, of the stretch between events
         (``DaeRun``: the held contacts' rows too)."""
-        if not self.compiled.topology.contacts:
+        if not self.compiled.contact_rows:   # (contacts or collision features)
             return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
         from mbcomp.codegen.integrators import compiled_jacobian
         from mbcomp.formulations.compiled_rhs import Stretch, CompiledRhsWorkspace

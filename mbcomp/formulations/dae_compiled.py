@@ -154,6 +154,10 @@ class DaeRun(ContactWatching):
             self.friction = FrictionRows(kernel, lib, self.contacts, {i: nc + r for r, i in enumerate(self.contacts)},
                                          len(rows), q0, qd0)
         self.nc = nc
+        # collision features: the C narrow phase on this stretch's candidates (compiled/collision_c.py)
+        self.collisions = kernel.compiled_stretch(lib, q0, qd0, self.contacts)
+        if self.collisions is not None:
+            self.step_cap = self.collisions.step_cap
 
     def _rows(self, t0, q0):
         """The KKT rows at the stretch's start: the nominal rows without held contacts, else
@@ -191,6 +195,8 @@ class DaeRun(ContactWatching):
             self.friction.close()
         if self.dae_rows is not None:
             self.dae_rows.close()
+        if self.collisions is not None:
+            self.collisions.close()
         if self.event is not None:
             self.lib.dae_watch(0, None, None, 0.0, None)
 

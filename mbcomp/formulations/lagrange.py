@@ -225,7 +225,7 @@ class LagrangeFormulation(Formulation):
     def compiled_methods(self) -> tuple[str, ...]:
         """The compiled loops this formulation can step in: DOP853 only with constraints or
         contacts (the reduced loop has no fixed-step variant)."""
-        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.topology.contacts else ("DOP853",)
+        return ("DOP853", "RK4") if self.constraints is None and not self.compiled.contact_rows else ("DOP853",)
 
     @property
     def compiled_contacts(self) -> bool:
@@ -237,7 +237,7 @@ class LagrangeFormulation(Formulation):
         if self.constraints is None:
             return None
         topology = self.compiled.topology
-        if self.compiled.drives.nz and topology.contacts:
+        if self.compiled.drives.nz and self.compiled.contact_rows:
             return "the lagrange formulation steps models with drive states and contacts in Python"
         from mbcomp.codegen.expressions_c import NotCompilable
         from mbcomp.formulations.lagrange_compiled import motor_programs
@@ -260,12 +260,12 @@ class LagrangeFormulation(Formulation):
         """The compiled reduced right-hand side (``Formulation.scipy_stretch``): with
         constraints or contacts, a ``ReducedRun``'s configuration stepped by scipy
         (``compiled_rhs.CompiledReducedWorkspace``)."""
-        if self.constraints is None and not self.compiled.topology.contacts:
+        if self.constraints is None and not self.compiled.contact_rows:   # (contacts or collision features)
             return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
         from mbcomp.formulations.compiled_rhs import CompiledReducedWorkspace, Stretch
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         run = ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
-        if self.compiled.topology.contacts:  # (armed, the C code evaluates the held contacts' gaps)
+        if self.compiled.contact_rows:  # (armed, the C code evaluates the held contacts' gaps)
             from mbcomp.formulations.impact import GAP_TOLERANCE
             run.watch_contacts(kernel.contacts(q0, qd0).g, GAP_TOLERANCE)
         return Stretch(CompiledReducedWorkspace(run, method), run.close)

@@ -148,6 +148,10 @@ class ReducedRun(ContactWatching):
         drives = lib.lagrange_drives
         drives.argtypes, drives.restype = [_INT], ctypes.c_int
         drives(int(bool(kernel.compiled.drives.elements)))  # (their states follow [q_i, qd_i] in y)
+        # collision features: the C narrow phase on this stretch's candidates (compiled/collision_c.py)
+        self.collisions = kernel.compiled_stretch(lib, q0, qd0, self.contacts)
+        if self.collisions is not None:
+            self.step_cap = self.collisions.step_cap
 
     def loop(self, lib):
         """The reduced loop (``dop853_reduced_run``): it steps ``[q_i, qd_i, z]``."""
@@ -220,6 +224,8 @@ class ReducedRun(ContactWatching):
     def close(self) -> None:
         if getattr(self, "friction", None) is not None:
             self.friction.close()
+        if getattr(self, "collisions", None) is not None:
+            self.collisions.close()
         self.lib.lagrange_configure(-1, None, None, None, None, None, 0, None, None, 0, None, 0, None, None, 0, None,
                                     0.0, 0.0, None, None)
         self.lib.lagrange_drives(0)

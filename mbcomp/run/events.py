@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mbcomp.core.errors import SimulationError
-from mbcomp.core.tolerances import CONE_FLOOR, CONE_TOLERANCE, EVENT_FORCE_XTOL, EVENT_GAP_XTOL, SLIP_FLOOR, STOP_SPEED
+from mbcomp.core.tolerances import CONE_FLOOR, CONE_TOLERANCE, EVENT_FORCE_XTOL, EVENT_GAP_XTOL, FORCE_ROUNDING,
+                                    SLIP_FLOOR, STOP_SPEED
 from mbcomp.formulations.friction import Closed, friction_of, plane_contact_rows
 from mbcomp.formulations.impact import GAP_TOLERANCE, remove_slip, solve_impact
 from mbcomp.core.result import Event
@@ -256,7 +257,7 @@ class ContactWatch:
         """``(time, contact index)``: the earliest time in [t_old, t_new] at which a persistent
         contact's normal force reaches 0 (None when every force still pushes at t_new)."""
         forces = self.contact_forces(t_new, q_new, qd_new)
-        if forces.min() >= 0.0:
+        if forces.min() >= -FORCE_ROUNDING * np.abs(forces).max():   # (rounding: as the compiled watches)
             return None
         k = int(np.argmin(forces))
 

@@ -424,7 +424,7 @@ class CompiledStepping:
             i_out = np.array([recorder.next], dtype=np.int64)
             try:
                 status, steps_t, steps_y, y, f = dop853_segment(
-                    kernel, segment.loop(lib), self.hook, segment, o.replace(method="DOP853", max_step=self.max_step),
+                    kernel, segment.loop(lib), self.hook, segment, o.replace(method="DOP853", max_step=min(self.max_step, segment.step_cap)),
                     state, y, np.empty_like(y), self.tau_ptr, counts, t_out, i_out, y_out, budget=self.budget,
                     stored=len(recorder.t))
             except SimulationError:

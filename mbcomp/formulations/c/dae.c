@@ -23,7 +23,7 @@ static __thread const double *dae_data;           /* per row: speed, offset */
 static __thread const double *dae_programs;
 static __thread double dae_alpha, dae_beta, dae_scale, dae_tol = MB_RANK_TOLERANCE;
 static __thread double dae_time = 0.0;            /* the time of the state being evaluated */
-static __thread int dae_has_geo, dae_has_contacts;
+static __thread int dae_has_geo, dae_has_contacts, dae_has_collisions;
 static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
 
 /* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
@@ -32,10 +32,13 @@ double dae_motor_failure(void) {
 }
 
 static void dae_scan(void) {
-    dae_has_geo = dae_has_contacts = 0;
+    dae_has_geo = dae_has_contacts = dae_has_collisions = 0;
     for (int k = 0; k < dae_nr; ++k) {
         if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_GEOMETRIC) dae_has_geo = 1;
-        if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT) dae_has_contacts = 1;
+        if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT) {
+            if (dae_spec[DAE_SPEC_LONGS * k + 1] < DAE_NK) dae_has_contacts = 1;
+            else dae_has_collisions = 1;  /* a collision feature (codegen/c/collide.c) */
+        }
     }
 }
 
@@ -68,6 +71,7 @@ static void dae_rows_eval(const double *q, const double *qd, const double *p, co
     double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ, *bias = gt + DAE_NR;
     if (MB_HAS_NG && dae_has_geo) constraints(q, qd, p, u, c);
     if (MB_HAS_CONTACTS && dae_has_contacts) contacts(q, qd, p, u, kc);
+    if (dae_has_collisions) mb_collide_eval(q, qd, p);
     (void)c; (void)kc;
     for (int k = 0; k < dae_nr; ++k) {
         const long *s = dae_spec + DAE_SPEC_LONGS * k;
@@ -78,6 +82,12 @@ static void dae_rows_eval(const double *q, const double *qd, const double *p, co
             for (int i = 0; i < NQ; ++i) Jr[i] = c[CONSTRAINTS_JACOBIAN_OFF + j * NQ + i];
             gt[k] = 0.0;
             bias[k] = c[CONSTRAINTS_BIAS_OFF + j];
+        } else if (s[0] == DAE_ROW_CONTACT && j >= DAE_NK) {  /* a collision feature */
+            gt[k] = 0.0;
+            if (mb_collide_row(j - DAE_NK, g + k, Jr, bias + k)) {
+                g[k] = bias[k] = NAN;
+                for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
+            }
         } else if (s[0] == DAE_ROW_CONTACT) {
             g[k] = kc[CONTACTS_GAP_OFF + j];
             for (int i = 0; i < NQ; ++i) Jr[i] = kc[CONTACTS_JACOBIAN_OFF + j * NQ + i];
@@ -294,18 +304,29 @@ static int dae_event(double t, const double *y, const double *p) {
     double kc[CONTACTS_SIZE + 1], u[1] = {0.0};
     (void)t;
     int event = 0;
-    if (!MB_HAS_CONTACTS) return 0;
-    contacts(y, y + NQ, p, u, kc);
+    const int own = dae_nk < DAE_NK ? dae_nk : DAE_NK, features = dae_nk > DAE_NK && mb_collide_count();
+    if (!MB_HAS_CONTACTS && !features) return 0;
+    if (MB_HAS_CONTACTS) contacts(y, y + NQ, p, u, kc);
+    if (features) mb_collide_eval(y, y + NQ, p);  /* the candidate collision features (collide.c) */
     for (int k = 0; k < dae_nk; ++k) {
         if (dae_held[k]) continue;
-        const double g0 = dae_gaps[k], g1 = kc[CONTACTS_GAP_OFF + k];
+        const double g0 = dae_gaps[k], g1 = k < own ? kc[CONTACTS_GAP_OFF + k] : mb_collide_gap_of(k - DAE_NK);
         if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -dae_gap_tol && -dae_gap_tol < g0)) event = 1;
     }
-    if (!event)
+    if (!event) {  /* a held force pulling (beyond rounding: MB_FORCE_ROUNDING) */
+        double most = 0.0;
         for (int k = 0; k < dae_nr; ++k)
-            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < 0.0) event = 1;
+            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && fabs(dae_lam[k]) > most) most = fabs(dae_lam[k]);
+        for (int k = 0; k < dae_nr; ++k)
+            if (dae_spec[DAE_SPEC_LONGS * k] == DAE_ROW_CONTACT && dae_lam[k] < -MB_FORCE_ROUNDING * most) event = 1;
+    }
     if (!event && mb_fr_n > 0) event = mb_friction_event();  /* (the friction solve's, at (t, y) too) */
-    if (!event) for (int k = 0; k < dae_nk; ++k) dae_gaps[k] = kc[CONTACTS_GAP_OFF + k];
+    if (!event && features && mb_collide_leaves()) event = 1;  /* a new broad phase: Python finds no event */
+    if (!event)
+        for (int k = 0; k < dae_nk; ++k) {
+            const double g1 = k < own ? kc[CONTACTS_GAP_OFF + k] : mb_collide_gap_of(k - DAE_NK);
+            if (g1 == g1) dae_gaps[k] = g1;  /* (a feature that is not a candidate keeps its bound) */
+        }
     return event;
 }
 
@@ -317,6 +338,7 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
                   const double *p) {
     double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {0.0};
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    if (k >= DAE_NK) return mb_collide_gap(k - DAE_NK, y, y + NQ, p);  /* a collision feature */
     if (!MB_HAS_CONTACTS) return NAN;
     contacts(y, y + NQ, p, u, kc);
     return kc[CONTACTS_GAP_OFF + k];

@@ -180,6 +180,8 @@ static const double *lag_drive_forces(double t, const double *q, const double *q
 /* the contact watch: nk contacts, held[k] (1: a persistent row), gaps at the last accepted
    step (updated), tolerance; ev: [t_new, y_new, f_new, F (7 rows)] of an event step */
 static __thread int lag_nk = 0;
+/* the model's own contacts (the watched ones after them are collision features, collide.c) */
+#define LAG_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
 static __thread const long *lag_held;
 static __thread double *lag_gaps, *lag_ev, lag_gap_tol;  /* lag_kc (CONTACTS_SIZE + 1): c_sizes.py */
 
@@ -246,11 +248,22 @@ int lagrange_configure(int nc, const long *geo, const long *mq, const long *mv, 
 static int lag_values(double t, const double *q, const double *qd, const double *p) {
     lag_bad = 0;
     constraints(q, qd, p, lag_u, lag_c);
-    if (lag_nk) contacts(q, qd, p, lag_u, lag_kc);
+    if (lag_nk && MB_HAS_CONTACTS) contacts(q, qd, p, lag_u, lag_kc);
+    for (int r = 0; r < lag_nc; ++r)
+        if (lag_geo[r] <= -2 - LAG_NK) {  /* a held collision feature: measure the candidates (collide.c) */
+            mb_collide_eval(q, qd, p);
+            break;
+        }
     for (int r = 0; r < lag_nc; ++r) {
         double *Jr = lag_J + (long)r * NQ;
         const long j = lag_geo[r];
-        if (j <= -2) {  /* a contact held closed: its gap */
+        if (j <= -2 - LAG_NK) {  /* a collision feature held closed */
+            lag_gt[r] = 0.0;
+            if (mb_collide_row(-2 - j - LAG_NK, lag_g + r, Jr, lag_bias + r)) {
+                lag_g[r] = lag_bias[r] = NAN;
+                for (int i = 0; i < NQ; ++i) Jr[i] = 0.0;
+            }
+        } else if (j <= -2) {  /* a contact held closed: its gap */
             const long k = -2 - j;
             lag_g[r] = lag_kc[CONTACTS_GAP_OFF + k];
             for (int i = 0; i < NQ; ++i) Jr[i] = lag_kc[CONTACTS_JACOBIAN_OFF + k * NQ + i];
@@ -457,6 +470,20 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    if (nr == 0 && lag_nc == 0 && ni == n && !HAS_DRIVES) {
+        /* no row held (colliding shapes apart): the tree's own accelerations, by the recursive
+           program where the model has it, instead of the dense reduced solve */
+        double *qdd = lag_eig;
+        if (accelerations(q, qd, p, lag_u, tau, qdd, lag_dyn)) return 1;
+        for (int k = 0; k < ni; ++k) f[nqi + k] = qdd[lag_ind[k]];
+        if (MB_HAS_QUAT) {
+            lag_chart_rate(lag_x, qd, lag_rate);
+            for (int k = 0; k < nqi; ++k) f[k] = lag_rate[lag_qind[k]];
+        } else {
+            for (int k = 0; k < nqi; ++k) f[k] = qd[lag_qind[k]];
+        }
+        return 0;
+    }
     dynamics(q, qd, p, lag_u, lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
@@ -722,6 +749,7 @@ double lagrange_gap_at(double s, double t_old, double h, const double *y_old, co
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
+    if (k >= LAG_NK) return mb_collide_gap(k - LAG_NK, q, qd, p);  /* a collision feature */
     contacts(q, qd, p, lag_u, lag_kc);
     return lag_kc[CONTACTS_GAP_OFF + k];
 }
@@ -763,20 +791,25 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
-    contacts(q, qd, p, lag_u, lag_kc);
+    const int own = lag_nk < LAG_NK ? lag_nk : LAG_NK, features = lag_nk > LAG_NK && mb_collide_count();
+    if (MB_HAS_CONTACTS) contacts(q, qd, p, lag_u, lag_kc);
+    if (features) mb_collide_eval(q, qd, p);  /* the candidate collision features (collide.c) */
     const double *gap = lag_kc + CONTACTS_GAP_OFF;
     int event = 0, held = 0;
     for (int k = 0; k < lag_nk; ++k) {
         if (lag_held[k]) { held = 1; continue; }
-        const double g0 = lag_gaps[k], g1 = gap[k];
+        const double g0 = lag_gaps[k], g1 = k < own ? gap[k] : mb_collide_gap_of(k - LAG_NK);
         if ((g1 < 0.0 && 0.0 <= g0) || (g1 < -lag_gap_tol && -lag_gap_tol < g0)) event = 1;
     }
     if (!event && held && nr) {  /* the held contacts' forces */
         double *lam;
         status = lag_held_forces(t, y, p, tau, &lam);
         if (status) return status;
+        double most = 0.0;  /* a held force pulling (beyond rounding: MB_FORCE_ROUNDING) */
         for (int a = 0; a < nr; ++a)
-            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < 0.0) event = 1;
+            if (lag_geo[lag_rows[a]] <= -2 && fabs(lam[a]) > most) most = fabs(lam[a]);
+        for (int a = 0; a < nr; ++a)
+            if (lag_geo[lag_rows[a]] <= -2 && lam[a] < -MB_FORCE_ROUNDING * most) event = 1;
     }
     if (!event && mb_fr_n > 0) {  /* friction modes: from a solve at (t, y) */
         if (!(held && nr)) {
@@ -785,7 +818,12 @@ int lagrange_event(double t, const double *y, const double *p, const double *tau
         }
         event = mb_friction_event();
     }
-    if (!event) for (int k = 0; k < lag_nk; ++k) lag_gaps[k] = gap[k];
+    if (!event && features && mb_collide_leaves()) event = 1;  /* a new broad phase: Python finds no event */
+    if (!event)
+        for (int k = 0; k < lag_nk; ++k) {
+            const double g1 = k < own ? gap[k] : mb_collide_gap_of(k - LAG_NK);
+            if (g1 == g1) lag_gaps[k] = g1;  /* (a feature that is not a candidate keeps its bound) */
+        }
     return event;
 }
 
