@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from mbcomp.core.errors import SimulationError
-from mbcomp.core.tolerances import CONE_FLOOR, CONE_TOLERANCE, EVENT_FORCE_XTOL, EVENT_GAP_XTOL, FORCE_ROUNDING,
-                                    SLIP_FLOOR, STOP_SPEED
+from mbcomp.core.tolerances import (CONE_FLOOR, CONE_TOLERANCE, EVENT_FORCE_XTOL, EVENT_GAP_XTOL, FORCE_ROUNDING,
+                                    SLIP_FLOOR, STOP_SPEED)
 from mbcomp.formulations.friction import Closed, friction_of, plane_contact_rows
 from mbcomp.formulations.impact import GAP_TOLERANCE, remove_slip, solve_impact
 from mbcomp.core.result import Event
