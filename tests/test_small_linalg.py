@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from mbcomp.core.small_linalg import orthonormal_basis, pivoted_qr, solve
+from mbcomp.core.small_linalg import least_norm, orthonormal_basis, pivoted_qr, solve
+from mbcomp.core.errors import SimulationError
 
 
 def matrices():
@@ -71,3 +72,16 @@ def test_solve_refuses_a_singular_matrix_and_mismatched_shapes():
     with pytest.raises(ValueError, match="rows"):
         solve(np.eye(2), np.ones(3))
     assert solve(np.zeros((0, 0)), np.zeros(0)).shape == (0,)
+
+
+def test_least_norm_is_lstsq_and_names_what_failed():
+    """The least-norm solution of a rank-deficient system equals numpy's; a non-finite system
+    is a SimulationError naming what was solved (never numpy's LinAlgError)."""
+    a = np.array([[1.0, 2.0], [2.0, 4.0], [0.0, 0.0]])
+    b = np.array([1.0, 2.0, 0.0])
+    x = least_norm(a, b, 1e-10, "test rows")
+    np.testing.assert_array_equal(x, np.linalg.lstsq(a, b, rcond=1e-10)[0])
+    np.testing.assert_allclose(x, [0.2, 0.4], rtol=1e-14)  # the shortest x with x0 + 2 x1 = 1
+    a[0, 0] = np.nan
+    with pytest.raises(SimulationError, match="test rows: the system to solve is not finite"):
+        least_norm(a, b, 1e-10, "test rows")

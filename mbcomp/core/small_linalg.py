@@ -92,3 +92,19 @@ def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if info < 0:
         raise ValueError(f"illegal value in {-info}th argument of internal gesv")
     return x
+
+
+def least_norm(a: np.ndarray, b: np.ndarray, rcond: float | None, what: str) -> np.ndarray:
+    """The least-norm least-squares ``x`` of ``a x ~ b`` (``numpy.linalg.lstsq``: singular
+    values below ``rcond`` times the largest dropped), or a ``SimulationError`` saying
+    ``what`` was being solved when the system is not finite or the SVD does not converge
+    (numpy's ``LinAlgError`` names neither the model nor the cause)."""
+    from mbcomp.core.errors import SimulationError
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise SimulationError(f"{what}: the system to solve is not finite (a state or force grew without bound)")
+    try:
+        return np.linalg.lstsq(a, b, rcond=rcond)[0]
+    except np.linalg.LinAlgError as exc:
+        raise SimulationError(f"{what}: the least-squares solve failed ({exc}); the contact or constraint rows "
+                              f"are degenerate there") from None

@@ -36,6 +36,7 @@ from mbcomp.core.errors import SimulationError
 from mbcomp.core.tolerances import (CONE_TOLERANCE, DIRECTION_SPEED, FRICTION_RCOND,  # noqa: F401 (CONE_TOLERANCE: re-exported)
                                     FRICTION_RESIDUAL, PAINLEVE, STICK_RATE)
 from mbcomp.core.rotations import cross
+from mbcomp.core.small_linalg import least_norm
 
 #: Sweeps of the impact's projected Gauss-Seidel, and its relative convergence tolerance (on
 #: the change of the velocities a sweep produces).
@@ -207,7 +208,7 @@ def solve_sliding(Minv: np.ndarray, f: np.ndarray, J: np.ndarray, rhs: np.ndarra
     for k in sliding_rows:
         if A[k, k] <= PAINLEVE * scale:
             raise SimulationError(painleve_message(t, where, A[k, k]))
-    lam = np.linalg.lstsq(A, b, rcond=FRICTION_RCOND)[0]  # (least norm: redundant rows share the load)
+    lam = least_norm(A, b, FRICTION_RCOND, f"the friction solve at t = {t:g} ({where})")  # (least norm: redundant rows share the load)
     residual = float(np.abs(A @ lam - b).max(initial=0.0))
     if residual > FRICTION_RESIDUAL * max(1.0, float(np.abs(b).max(initial=0.0))):
         raise SimulationError(inconsistent_message(t, where, residual))

@@ -7,6 +7,7 @@ import numpy as np
 
 from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.core.small_linalg import least_norm
 from mbcomp.formulations.friction import cone_impact, friction_of, plane_contact_rows
 
 #: A contact counts as closed when its gap is below this (m).
@@ -189,5 +190,5 @@ def remove_slip(kernel, formulation, t: float, q: np.ndarray, qd: np.ndarray, cl
     independent = formulation.rows_of(J)
     J, target = J[independent], target[independent]
     Minv_JT = Minv @ J.T
-    P = np.linalg.lstsq(J @ Minv_JT, target - J @ qd, rcond=1e-10)[0]
+    P = least_norm(J @ Minv_JT, target - J @ qd, 1e-10, "the slip removal at a stop")
     return qd + Minv_JT @ P

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from mbcomp.core.errors import SimulationError, TrialStateError, format_state
-from mbcomp.core.small_linalg import pivoted_qr, solve
+from mbcomp.core.small_linalg import least_norm, pivoted_qr, solve
 from mbcomp.core.statemap import Chart
 from mbcomp.formulations.base import ASSEMBLY_TOLERANCE, Formulation, Workspace
 from mbcomp.formulations.friction import has_friction
@@ -315,5 +315,5 @@ class LagrangeFormulation(Formulation):
         else:
             qdd = c
         if multipliers:
-            lam[rows] = np.linalg.lstsq(J.T, M @ qdd - f, rcond=None)[0]
+            lam[rows] = least_norm(J.T, M @ qdd - f, None, f"the constraint forces at t = {t:g}")
         return qdd, lam
