@@ -40,11 +40,12 @@ from models import write_csv  # noqa: E402
 RADIUS = 0.05
 
 
-def gas(n: int, seed: int = 0):
-    """The model and its initial state: n spheres on a grid inside a box of planes."""
+def spheres_in_a_box(n: int, name: str, gravity: tuple, restitution: float):
+    """n spheres (radius RADIUS, 1 kg) on Free joints inside a box of six planes, colliding
+    with each other and the walls; and the grid of their start positions (m)."""
     side = int(np.ceil(n ** (1 / 3)))
     half = max(0.4, 0.5 * side * 3 * RADIUS + RADIUS)
-    m = mb.Model(f"gas{n}", gravity=(0, 0, 0))
+    m = mb.Model(name, gravity=gravity)
     balls = []
     for i in range(n):
         ball = m.add(mb.Body(f"s{i}", mass=1.0, inertia=(0.4 * RADIUS ** 2,) * 3, shape=mb.Sphere(RADIUS)))
@@ -52,10 +53,15 @@ def gas(n: int, seed: int = 0):
         balls.append(ball)
     walls = [(m.ground, mb.Plane(normal=s * np.eye(3)[k], origin=-s * half * np.eye(3)[k]))
              for k in range(3) for s in (1.0, -1.0)]
-    m.add(mb.Collision("gas", balls, balls, restitution=1.0))
-    m.add(mb.Collision("walls", balls, walls, restitution=1.0))
+    m.add(mb.Collision("gas", balls, balls, restitution=restitution))
+    m.add(mb.Collision("walls", balls, walls, restitution=restitution))
     ticks = (np.arange(side) - (side - 1) / 2) * 3 * RADIUS
-    grid = np.array([(x, y, z) for x in ticks for y in ticks for z in ticks])[:n]
+    return m, np.array([(x, y, z) for x in ticks for y in ticks for z in ticks])[:n]
+
+
+def gas(n: int, seed: int = 0):
+    """The model and its initial state: n spheres on a grid inside a box of planes."""
+    m, grid = spheres_in_a_box(n, f"gas{n}", (0, 0, 0), 1.0)
     rng = np.random.default_rng(seed)
     q0 = np.concatenate([np.concatenate((p, [1, 0, 0, 0])) for p in grid])
     qd0 = np.concatenate([np.concatenate((v, [0, 0, 0])) for v in rng.normal(size=(n, 3))])
@@ -79,21 +85,9 @@ def run(n: int, t_end: float) -> dict:
 def dropped(n: int, seed: int = 0):
     """n spheres on a grid, at rest, dropped under gravity into a box of six planes
     (restitution 0.9 everywhere)."""
-    side = int(np.ceil(n ** (1 / 3)))
-    half = max(0.4, 0.5 * side * 3 * RADIUS + RADIUS)
-    m = mb.Model(f"drop{n}", gravity=(0, 0, -9.81))
-    balls = []
-    for i in range(n):
-        ball = m.add(mb.Body(f"s{i}", mass=1.0, inertia=(0.4 * RADIUS ** 2,) * 3, shape=mb.Sphere(RADIUS)))
-        m.add(mb.Free(f"j{i}", m.ground, ball))
-        balls.append(ball)
-    walls = [(m.ground, mb.Plane(normal=s * np.eye(3)[k], origin=-s * half * np.eye(3)[k]))
-             for k in range(3) for s in (1.0, -1.0)]
-    m.add(mb.Collision("gas", balls, balls, restitution=0.9))
-    m.add(mb.Collision("walls", balls, walls, restitution=0.9))
-    ticks = (np.arange(side) - (side - 1) / 2) * 3 * RADIUS
+    m, grid = spheres_in_a_box(n, f"drop{n}", (0, 0, -9.81), 0.9)
     rng = np.random.default_rng(seed)
-    grid = np.array([(x, y, z) for x in ticks for y in ticks for z in ticks])[:n] + rng.uniform(-0.01, 0.01, (n, 3))
+    grid = grid + rng.uniform(-0.01, 0.01, (n, 3))
     q0 = np.concatenate([np.concatenate((p, [1, 0, 0, 0])) for p in grid])
     return m, q0, np.zeros(6 * n)
 

@@ -344,16 +344,23 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
     return kc[CONTACTS_GAP_OFF + k];
 }
 
-double dae_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
-                    const double *p, const double *tau) {
+/* The KKT solve at time s of the event step (its multipliers in dae_lam, the friction
+   solve's state in friction.h); 0, or nonzero when it failed. */
+static int dae_solve_at(double s, double t_old, double h, const double *y_old, const double *F, int ny,
+                        const double *p, const double *tau) {
     double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
     double *work = malloc(sizeof(double) * (NDAEWORK + 1));
-    if (!work) return NAN;
+    if (!work) return -4;
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     dae_time = s;
     const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
     free(work);
-    return status ? NAN : dae_lam[row];
+    return status;
+}
+
+double dae_force_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long row,
+                    const double *p, const double *tau) {
+    return dae_solve_at(s, t_old, h, y_old, F, ny, p, tau) ? NAN : dae_lam[row];
 }
 
 /* Friction events on the event step: sticking contact j's distance outside the cone (N,
@@ -361,14 +368,7 @@ double dae_force_at(double s, double t_old, double h, const double *y_old, const
    tangent-coordinate direction (e0, e1) at time s. */
 double dae_cone_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
                    const double *p, const double *tau) {
-    double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
-    double *work = malloc(sizeof(double) * (NDAEWORK + 1));
-    if (!work) return NAN;
-    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
-    dae_time = s;
-    const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
-    free(work);
-    return status ? NAN : mb_friction_margin((int)j);
+    return dae_solve_at(s, t_old, h, y_old, F, ny, p, tau) ? NAN : mb_friction_margin((int)j);
 }
 
 double dae_slip_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
