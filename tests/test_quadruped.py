@@ -142,12 +142,9 @@ def test_dropped_its_feet_stick(drop_runs):
             assert np.hypot(v[0], v[1]) < 1e-6, (leg, res.t[k], v)
 
 
-def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
-    """At rest the PD torques kp (target - q) balance what holds the robot with the
-    contact forces found: h(q) = J^T F on the joints (the sag below the kinematic height
-    is the joints' compliance, ~2.8 mm at kp = 20 N m/rad)."""
-    robot, q0, res = drop_runs
-    q = res.q[-1]
+def foot_forces_generalised(robot, res, q) -> np.ndarray:
+    """``J^T F`` at ``q``: the generalised forces of the feet's last contact forces (world,
+    acting at each foot's touching point), by virtual power over unit speeds."""
     nv = robot.nv
     generalised = np.zeros(nv)
     for leg in solo.LEGS:
@@ -158,6 +155,17 @@ def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
             e = np.zeros(nv)
             e[k] = 1.0
             generalised[k] += force @ robot.body_state(f"{leg}_LOWER_LEG", q, e, point=touching).velocity
+    return generalised
+
+
+def test_dropped_the_knees_give_as_the_statics_say(drop_runs):
+    """At rest the PD torques kp (target - q) balance what holds the robot with the
+    contact forces found: h(q) = J^T F on the joints (the sag below the kinematic height
+    is the joints' compliance, ~2.8 mm at kp = 20 N m/rad)."""
+    robot, q0, res = drop_runs
+    q = res.q[-1]
+    nv = robot.nv
+    generalised = foot_forces_generalised(robot, res, q)
     kp = robot.parameters["FL_HAA_pd.value.constant1.value"]
     pd = np.array([kp * (solo.POSTURE[name] - q[robot.coords.index(name)]) for name in robot.coords[7:]])
     hold = robot.holding_forces(q)
@@ -202,15 +210,7 @@ def test_dropped_with_feed_forward_it_lands_on_four_feet_and_stands(feed_forward
     total = sum(res.contact_forces[name][-1] for name in feet)
     np.testing.assert_allclose(total, [0.0, 0.0, mass * G], rtol=0, atol=1e-5 * mass * G)
     q, nv = res.q[-1], robot.nv
-    generalised = np.zeros(nv)
-    for leg in solo.LEGS:
-        force = res.contact_forces[f"{leg}_foot"][-1]          # acts at the touching point
-        below = robot.body_state(f"{leg}_LOWER_LEG", q).rotation.T @ np.array([0.0, 0.0, -solo.FOOT_RADIUS])
-        touching = np.asarray(solo.foot_point(leg)) + below
-        for k in range(nv):
-            e = np.zeros(nv)
-            e[k] = 1.0
-            generalised[k] += force @ robot.body_state(f"{leg}_LOWER_LEG", q, e, point=touching).velocity
+    generalised = foot_forces_generalised(robot, res, q)
     p = robot.parameters
     pd = np.array([p[f"{name}_pd.value.constant1.value"] * (solo.POSTURE[name] - q[robot.coords.index(name)])
                    + p[f"{name}_pd.value.constant4.value"] for name in robot.coords[7:]])
