@@ -28,7 +28,7 @@ import numpy as np
 import mbcomp as mb
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from models import write_csv  # noqa: E402
+from models import bounce_height, write_csv  # noqa: E402
 from timing import Run, fmt, measure, rounds_main, time_at  # noqa: E402
 
 MASS, RADIUS, HEIGHT, E, G, T_END = 0.1, 0.05, 1.0, 0.8, 9.81, 2.0
@@ -41,17 +41,7 @@ MBCOMP, MUJOCO = "mbcomp (impact law)", "MuJoCo RK4 (soft contact; rollout)"
 
 def exact_height(t: float) -> float:
     """Centre height (m) of the ideal bouncing ball at time t."""
-    t_flight = math.sqrt(2 * (HEIGHT - RADIUS) / G)
-    if t <= t_flight:
-        return HEIGHT - 0.5 * G * t * t
-    start, speed = t_flight, G * t_flight
-    while True:
-        speed *= E
-        duration = 2 * speed / G
-        if t <= start + duration:
-            s = t - start
-            return RADIUS + speed * s - 0.5 * G * s * s
-        start += duration
+    return bounce_height(t, HEIGHT, RADIUS, E, G)
 
 
 def mbcomp_ball() -> mb.Model:

@@ -1,6 +1,7 @@
 """Model builders shared by the benchmarks (the N-link 3D pendulum chain of the speed issue)."""
 from __future__ import annotations
 
+import math
 import numpy as np
 
 import mbcomp as mb
@@ -37,3 +38,21 @@ def write_csv(rows: list[dict], name: str):
         writer.writeheader()
         writer.writerows({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
     return out
+
+
+def bounce_height(t: float, z0: float, radius: float, e: float, g: float) -> float:
+    """Centre height (m) at time t (s) of a ball of ``radius`` dropped from rest at centre
+    height ``z0`` onto a floor: free flight between impacts, each reversing the speed times
+    ``e`` (Newton); at rest on the floor (z = radius) once the rebound speeds have summed up."""
+    t_fall = math.sqrt(2 * (z0 - radius) / g)
+    if t <= t_fall:
+        return z0 - 0.5 * g * t * t
+    start, speed = t_fall, g * t_fall
+    while speed > 1e-12:
+        speed *= e
+        duration = 2 * speed / g
+        if t <= start + duration:
+            s = t - start
+            return radius + speed * s - 0.5 * g * s * s
+        start += duration
+    return radius

@@ -69,7 +69,7 @@ from scipy.spatial.distance import pdist, squareform  # noqa: E402
 import mbcomp as mb  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from models import write_csv  # noqa: E402
+from models import bounce_height, write_csv  # noqa: E402
 from timing import Run, fmt, measure  # noqa: E402
 
 N, RADIUS, MASS, HALF, E, MU, G = 50, 0.05, 1.0, 0.6, 0.5, 0.3, 9.81
@@ -92,18 +92,7 @@ def z_exact(z0: float, t: float) -> float:
     onto the floor, touching nothing else: free flight between impacts, each impact reversing
     the normal speed times E (friction acts through the centre's normal line: it does not
     change the vertical motion); at rest on the floor (z = r) after t0 (1 + E) / (1 - E)."""
-    t_fall = math.sqrt(2 * (z0 - RADIUS) / G)
-    if t <= t_fall:
-        return z0 - 0.5 * G * t * t
-    start, speed = t_fall, G * t_fall
-    while speed > 1e-12:
-        speed *= E
-        duration = 2 * speed / G
-        if t <= start + duration:
-            s = t - start
-            return RADIUS + speed * s - 0.5 * G * s * s
-        start += duration
-    return RADIUS
+    return bounce_height(t, z0, RADIUS, E, G)
 
 
 def observe(centres: np.ndarray, v_end: np.ndarray, w_end: np.ndarray) -> dict:
