@@ -440,9 +440,10 @@ class Formulation:
         yield
 
     def scipy_stretch(self, kernel, lib, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts: tuple = (),
-                      offsets: dict | None = None, method: str = ""):
+                      offsets: dict | None = None, method: str = "", z0: np.ndarray | None = None):
         """scipy's stepping of the compiled right-hand side from the consistent ``(q0, qd0)`` at
-        ``t0`` with the held ``contacts`` (``tau``: constant generalised forces or None): a
+        ``t0`` with the held ``contacts`` (``tau``: constant generalised forces or None; ``z0``:
+        the drive elements' states, which follow the mechanical state in ``y``): a
         ``compiled_rhs.Stretch`` whose ``workspace`` calls the C functions the compiled loops
         step; ``close()`` undoes the configuration.  Only asked for where the compiled loop
         could run the model (``run/paths.why_not_compiled``).  Here: the tree state without
@@ -451,7 +452,7 @@ class Formulation:
         workspace = self.start(kernel, t0, q0, qd0, tau, contacts)
         if offsets is not None:
             workspace.offsets = offsets
-        return tree_stretch(self, kernel, workspace, tau, method, self.compiled_setup(lib, kernel=kernel, q0=q0))
+        return tree_stretch(self, kernel, workspace, tau, method, self.compiled_setup(lib, kernel=kernel, q0=q0), z0)
 
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
