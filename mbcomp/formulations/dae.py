@@ -158,6 +158,10 @@ class DaeFormulation(Formulation):
         cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         return self.solve_constrained(kernel, M, f, cv.J, self.acceleration_targets(cv, qd), q, t, contacts, qd)
 
+    def evaluation_gains(self) -> tuple[float, float]:
+        """This formulation's Baumgarte gains (1/s): its solve at a state includes them."""
+        return self.baumgarte
+
     def acceleration_targets(self, cv, qd):
         """``-bias - 2 alpha gdot - beta^2 g`` (Baumgarte)."""
         alpha, beta = self.baumgarte
