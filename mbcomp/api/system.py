@@ -347,7 +347,10 @@ class System:
         elements act with their ``states``, by name; 0 when not given).
 
         A float64 ndarray of the right length takes a direct call of the compiled code
-        (``mbcomp.codegen.fastcall``); anything else is converted and checked."""
+        (``mbcomp.codegen.fastcall``); anything else is converted and checked.  With
+        constraints, the compiled KKT solve of the compiled loops answers
+        (``Formulation.compiled_solve``; the dae formulation's includes its Baumgarte terms),
+        the Python solve where there is no C or at a singular position."""
         if tau is None and states is None:
             qdd = (self._fast or self._bind_fast())[1].accelerations(q, qd)
             if qdd is not None:
@@ -375,7 +378,8 @@ class System:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
-        and the normal force (N) of each contact in ``contacts`` held closed."""
+        and the normal force (N) of each contact in ``contacts`` held closed.  Without held
+        contacts the multipliers come from the compiled KKT solve, as in ``accelerations``."""
         if tau is None and states is None and offsets is None and not contacts and \
                 (self._fast or self._bind_fast())[1].check(q, qd):
             return {}  # a tree without drive elements and no contact held closed: no reactions
