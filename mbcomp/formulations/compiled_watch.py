@@ -41,11 +41,17 @@ class ContactWatching(LoopSession):
         self.gaps = np.ascontiguousarray(gaps, dtype=float).copy()
         self.held = np.zeros(nk, dtype=np.int64)
         self.held[list(self.contacts)] = 1
-        self.event = np.zeros(1 + 9 * 2 * self.n)
+        self.event = np.zeros(1 + 9 * self.loop_ny)
         watch = getattr(self.lib, self.WATCH)
         watch.argtypes = [_INT, _VOID, _VOID, _DBL, _VOID]
         watch.restype = ctypes.c_int
         watch(nk, pointer(self.held), pointer(self.gaps), self.gap_tolerance, pointer(self.event))
+
+    @property
+    def loop_ny(self) -> int:
+        """The most values the loop's state can have (the event buffer holds 9 of them): the
+        reduced ``[x_i, qd_i]`` of at most 2 ``n`` values, then the drive states."""
+        return 2 * self.n + self.kernel.compiled.drives.nz
 
     def event_step(self, t_old: float, y_old: np.ndarray):
         """``(t_new, y_new, dense)`` of the step the loop stopped at with EVENT: its end and its

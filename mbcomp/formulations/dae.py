@@ -79,8 +79,6 @@ class DaeFormulation(Formulation):
                 return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
                         f"which is evaluated in Python")
         if self.compiled.contact_rows:  # (contacts or collision features)
-            if not self.compiled.topology.state_map.identity:
-                return "the dae formulation steps contacts on ball or free joints in Python"
             if self.compiled.drives.elements:
                 return "the dae formulation steps contacts with drive elements in Python"
         if self.constraints is not None and self.nominal_rows is None:

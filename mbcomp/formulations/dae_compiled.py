@@ -184,6 +184,12 @@ class DaeRun(ContactWatching):
         return self.n
 
     @property
+    def loop_ny(self) -> int:
+        """The loop's state ``[q, v, z]``: nq coordinates (quaternions: more than the nv
+        speeds), nv speeds, the drive states."""
+        return self.kernel.topology.nq + self.n + self.kernel.compiled.drives.nz
+
+    @property
     def y0(self) -> np.ndarray:
         return np.ascontiguousarray(self.workspace.y0, dtype=float)
 

@@ -323,7 +323,7 @@ int dae_project(double *y, const double *p, const double *u, double *work) {
    the gaps of the free contacts and the normal forces of the held ones (rows of kind
    contact, from the multipliers of the step end's solve) are checked as
    events.ContactWatch does; an event step is not taken: the loop returns EVENT with
-   [t_new, y_new, f_new, F (7 rows of 2 NQ)] in ev.  gaps: of every contact at the last
+   [t_new, y_new, f_new, F (7 rows of NY)] in ev (y = [q (NCOORD), v (NQ), z (NZ)]).  gaps: of every contact at the last
    accepted step (updated); held[k] = 1 for a contact held closed. */
 static __thread int dae_nk = 0;
 static __thread const long *dae_held;
@@ -342,8 +342,8 @@ static int dae_event(double t, const double *y, const double *p) {
     int event = 0;
     const int own = dae_nk < DAE_NK ? dae_nk : DAE_NK, features = dae_nk > DAE_NK && mb_collide_count();
     if (!MB_HAS_CONTACTS && !features) return 0;
-    if (MB_HAS_CONTACTS) contacts(y, y + NQ, p, u, kc);
-    if (features) mb_collide_eval(y, y + NQ, p);  /* the candidate collision features (collide.c) */
+    if (MB_HAS_CONTACTS) contacts(y, y + NCOORD, p, u, kc);
+    if (features) mb_collide_eval(y, y + NCOORD, p);  /* the candidate collision features (collide.c) */
     for (int k = 0; k < dae_nk; ++k) {
         if (dae_held[k]) continue;
         const double g0 = dae_gaps[k], g1 = k < own ? kc[CONTACTS_GAP_OFF + k] : mb_collide_gap_of(k - DAE_NK);
@@ -372,11 +372,11 @@ static int dae_event(double t, const double *y, const double *p) {
    configured row `row` (a held contact's normal force), at time s of the event step. */
 double dae_gap_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long k,
                   const double *p) {
-    double y[2 * NQ + 1], kc[CONTACTS_SIZE + 1], u[1] = {0.0};
+    double y[NMECH + NZ + 1], kc[CONTACTS_SIZE + 1], u[1] = {0.0};
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
-    if (k >= DAE_NK) return mb_collide_gap(k - DAE_NK, y, y + NQ, p);  /* a collision feature */
+    if (k >= DAE_NK) return mb_collide_gap(k - DAE_NK, y, y + NCOORD, p);  /* a collision feature */
     if (!MB_HAS_CONTACTS) return NAN;
-    contacts(y, y + NQ, p, u, kc);
+    contacts(y, y + NCOORD, p, u, kc);
     return kc[CONTACTS_GAP_OFF + k];
 }
 
@@ -384,12 +384,12 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
    solve's state in friction.h); 0, or nonzero when it failed. */
 static int dae_solve_at(double s, double t_old, double h, const double *y_old, const double *F, int ny,
                         const double *p, const double *tau) {
-    double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
+    double y[NMECH + NZ + 1], qdd[NQ + 1], u[1] = {0.0};
     double *work = malloc(sizeof(double) * (NDAEWORK + 1));
     if (!work) return -4;
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     dae_time = s;
-    const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
+    const int status = dae_accelerations(y, y + NCOORD, p, u, tau, qdd, work);
     free(work);
     return status;
 }
@@ -409,9 +409,9 @@ double dae_cone_at(double s, double t_old, double h, const double *y_old, const 
 
 double dae_slip_at(double s, double t_old, double h, const double *y_old, const double *F, int ny, long j,
                    const double *p, double e0, double e1) {
-    double y[2 * NQ + 1];
+    double y[NMECH + NZ + 1];
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
-    return mb_friction_along((int)j, y, y + NQ, p, e0, e1);
+    return mb_friction_along((int)j, y, y + NCOORD, p, e0, e1);
 }
 
 /* The event's time on its step by Brent's method in C (events_c.py): where the gap of

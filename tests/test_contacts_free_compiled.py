@@ -1,0 +1,132 @@
+"""Contacts on quaternion joints (Free, Ball) in the dae formulation's compiled loop
+(formulations/dae_compiled.py ``DaeRun`` on the state ``[q (nq), v (nv)]``, c/dae.c's watch
+and locators): closed forms, conserved energy, and the motion of lagrange's compiled run and
+of scipy's stepping."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mbcomp as mb
+
+G = 9.81
+R = 0.1
+
+
+def assert_compiled(system, res) -> None:
+    assert system.integration_path() == "compiled"
+    assert res.stats["path"] == "compiled"
+
+
+def free_ball(formulation: str, e: float = 0.8):
+    """A sphere of radius R on a Free joint over the floor z = 0 (a point contact with radius)."""
+    m = mb.Model("free_ball", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=1.0, inertia=(0.4 * R * R,) * 3))
+    m.add(mb.Free("free", m.ground, ball))
+    m.add(mb.Contact("floor", ball, (0, 0, 0), normal=(0, 0, 1), restitution=e, radius=R))
+    return m.compile(formulation=formulation)
+
+
+@pytest.fixture(scope="module")
+def dae_ball():
+    return free_ball("dae")
+
+
+Q0 = [0.3, -0.2, 1.0, 1.0, 0.0, 0.0, 0.0]
+QD0 = [0.5, 0.1, 0.0, 1.0, 2.0, -0.5]   # drifting and spinning: the quaternion moves
+OPTIONS = dict(rtol=1e-10, atol=1e-12)
+
+
+def test_free_ball_bounces_to_e_squared_apexes_in_compiled_code(dae_ball):
+    e, drop = 0.8, 1.0 - R
+    res = dae_ball.simulate(2.0, Q0, QD0, **OPTIONS)
+    assert_compiled(dae_ball, res)
+    assert [ev.kind for ev in res.events] == ["impact"] * 3
+    assert res.events[0].time == pytest.approx(np.sqrt(2 * drop / G), rel=1e-9)
+    for n, event in enumerate(res.events, start=1):
+        k = np.flatnonzero(res.t == event.time)[-1]           # the state just after the impact
+        apex = res["free_z"][k] + res.qd[k][2] ** 2 / (2 * G) - R
+        assert apex == pytest.approx(e ** (2 * n) * drop, rel=1e-8)
+    np.testing.assert_allclose(np.linalg.norm(res.q[:, 3:7], axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(res.qd[-1][3:], QD0[3:], atol=1e-9)   # frictionless: the spin is untouched
+
+
+def test_free_ball_moves_as_lagrange_and_scipy_stepping(dae_ball):
+    compiled = dae_ball.simulate(2.0, Q0, QD0, **OPTIONS)
+    scipy = dae_ball.simulate(2.0, Q0, QD0, integrator="scipy", **OPTIONS)
+    assert scipy.stats["path"].startswith("scipy")
+    lagrange_system = free_ball("lagrange")
+    lagrange = lagrange_system.simulate(2.0, Q0, QD0, **OPTIONS)
+    assert_compiled(lagrange_system, lagrange)
+    for other in (scipy, lagrange):
+        assert [ev.time for ev in compiled.events] == pytest.approx([ev.time for ev in other.events], abs=1e-9)
+        np.testing.assert_allclose(compiled.q[-1], other.q[-1], atol=1e-8)
+        np.testing.assert_allclose(compiled.qd[-1], other.qd[-1], atol=1e-8)
+
+
+def _spheres():
+    """Three spheres on Free joints in zero gravity, elastic collisions between them."""
+    m = mb.Model("spheres", gravity=(0, 0, 0))
+    balls = []
+    for i in range(3):
+        ball = m.add(mb.Body(f"s{i}", mass=1.0 + 0.5 * i, inertia=(0.4 * (1.0 + 0.5 * i) * R * R,) * 3,
+                             shape=mb.Sphere(R)))
+        m.add(mb.Free(f"j{i}", m.ground, ball))
+        balls.append(ball)
+    m.add(mb.Collision("hits", balls, balls, restitution=1.0))
+    return m.compile(formulation="dae")
+
+
+def test_free_spheres_collide_elastically_in_compiled_code():
+    """Momentum and kinetic energy after the collisions (e = 1, no friction) are the start's;
+    every sphere keeps its spin, and scipy's stepping meets the same events."""
+    system = _spheres()
+    masses = np.array([1.0, 1.5, 2.0])
+    unit = [1.0, 0.0, 0.0, 0.0]
+    q0 = np.concatenate([[-0.5, 0.03, 0.0], unit, [0.0, 0.0, 0.0], unit, [0.45, -0.04, 0.02], unit])
+    v = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-0.8, 0.0, 0.0]])
+    w = np.array([[0.0, 3.0, 1.0], [2.0, 0.0, 0.0], [0.0, 0.0, -4.0]])
+    qd0 = np.concatenate([np.concatenate((v[i], w[i])) for i in range(3)])
+    res = system.simulate(1.0, q0, qd0, **OPTIONS)
+    assert_compiled(system, res)
+    assert len(res.events) >= 2
+    qd = res.qd[-1].reshape(3, 6)
+    np.testing.assert_allclose(masses @ qd[:, :3], masses @ v, atol=1e-10)
+    energy = lambda vs: 0.5 * masses @ (vs ** 2).sum(axis=1)   # noqa: E731  (the spins do not change)
+    assert energy(qd[:, :3]) == pytest.approx(energy(v), rel=1e-9)
+    np.testing.assert_allclose(qd[:, 3:], w, atol=1e-9)
+    scipy = system.simulate(1.0, q0, qd0, integrator="scipy", **OPTIONS)
+    assert [ev.time for ev in res.events] == pytest.approx([ev.time for ev in scipy.events], abs=1e-9)
+    np.testing.assert_allclose(res.q[-1], scipy.q[-1], atol=1e-8)
+
+
+def test_ball_joint_pendulum_hits_a_wall_in_compiled_code():
+    """A rod on a Ball joint swinging (and twisting) into the wall x = 0.3 with e = 1: every
+    impact keeps the energy; the motion is scipy stepping's and lagrange's."""
+    length = 1.0
+
+    def pendulum(formulation):
+        m = mb.Model("ball_pendulum", gravity=(0, 0, -G))
+        rod = m.add(mb.Body("rod", mass=2.0, com=(0, 0, -length), inertia=(0.05, 0.05, 0.01)))
+        m.add(mb.Ball("pivot", m.ground, rod))
+        m.add(mb.Contact("wall", rod, (0, 0, -length), origin=(0.3, 0, 0), normal=(-1, 0, 0), restitution=1.0))
+        return m.compile(formulation=formulation)
+
+    system = pendulum("dae")
+    angle = 0.4                                    # tilted about y: the tip at x = -0.39, swinging to the wall
+    q0 = [np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0]
+    qd0 = [0.3, 0.0, 3.0]
+    res = system.simulate(3.5, q0, qd0, **OPTIONS)
+    assert_compiled(system, res)
+    assert len(res.events) >= 2 and {ev.kind for ev in res.events} == {"impact"}
+    energy = res.energy().total
+    assert np.ptp(energy) < 1e-7 * abs(energy[0])
+    qw, qx, qy, qz = res.q.T
+    tip_x = -2 * length * (qx * qz + qw * qy)       # R(q) (0, 0, -length), its x
+    assert tip_x.max() < 0.3 + 1e-9 and tip_x.max() > 0.3 - 1e-6
+    scipy = system.simulate(3.5, q0, qd0, integrator="scipy", **OPTIONS)
+    lagrange = pendulum("lagrange").simulate(3.5, q0, qd0, **OPTIONS)
+    for other in (scipy, lagrange):
+        assert [ev.time for ev in res.events] == pytest.approx([ev.time for ev in other.events], abs=1e-9)
+        np.testing.assert_allclose(res.q[-1], other.q[-1], atol=1e-8)
+        np.testing.assert_allclose(res.qd[-1], other.qd[-1], atol=1e-8)
