@@ -130,3 +130,44 @@ def test_ball_joint_pendulum_hits_a_wall_in_compiled_code():
         assert [ev.time for ev in res.events] == pytest.approx([ev.time for ev in other.events], abs=1e-9)
         np.testing.assert_allclose(res.q[-1], other.q[-1], atol=1e-8)
         np.testing.assert_allclose(res.qd[-1], other.qd[-1], atol=1e-8)
+
+
+# -- drive elements with contacts: their states ride in the compiled stretches -----------------
+RATIO, K_T, RES, IND, VOLT = 20.0, 0.03, 2.0, 0.05, 6.0
+
+
+def motor_pendulum(formulation: str, backend: str = "auto", e: float = 1.0):
+    """A rod (COM 0.5 m below a hinge about x) turned by a DC motor into the wall y = 0.3
+    (its tip, 1 m below the hinge, hits it at th = asin 0.3)."""
+    m = mb.Model("motor_wall", gravity=(0, 0, -G))
+    rod = m.add(mb.Body("rod", mass=1.0, com=(0, 0, -0.5), inertia=(0.01, 0.01, 0.0)))
+    hinge = m.add(mb.Revolute("hinge", m.ground, rod, axis="x", coords="th"))
+    m.add(mb.DCMotor("motor", hinge, ratio=RATIO, resistance=RES, inductance=IND, k=K_T, voltage=VOLT))
+    m.add(mb.Contact("wall", rod, (0, 0, -1.0), origin=(0, 0.3, 0), normal=(0, -1, 0), restitution=e))
+    return m.compile(formulation=formulation, backend=backend)
+
+
+@pytest.mark.parametrize("formulation", ["dae", "lagrange"])
+def test_motor_driven_pendulum_hits_a_wall_in_compiled_code(formulation):
+    """The motor's current is a state of the compiled stretches and carries over the impacts:
+    the run equals Python stepping (the model without C), the impacts happen where the tip
+    meets the wall, and the motor's work is the mechanical energy gained (e = 1)."""
+    system = motor_pendulum(formulation)
+    t_eval = np.linspace(0.0, 1.5, 30001)
+    res = system.simulate(1.5, [0.0], [0.0], t_eval=t_eval, **OPTIONS)
+    assert_compiled(system, res)
+    assert len(res.events) >= 2 and {ev.kind for ev in res.events} == {"impact"}
+    python = motor_pendulum(formulation, backend="python").simulate(1.5, [0.0], [0.0], t_eval=t_eval, **OPTIONS)
+    assert python.stats["path"].startswith("scipy")
+    assert [ev.time for ev in res.events] == pytest.approx([ev.time for ev in python.events], abs=1e-9)
+    np.testing.assert_allclose(res.q, python.q, atol=1e-8)
+    np.testing.assert_allclose(res.qd, python.qd, atol=1e-8)
+    np.testing.assert_allclose(res["motor.current"], python["motor.current"], atol=1e-8)
+    for event in res.events:   # the tip at the wall: -sin(th) = -0.3 ... th = asin 0.3
+        k = np.argmin(np.abs(res.t - event.time))
+        assert np.sin(res["th"][k]) == pytest.approx(0.3, abs=1e-3)
+    # the motor's work from its electrical side (the current is continuous at impacts, the
+    # speed is not): V i - R i^2 - d(L i^2 / 2)/dt = k ratio i th_d
+    energy, i = res.energy().total, res["motor.current"]
+    work = np.trapezoid(VOLT * i - RES * i ** 2, res.t) - IND * (i[-1] ** 2 - i[0] ** 2) / 2
+    assert energy[-1] - energy[0] == pytest.approx(work, rel=1e-6)

@@ -69,15 +69,14 @@ class CompiledModel:
         self.constraint_set = ConstraintSet(self.topology) if (self.topology.cut_joints or self.topology.constraints) else None
         self.geometric_rows = [] if self.constraint_set is None else self.constraint_set.geometric_rows
         #: The lagrange formulation's reduced loop is compiled in (constraints or contacts, with
-        #: quaternions stepped in their chart; drive states only without contacts: see
+        #: quaternions stepped in their chart; drive states after the reduced state: see
         #: formulations/lagrange_c.py).
         from mbcomp.spec.components.collision import Collision
         #: Contact rows in the compiled loops: the model's contacts, or the features of its
         #: collisions (measured in C: codegen/c/collide.c).
         self.contact_rows = bool(self.topology.contacts) or any(
             isinstance(c, Collision) for c in self.topology.components.values())
-        self.reduced_loop = ((self.constraint_set is not None or self.contact_rows)
-                             and not (self.drives.nz and self.contact_rows))
+        self.reduced_loop = self.constraint_set is not None or self.contact_rows
         self.n_inputs = sum(size for _, size in self.inputs.values())
         self.no_inputs = np.zeros(0)
         self.tril = np.tril_indices(self.topology.nv)

@@ -78,9 +78,6 @@ class DaeFormulation(Formulation):
             if program is None:
                 return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
                         f"which is evaluated in Python")
-        if self.compiled.contact_rows:  # (contacts or collision features)
-            if self.compiled.drives.elements:
-                return "the dae formulation steps contacts with drive elements in Python"
         if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None

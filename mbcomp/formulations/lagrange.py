@@ -237,8 +237,6 @@ class LagrangeFormulation(Formulation):
         if self.constraints is None:
             return None
         topology = self.compiled.topology
-        if self.compiled.drives.nz and self.compiled.contact_rows:
-            return "the lagrange formulation steps models with drive states and contacts in Python"
         from mbcomp.codegen.expressions_c import NotCompilable
         from mbcomp.formulations.lagrange_compiled import motor_programs
         try:

@@ -37,10 +37,12 @@ class DriveTorque:
 class DriveWorkspace:
     """A formulation workspace with the drive states appended to its state vector."""
 
-    def __init__(self, inner, torque: DriveTorque):
+    def __init__(self, inner, torque: DriveTorque, m: int | None = None):
+        """``m``: the length of the formulation's part of the state (default: that of
+        ``inner.y0``; a compiled stretch's event step gives its own)."""
         object.__setattr__(self, "inner", inner)
         object.__setattr__(self, "torque", torque)
-        object.__setattr__(self, "m", inner.y0.size)
+        object.__setattr__(self, "m", inner.y0.size if m is None else int(m))
         object.__setattr__(self, "z_accepted", torque.z.copy())
 
     def __getattr__(self, name):

@@ -138,6 +138,8 @@ class ScipyStepping:
                 tau = self.drive
         self.tau = tau
         self.applied = tau if self.drive is None else self.drive  #: what contact events see as applied forces
+        if self.drive is not None and self.compiled_rhs:  # (the compiled workspace keeps the drive states)
+            self.applied = self._applied
         self.state_columns = 0 if self.drive is None else len(self.drive.z)  #: drive states in a sample
         self.max_step = options.max_step
         self.solver_options: dict = {}
@@ -272,6 +274,12 @@ class ScipyStepping:
         return self.tau if self.drive is None else self.drive.tau
 
     # -- helpers -------------------------------------------------------------------------------------
+    def _applied(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """What contact events see as applied forces with the compiled right-hand side: tau and
+        the drive elements' forces at the drive states of the state last evaluated."""
+        self.drive.z = np.array(self.states())
+        return self.drive(t, q, qd)
+
     def _workspace(self, t0, q0, qd0, contacts):
         if not self.compiled_rhs:
             workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
@@ -332,10 +340,15 @@ class CompiledStepping:
         self.watched = bool(kernel.topology.contacts)
         #: Without contacts the compiled rows hold the start sample.
         self.records_start = not self.watched
-        self.state_columns = 0 if self.watched else kernel.compiled.drives.nz
+        self.state_columns = kernel.compiled.drives.nz
         self.applied = tau  # (what the events see: the drive elements' forces join tau, as in Python stepping)
+        #: With contacts, the drive elements' states: the stretches carry them after their
+        #: state (``[q, v, z]``, lagrange ``[x_i, qd_i, z]``); between stretches they are
+        #: ``drive.z`` (set by the event step's ``full_state``), which the events' forces read.
+        self.drive = None
         if self.watched and kernel.compiled.drives.elements:
-            self.applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
+            self.drive = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), z0)
+            self.applied = self.drive
         self.max_step = options.max_step
         self.nothing_to_integrate = False
         self.segment = None
@@ -357,7 +370,8 @@ class CompiledStepping:
                 self._close_segment()
 
     def states(self) -> np.ndarray:
-        return np.zeros(0)
+        """The drive elements' states at the sample the driver just evaluated (with contacts)."""
+        return np.zeros(0) if self.drive is None else self.drive.z.copy()
 
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         self.offsets = offsets
@@ -435,8 +449,11 @@ class CompiledStepping:
                 self.max_step = min(self.max_step, o.t_end / 500)  # nothing to integrate: step time to watch
             segment.watch_contacts(gaps, GAP_TOLERANCE)
             state, y = np.array([self.t, 0.0]), segment.y0
+            if self.drive is not None:  # the drive states follow the stretch's state
+                segment.drive_states(self.drive.z)
+                y = np.ascontiguousarray(np.concatenate((y, self.drive.z)), dtype=float)
             t_out = None if o.t_eval is None else np.ascontiguousarray(o.t_eval, dtype=float)
-            y_out = None if o.t_eval is None else np.empty((len(t_out), kernel.nq + n))
+            y_out = None if o.t_eval is None else np.empty((len(t_out), kernel.nq + n + self.state_columns))
             i_out = np.array([recorder.next], dtype=np.int64)
             try:
                 status, steps_t, steps_y, y, f = dop853_segment(
@@ -460,7 +477,10 @@ class CompiledStepping:
             segment.sync()  # the Python workspace at the step's start, where the loop stopped
             t_new, y_new, dense = segment.event_step(float(state[0]), y)
             # (the stretch stays open for the driver's work on the event step: closed before the next)
-            return Step(float(state[0]), t_new, y_new, lambda: dense, segment.workspace, gaps=segment.gaps.copy(),
+            workspace = segment.workspace
+            if self.drive is not None:  # full_state splits the drive states off (into drive.z)
+                workspace = DriveWorkspace(workspace, self.drive, len(y_new) - self.state_columns)
+            return Step(float(state[0]), t_new, y_new, lambda: dense, workspace, gaps=segment.gaps.copy(),
                         locator=segment.locator(float(state[0]), y))
         except BaseException:
             self._close_segment()

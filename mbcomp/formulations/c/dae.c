@@ -381,13 +381,22 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
 }
 
 /* The KKT solve at time s of the event step (its multipliers in dae_lam, the friction
-   solve's state in friction.h); 0, or nonzero when it failed. */
+   solve's state in friction.h); 0, or nonzero when it failed.  With drive elements their
+   forces at the step's drive states (y after [q, v]) join tau, as in the loop (drive_rhs). */
 static int dae_solve_at(double s, double t_old, double h, const double *y_old, const double *F, int ny,
                         const double *p, const double *tau) {
-    double y[NMECH + NZ + 1], qdd[NQ + 1], u[1] = {0.0};
+    double y[NMECH + NZ + 1], qdd[NQ + 1], u[1] = {0.0}, tau_all[NQ + 1];
     double *work = malloc(sizeof(double) * (NDAEWORK + 1));
     if (!work) return -4;
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    if (HAS_DRIVES) {
+        double in[1 + NZ], out[NV + NZ + 1];
+        in[0] = s;
+        for (int k = 0; k < NZ; ++k) in[1 + k] = y[NMECH + k];
+        drives(y, y + NCOORD, p, in, out);
+        for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
+        tau = tau_all;
+    }
     dae_time = s;
     const int status = dae_accelerations(y, y + NCOORD, p, u, tau, qdd, work);
     free(work);
