@@ -64,6 +64,27 @@ def test_free_ball_moves_as_lagrange_and_scipy_stepping(dae_ball):
         np.testing.assert_allclose(compiled.qd[-1], other.qd[-1], atol=1e-8)
 
 
+def test_free_ball_launched_sliding_with_spin_rolls_at_the_closed_form_time():
+    """Friction on a Free joint in dae's compiled loop: a ball sliding with spin rolls at
+    t = 2 |u0| / (7 mu g) (tests/test_friction.py), as scipy's stepping finds."""
+    mu, mass = 0.3, 1.5
+    m = mb.Model("rough_ball", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=mass, inertia=(0.4 * mass * R * R,) * 3))
+    m.add(mb.Free("free", m.ground, ball))
+    m.add(mb.Contact("floor", ball, (0, 0, 0), normal=(0, 0, 1), friction=mu, radius=R))
+    system = m.compile(formulation="dae")
+    v0, w0 = np.array([2.0, 0.5, 0.0]), np.array([3.0, -4.0, 7.0])
+    q0, qd0 = [0, 0, R, 1, 0, 0, 0], np.concatenate((v0, w0))
+    res = system.simulate(0.3, q0, qd0, **OPTIONS)
+    assert_compiled(system, res)
+    u0 = (v0 + np.cross(w0, [0.0, 0.0, -R]))[:2]
+    assert [ev.kind for ev in res.events] == ["stick"]
+    assert res.events[0].time == pytest.approx(2 * np.linalg.norm(u0) / (7 * mu * G), rel=1e-7)
+    scipy = system.simulate(0.3, q0, qd0, integrator="scipy", **OPTIONS)
+    np.testing.assert_allclose(res.q[-1], scipy.q[-1], atol=1e-8)
+    np.testing.assert_allclose(res.qd[-1], scipy.qd[-1], atol=1e-8)
+
+
 def _spheres():
     """Three spheres on Free joints in zero gravity, elastic collisions between them."""
     m = mb.Model("spheres", gravity=(0, 0, 0))
