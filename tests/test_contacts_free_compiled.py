@@ -184,6 +184,10 @@ def test_motor_driven_pendulum_hits_a_wall_in_compiled_code(formulation):
     np.testing.assert_allclose(res.q, python.q, atol=1e-8)
     np.testing.assert_allclose(res.qd, python.qd, atol=1e-8)
     np.testing.assert_allclose(res["motor.current"], python["motor.current"], atol=1e-8)
+    scipy = system.simulate(1.5, [0.0], [0.0], t_eval=t_eval, integrator="scipy", **OPTIONS)   # (the compiled rhs)
+    assert scipy.stats["rhs"] == "compiled"
+    np.testing.assert_allclose(scipy.q, python.q, atol=1e-8)
+    np.testing.assert_allclose(scipy["motor.current"], python["motor.current"], atol=1e-8)
     for event in res.events:   # the tip at the wall: -sin(th) = -0.3 ... th = asin 0.3
         k = np.argmin(np.abs(res.t - event.time))
         assert np.sin(res["th"][k]) == pytest.approx(0.3, abs=1e-3)

@@ -5,7 +5,9 @@ motor rows (speed motors; position motors whose position is a file expression, r
 postfix programs, ``expressions_c``) and the gaps of contacts held closed.
 
 ``DaeRun`` is one compiled stretch of a run with contacts (``Formulation.contact_run``,
-stepped by ``run/stepping.CompiledStepping``): the loop steps the full state ``[q, qd]`` and checks every accepted step for a contact
+stepped by ``run/stepping.CompiledStepping``): the loop steps the full state ``[q, v, z]`` (q:
+the nq coordinates, quaternions of ``Ball``/``Free`` joints normalised after each step; v: the
+nv speeds; z: the drive elements' states) and checks every accepted step for a contact
 event (a free contact closing, a held contact's force pulling); at one it stops with the
 step's end and dense output, Python locates the event with the gaps and forces evaluated
 in C (``locator``), applies the impact law (``events.ContactWatch``) and starts the next

@@ -16,7 +16,8 @@ coordinates and their speeds); everything else follows in C, as in ``LagrangeWor
   regular size, over the smallest of ``J_d``): above the limit the loop pauses and Python
   chooses the partition afresh.
 
-Drive elements without states add their forces (the generated ``drives`` at time t).
+Drive elements add their forces (the generated ``drives`` at time t); their states follow in
+the reduced state, ``y = [q_i, qd_i, z]``, with contacts too.
 Motor rows (``q_k - offset - speed t``, or ``q_k - s(t)`` for a position given as an
 expression of t: ``s`` and its exact derivatives run as postfix programs, ``expressions_c.py``)
 are evaluated here, the geometric rows come from the generated ``constraints``.  Outputs are full ``[q, qd]`` rows.  The partition, the motor data
