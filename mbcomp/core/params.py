@@ -125,12 +125,15 @@ def _inertia_problem(arr: np.ndarray) -> "str | None":
     if scale == 0.0:
         return None  # a point mass
     unit = matrix / scale  # entries in [-1, 1]: no overflow below
-    if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
-        return "matrix is not symmetric"
-    try:
-        a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
-    except np.linalg.LinAlgError:
-        return "has no computable principal moments"
+    if arr.shape == (3,):  # principal values: the moments themselves (what eigvalsh gives for a diagonal)
+        a, b, c = sorted(float(v) for v in np.diag(unit))
+    else:
+        if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
+            return "matrix is not symmetric"
+        try:
+            a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
+        except np.linalg.LinAlgError:
+            return "has no computable principal moments"
     with np.errstate(all="ignore"):
         moments = np.array([a, b, c]) * scale
     if not np.all(np.isfinite(moments)):
