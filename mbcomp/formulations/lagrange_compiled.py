@@ -358,6 +358,15 @@ class _Locator(EventStepFunctions):
     def gap(self, s: float, i: int) -> float:
         return self._checked(self._gap(float(s), *self.args, int(i), self.p), s, "gap")
 
+    def force_row(self, k: int) -> int:
+        """The row of the k-th held contact (after the model's own constraint rows)."""
+        return self.nm + int(k)
+
+    def root_failure(self, what: str, a: float, b: float) -> SimulationError:
+        self.run.check_motors()
+        return SimulationError(f"the {what} cannot be evaluated on [{a:.9g}, {b:.9g}] s (no dependent coordinates "
+                               f"near the step's start)")
+
     def force(self, s: float, k: int) -> float:
-        value = self._force(float(s), *self.args, self.nm + int(k), self.p, self.tau)
+        value = self._force(float(s), *self.args, self.force_row(k), self.p, self.tau)
         return self._checked(value, s, "contact force")

@@ -6,6 +6,7 @@
 #define LAG_NEWTON_ITER 25
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
 #include "friction.h"
+#include "brentq.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -781,6 +782,58 @@ double lagrange_slip_at(double s, double t_old, double h, const double *y_old, c
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
     return mb_friction_along((int)j, q, qd, p, e0, e1);
+}
+
+/* The event's time on its step by Brent's method in C (codegen/c/brentq.h, as scipy's
+   brentq): where the gap of contact `index` (lagrange_gap_root), the normal force of the
+   held contact whose row is `index` (lagrange_force_root), sticking contact `index`'s
+   distance outside the cone (lagrange_cone_root) or sliding contact `index`'s slip along
+   (e0, e1) (lagrange_slip_root) crosses zero in [a, b]; *status as mb_brentq's (3: the
+   state could not be found at a trial time). */
+struct lag_root_ctx { double t_old, h; const double *y_old, *F; int ny; long index; const double *p, *tau; double e0, e1; };
+
+static double lag_gap_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_gap_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p);
+}
+
+static double lag_force_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_force_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+static double lag_cone_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_cone_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+static double lag_slip_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_slip_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->e0, x->e1);
+}
+
+double lagrange_gap_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                         long index, const double *p, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, 0, 0.0, 0.0};
+    return mb_brentq(lag_gap_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_force_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                           long index, const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, tau, 0.0, 0.0};
+    return mb_brentq(lag_force_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_cone_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                          long index, const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, tau, 0.0, 0.0};
+    return mb_brentq(lag_cone_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_slip_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                          long index, const double *p, double e0, double e1, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, 0, e0, e1};
+    return mb_brentq(lag_slip_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
 }
 
 /* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
