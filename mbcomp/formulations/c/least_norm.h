@@ -7,12 +7,15 @@
        x = sum over kept i of v_i (v_i . r) / w_i,
 
    keeping the eigen-directions with sqrt(w_i) > tol * max(sqrt(w_max), scale) (the same
-   relative test as a Cholesky pivot, ``sqrt`` of the Gram matrix's entries); the dropped
+   relative test as a Cholesky pivot, ``sqrt`` of the Gram matrix's entries) and w_i above
+   the decomposition's rounding, MB_EIGEN_ROUNDING n eps w_max (the eigenvalues are exact
+   to a few eps w_max: a direction that rounding alone left is no direction); the dropped
    directions get no multiplier, so x is the minimum-norm least-squares solution of the
    truncated system, as numpy.linalg.lstsq (the Python oracle, core.small_linalg.least_norm)
-   gives it with rcond = tol^2 max(w_max, scale^2) / w_max. */
+   gives it with rcond = max(tol^2 max(w_max, scale^2) / w_max, MB_EIGEN_ROUNDING n eps). */
 
 #define MB_JACOBI_SWEEPS 60
+#define MB_EIGEN_ROUNDING 16.0
 
 /* Eigen-decomposition of the symmetric n x n matrix a (full storage, row stride lda;
    destroyed: its diagonal becomes the eigenvalues, copied to w) with the eigenvectors in
@@ -64,7 +67,7 @@ static int mb_jacobi_eigen(int n, double *a, int lda, double *w, double *v, int 
 
 /* x = the least-norm solution of A x = r for the symmetric positive semi-definite n x n A
    given by its lower triangle (row stride lda; overwritten), dropping the eigen-directions
-   with sqrt(w_i) <= tol * max(sqrt(w_max), scale).  work: n * n + n doubles.  Returns the
+   with sqrt(w_i) <= tol * max(sqrt(w_max), scale) or w_i within rounding.  work: n * n + n doubles.  Returns the
    number of dropped directions, or -1 when A is not finite or the decomposition failed. */
 static int mb_least_norm(double *A, int lda, const double *r, double *x, int n, double scale, double tol,
                          double *work) {
@@ -79,10 +82,11 @@ static int mb_least_norm(double *A, int lda, const double *r, double *x, int n, 
     double wmax = 0.0;
     for (int i = 0; i < n; ++i) if (w[i] > wmax) wmax = w[i];
     const double top = sqrt(wmax) > scale ? sqrt(wmax) : scale, floor_ = tol * top;
+    const double zero = MB_EIGEN_ROUNDING * n * DBL_EPSILON * wmax;
     int dropped = 0;
     for (int i = 0; i < n; ++i) x[i] = 0.0;
     for (int k = 0; k < n; ++k) {
-        if (!(w[k] > floor_ * floor_)) {
+        if (!(w[k] > floor_ * floor_ && w[k] > zero)) {
             ++dropped;
             continue;
         }
