@@ -476,7 +476,9 @@ def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPS
 
 
 class RankLost(Exception):
-    """The compiled dae path met a singular position: the caller falls back to Python stepping."""
+    """The compiled dae solve met a dead point at rest (its rows lost rank with every speed
+    below ``REST_SPEED``: the motion is not determined) or rows that are not finite: the
+    caller falls back to Python stepping, whose solve names the cause."""
 
 
 def run_loops(kernel, lib, hook: "_Hook", options: RunOptions, q0: np.ndarray, qd0: np.ndarray, z0: np.ndarray,

@@ -15,8 +15,9 @@ from __future__ import annotations
 PIVOT_TOLERANCE = 1e-13
 
 #: Relative rank tolerance of constraint rows: a row whose pivot (column-pivoted QR of the
-#: Jacobian in Python, the Cholesky factor of the Gram matrix ``J M^-1 J^T`` in the dae
-#: formulation's C) falls below this fraction of the largest counts as dependent.  Rounding
+#: Jacobian in Python; in the dae formulation's C, the square root of an eigenvalue of the
+#: Schur complement ``J M^-1 J^T`` at rest, ``c/least_norm.h``) falls below this fraction of
+#: the largest counts as dependent.  Rounding
 #: leaves redundant rows of a planar loop at ~1e-16 relative; a mechanism within 1e-9 of a
 #: dead point is treated as at it.  C name ``MB_RANK_TOLERANCE``.
 RANK_TOLERANCE = 1e-9
