@@ -137,16 +137,61 @@ static int dae_at_rest(const double *qd, int n) {
     return 1;
 }
 
+/* lam = A^-1 r for the Gram matrix A (lower triangle, rows of DAE_NR, nr x nr; overwritten)
+   by a Cholesky factorisation when every pivot is above tol relative to the largest
+   diagonal entry (and scale) and above rounding (least_norm.h's MB_EIGEN_ROUNDING): then A
+   has full rank and this is the one solution.  Returns 0, 1 at the first pivot that is not
+   (lam not set), -1 on a non-finite pivot. */
+static int dae_cholesky_solve(double *A, const double *r, double *lam, int nr, double scale, double tol) {
+    double amax = 0.0;
+    for (int j = 0; j < nr; ++j) if (A[j * DAE_NR + j] > amax) amax = A[j * DAE_NR + j];
+    const double top = sqrt(amax) > scale ? sqrt(amax) : scale, floor_ = tol * top;
+    const double zero = MB_EIGEN_ROUNDING * nr * DBL_EPSILON * amax;
+    for (int j = 0; j < nr; ++j) {
+        double s = A[j * DAE_NR + j];
+        for (int k = 0; k < j; ++k) s -= A[j * DAE_NR + k] * A[j * DAE_NR + k];
+        if (s != s) return -1;
+        if (!(s > floor_ * floor_ && s > zero)) return 1;
+        const double d = sqrt(s);
+        A[j * DAE_NR + j] = d;
+        for (int i = j + 1; i < nr; ++i) {
+            double t = A[i * DAE_NR + j];
+            for (int k = 0; k < j; ++k) t -= A[i * DAE_NR + k] * A[j * DAE_NR + k];
+            A[i * DAE_NR + j] = t / d;
+        }
+    }
+    for (int i = 0; i < nr; ++i) {
+        double s = r[i];
+        for (int k = 0; k < i; ++k) s -= A[i * DAE_NR + k] * lam[k];
+        lam[i] = s / A[i * DAE_NR + i];
+    }
+    for (int i = nr - 1; i >= 0; --i) {
+        double s = lam[i];
+        for (int k = i + 1; k < nr; ++k) s -= A[k * DAE_NR + i] * lam[k];
+        lam[i] = s / A[i * DAE_NR + i];
+    }
+    return 0;
+}
+
 /* lam = the least-norm solution of A lam = r for the Gram matrix A (lower triangle, rows of
-   DAE_NR, nr x nr; overwritten) by least_norm.h's Jacobi eigen-decomposition, dropping the
-   directions whose sqrt(eigenvalue) falls below tol relative to the largest (and scale):
-   they get no multiplier.  Returns the number dropped, or -1 when A is not finite. */
+   DAE_NR, nr x nr; overwritten): the Cholesky solve where A has full rank by its pivots (the
+   one solution; the regular case, at the cost of a Cholesky factorisation), else
+   least_norm.h's Jacobi eigen-decomposition, dropping the directions whose sqrt(eigenvalue)
+   falls below tol relative to the largest (and scale): they get no multiplier.  Returns the
+   number dropped, or -1 when A is not finite. */
 static __thread double *dae_eig_work = 0;
 
 static int dae_least_norm(double *A, const double *r, double *lam, int nr, double scale, double tol) {
     if (nr <= 0) return 0;
-    if (!dae_eig_work) dae_eig_work = malloc(sizeof(double) * (DAE_NR * DAE_NR + DAE_NR + 1));
+    if (!dae_eig_work) dae_eig_work = malloc(sizeof(double) * (2 * DAE_NR * DAE_NR + DAE_NR + 1));
     if (!dae_eig_work) return -1;
+    double *copy = dae_eig_work + DAE_NR * DAE_NR + DAE_NR;
+    for (int i = 0; i < nr; ++i)
+        for (int j = 0; j <= i; ++j) copy[i * DAE_NR + j] = A[i * DAE_NR + j];
+    const int status = dae_cholesky_solve(A, r, lam, nr, scale, tol);
+    if (status <= 0) return status;
+    for (int i = 0; i < nr; ++i)
+        for (int j = 0; j <= i; ++j) A[i * DAE_NR + j] = copy[i * DAE_NR + j];
     return mb_least_norm(A, DAE_NR, r, lam, nr, scale, tol, dae_eig_work);
 }
 
