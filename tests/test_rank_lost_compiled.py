@@ -7,6 +7,8 @@ the same rows at the same states, and for a parallelogram four-bar, the closed-f
 of its parallelogram branch to one degree of freedom."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -50,7 +52,8 @@ def c_accelerations(system, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     """The accelerations of the compiled right-hand side (``rhs_value``: the dae KKT solve in C)."""
     formulation, kernel = system._formulation, system.kernel
     with formulation.compiled_setup(kernel.compiled.functions.lib, kernel=kernel, q0=q):
-        rates = CompiledRhsWorkspace(object(), kernel, None, "test").rhs(0.0, np.concatenate((q, qd)))
+        y = np.concatenate((q, qd))
+        rates = CompiledRhsWorkspace(SimpleNamespace(y0=y), kernel, None, "test").rhs(0.0, y)
     return rates[len(q):]
 
 
