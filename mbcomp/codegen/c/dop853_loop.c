@@ -206,7 +206,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
 #if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
+        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, mb_input_u(), work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
         }
