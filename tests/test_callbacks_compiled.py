@@ -189,3 +189,23 @@ def test_fourbar_with_a_callable_crank_torque(formulation):
         assert res.stats["integrator"] == ref.stats["integrator"] == ("scipy" if options else "compiled")
         np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-9)
     assert res.constraint_violation().max() < 1e-8
+
+
+def test_contact_events_see_the_callables_values():
+    """Impacts located in the compiled stretches (gap and dense output from the same stage
+    values): a callable damping torque and a callable tau give the events of the expression
+    model driven by the same tau."""
+    from pathlib import Path
+    library = Path(__file__).resolve().parents[1] / "library" / "pendulum_wall.toml"
+    called_model = mb.load(library)
+    called_model.add(mb.JointTorque("ctl", "hinge", lambda t, q, qd: [-0.4 * qd[0]]))
+    spring_model = mb.load(library)
+    spring_model.add(mb.TorsionSpring("damper", "hinge", stiffness=0.0, damping=0.4))
+    tau = lambda t, q, qd: [0.2 * np.sin(5.0 * t)]  # noqa: E731
+    t = np.linspace(0.0, 3.0, 7)
+    res = called_model.compile().simulate(3.0, [0.6], [0.0], t_eval=t, tau=tau, rtol=1e-10, atol=1e-12)
+    ref = spring_model.compile().simulate(3.0, [0.6], [0.0], t_eval=t, tau=tau, rtol=1e-10, atol=1e-12)
+    assert res.stats["integrator"] == "compiled" and len(res.events) == len(ref.events) >= 2
+    for a, b in zip(res.events, ref.events):
+        assert a.time == pytest.approx(b.time, abs=1e-10) and a.impulse == pytest.approx(b.impulse, rel=1e-9)
+    np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-9)
