@@ -144,14 +144,44 @@ def input_hook(kernel, tau: Any = None) -> Iterator["InputHook | None"]:
     hook.outer = getattr(_local, "active", None)
     _local.active = hook
     _install(lib, hook)
+    _step_watch(lib, True)
     try:
         yield hook
     finally:
         _local.active = hook.outer
         outer = hook.outer if hook.outer is not None and hook.outer.lib is lib else None
         _install(lib, outer)  # (a nested run of the same model: the outer run's buffers again)
+        _step_watch(lib, outer is not None)
         hook.outer = None
     hook.raise_pending()
+
+
+#: The compiled loops' collapse check with callbacks: each step calls Python, so a runaway
+#: gives up as early as a Python-stepped run (``integrators.CollapseWatch``: a hundredth of
+#: ``limits.max_steps()``, windows of 1000 steps, and the rule on a pace that fell a hundredfold).
+PYTHON_BUDGET, PYTHON_WINDOW = 0.01, 1000
+
+
+def _step_watch(lib, python: bool) -> None:
+    """This thread's collapse check of the compiled loops: the Python-stepped one
+    (``python``) or the compiled loops' own (``integrators._set_step_budget``)."""
+    from mbcomp.core.limits import max_steps
+    budget, watch = getattr(lib, "set_step_budget", None), getattr(lib, "set_step_watch", None)
+    if budget is None or watch is None:
+        return
+    if budget.restype is not None:
+        budget.argtypes, budget.restype = [ctypes.c_double], None
+    if watch.restype is not None:
+        watch.argtypes, watch.restype = [ctypes.c_long, ctypes.c_int], None
+    budget(float(max_steps()) * (PYTHON_BUDGET if python else 1.0))
+    watch(PYTHON_WINDOW if python else 0, int(python))
+
+
+def constant_tau(tau: Any) -> np.ndarray | None:
+    """The constant generalised forces the compiled code takes as an argument (nv values):
+    ``tau`` as a contiguous array, or None when it is None or a callable (whose values the
+    callback adds at every evaluation)."""
+    return None if tau is None or callable(tau) else np.ascontiguousarray(tau, dtype=float)
 
 
 def raise_pending() -> None:
@@ -162,8 +192,10 @@ def raise_pending() -> None:
         hook.raise_pending()
 
 
-def constant_tau(tau: Any) -> np.ndarray | None:
-    """The constant generalised forces the compiled code takes as an argument (nv values):
-    ``tau`` as a contiguous array, or None when it is None or a callable (whose values the
-    callback adds at every evaluation)."""
-    return None if tau is None or callable(tau) else np.ascontiguousarray(tau, dtype=float)
+def python_watch() -> tuple[int, float] | None:
+    """``(window, budget)`` of the collapse check the compiled loops of this thread run with
+    while a hook is active (the Python-stepped one), or None without a hook."""
+    if getattr(_local, "active", None) is None:
+        return None
+    from mbcomp.core.limits import max_steps
+    return PYTHON_WINDOW, max_steps() * PYTHON_BUDGET

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mbcomp.codegen.callbacks import constant_tau, raise_pending
+from mbcomp.codegen.callbacks import constant_tau, python_watch, raise_pending
 from mbcomp.core import c_text
 
 #: Status codes returned by the compiled loops.
@@ -407,8 +407,10 @@ def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int 
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == COLLAPSED:
         from mbcomp.core.limits import max_steps
-        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds,
-                                               steps=steps, t_end=t_end, budget=max_steps()))
+        window, budget = python_watch() or (COLLAPSE_WINDOW, max_steps())  # (with callbacks: the Python-stepped check)
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds, window,
+                                               budget if window == COLLAPSE_WINDOW else budget / 30,
+                                               steps=steps, t_end=t_end, budget=budget))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")

@@ -2,6 +2,21 @@
    limits.max_steps()). */
 static __thread double step_budget = COLLAPSE_STEPS;
 void set_step_budget(double steps) { step_budget = steps > 0 ? steps : COLLAPSE_STEPS; }
+/* The collapse check's window (accepted steps) and whether it also gives up on a pace that
+   fell a hundredfold (step_drop): Python sets them for runs that call Python back at every
+   evaluation (codegen/callbacks.py), whose steps cost as much as Python-stepped ones. */
+static __thread long step_window = COLLAPSE_WINDOW;
+static __thread int step_drop = 0;
+static __thread double step_best = 0.0;  /* the best pace (s per step) of the run so far, over its calls of the loop */
+/* The collapse window where this thread's last loop call returned at step_t_last: a call
+   starting there (the next chunk of the same run) goes on with it. */
+static __thread double step_t_last = -1.0 / 0.0, step_window_t0 = 0.0;
+static __thread long step_window_n = 0;
+void set_step_watch(long window, int drop) {
+    step_window = window > 0 ? window : COLLAPSE_WINDOW;
+    step_drop = drop;
+    step_best = 0.0;
+}
 
 /* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank; -8: a
    trial state without dependent coordinates; MB_INPUT_FAILED: a Python callable failed). */
