@@ -323,7 +323,8 @@ class CompiledStepping:
         self.state_columns = 0 if self.watched else kernel.compiled.drives.nz
         self.applied = tau  # (what the events see: the drive elements' forces join tau, as in Python stepping)
         if self.watched and kernel.compiled.drives.elements:
-            self.applied = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), np.zeros(0))
+            self.applied = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float),
+                                       np.zeros(0))
         self.max_step = options.max_step
         self.nothing_to_integrate = False
         self.segment = None
