@@ -14,7 +14,7 @@ from mbcomp.files.toml_model import library_models, load
 
 #: The library's parts, each a model of its own (the library's models: tests/test_cross_paths.py).
 PARTS = library_parts()
-STATS_KEYS = {"method", "integrator", "path", "nfev", "njev", "nlu", "steps", "rejected", "restarts", "status",
+STATS_KEYS = {"method", "integrator", "path", "rhs", "nfev", "njev", "nlu", "steps", "rejected", "restarts", "status",
               "message", "success", "wall_time", "rtol", "atol", "formulation"}
 
 @pytest.mark.parametrize("formulation", ["lagrange", "dae"])

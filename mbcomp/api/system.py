@@ -347,20 +347,39 @@ class System:
         elements act with their ``states``, by name; 0 when not given).
 
         A float64 ndarray of the right length takes a direct call of the compiled code
-        (``mbcomp.codegen.fastcall``); anything else is converted and checked."""
+        (``mbcomp.codegen.fastcall``); anything else is converted and checked.  With
+        constraints, the compiled KKT solve of the compiled loops answers
+        (``Formulation.compiled_solve``; the dae formulation's includes its Baumgarte terms),
+        the Python solve where there is no C or at a singular position."""
         if tau is None and states is None:
             qdd = (self._fast or self._bind_fast())[1].accelerations(q, qd)
             if qdd is not None:
                 return qdd
         q, qd = self.state_vector(q), self._velocity(qd)
-        return self._formulation.accelerations(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states))
+        applied = self._applied(tau, t, q, qd, states)
+        solved = self._compiled_solution(t, q, qd, applied)
+        if solved is not None:
+            return solved[0]
+        return self._formulation.accelerations(self._kernel, t, q, qd, applied)
+
+    def _compiled_solution(self, t: float, q: np.ndarray, qd: np.ndarray, applied, offsets: dict | None = None):
+        """``(qdd, lam)`` from the compiled KKT solve (``Formulation.compiled_solve``: the C of
+        the compiled loops), or None where the formulation's Python solve answers: no
+        constraints, no C, a singular position (a row direction dropped), a failure it
+        explains."""
+        solver = self.__dict__.get("_solver", False)
+        if solver is False:  # (bound on first use)
+            solver = self._formulation.compiled_solve(self._kernel)
+            object.__setattr__(self, "_solver", solver)
+        return None if solver is None else solver.solve(t, q, qd, applied, offsets)
 
     def reactions(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                   contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
-        and the normal force (N) of each contact in ``contacts`` held closed."""
+        and the normal force (N) of each contact in ``contacts`` held closed.  Without held
+        contacts the multipliers come from the compiled KKT solve, as in ``accelerations``."""
         if tau is None and states is None and offsets is None and not contacts and \
                 (self._fast or self._bind_fast())[1].check(q, qd):
             return {}  # a tree without drive elements and no contact held closed: no reactions
@@ -369,8 +388,11 @@ class System:
         closed = (contacts if isinstance(contacts, tuple) else tuple(contacts)) if contacts and all(
             isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
-        return self._formulation.reactions(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
-                                           closed)
+        applied = self._applied(tau, t, q, qd, states)
+        solved = None if closed else self._compiled_solution(t, q, qd, applied, offsets)
+        if solved is not None:
+            return self._formulation.reactions_of(self._kernel, q, solved[1])
+        return self._formulation.reactions(self._kernel, t, q, qd, applied, offsets, closed)
 
     def contact_forces(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                        contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:

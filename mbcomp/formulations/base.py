@@ -292,12 +292,30 @@ class Formulation:
         """Multipliers by constraint name, then each closed contact's normal force (N)."""
         if self.constraints is None and not contacts:
             return {}
-        lam = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1]
+        return self.reactions_of(kernel, q, self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1], contacts)
+
+    def reactions_of(self, kernel, q, lam: np.ndarray, contacts=()) -> dict[str, np.ndarray]:
+        """``reactions`` from the multipliers ``lam`` of a solve at ``q`` (the model's
+        equations, then the closed ``contacts``' normal rows): by constraint name (a motor's
+        torque or force, a loop joint's force and torques, ``ConstraintSet.split_reactions``),
+        then each closed contact's normal force (N)."""
         nc = 0 if self.constraints is None else self.constraints.nc
         out = {} if self.constraints is None else self.constraints.split_reactions(lam[:nc], kernel, q)
         names = [c.name for c in kernel.topology.contacts]
         out.update({names[i]: float(value) for i, value in zip(contacts, lam[nc:])})
         return out
+
+    def evaluation_gains(self) -> tuple[float, float]:
+        """The Baumgarte gains ``(alpha, beta)`` (1/s) of this formulation's solve at a state
+        (``solve``, ``compiled_solve``): none here, the exact constraint accelerations."""
+        return (0.0, 0.0)
+
+    def compiled_solve(self, kernel):
+        """The compiled KKT solve the evaluation calls use on ``kernel`` (``System.accelerations``,
+        ``reactions``: ``compiled_eval.CompiledSolve``, the same numbers as ``solve`` from the C
+        the compiled loops run), or None where there is none (no constraints, no C)."""
+        from mbcomp.formulations.compiled_eval import CompiledSolve
+        return CompiledSolve.of(self, kernel, self.evaluation_gains())
 
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
@@ -440,9 +458,10 @@ class Formulation:
         yield
 
     def scipy_stretch(self, kernel, lib, t0: float, q0: np.ndarray, qd0: np.ndarray, tau, contacts: tuple = (),
-                      offsets: dict | None = None, method: str = ""):
+                      offsets: dict | None = None, method: str = "", z0: np.ndarray | None = None):
         """scipy's stepping of the compiled right-hand side from the consistent ``(q0, qd0)`` at
-        ``t0`` with the held ``contacts`` (``tau``: constant generalised forces or None): a
+        ``t0`` with the held ``contacts`` (``tau``: constant generalised forces or None; ``z0``:
+        the drive elements' states, which follow the mechanical state in ``y``): a
         ``compiled_rhs.Stretch`` whose ``workspace`` calls the C functions the compiled loops
         step; ``close()`` undoes the configuration.  Only asked for where the compiled loop
         could run the model (``run/paths.why_not_compiled``).  Here: the tree state without
@@ -451,7 +470,7 @@ class Formulation:
         workspace = self.start(kernel, t0, q0, qd0, tau, contacts)
         if offsets is not None:
             workspace.offsets = offsets
-        return tree_stretch(self, kernel, workspace, tau, method, self.compiled_setup(lib, kernel=kernel, q0=q0))
+        return tree_stretch(self, kernel, workspace, tau, method, self.compiled_setup(lib, kernel=kernel, q0=q0), z0)
 
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")

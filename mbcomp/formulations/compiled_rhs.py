@@ -12,6 +12,11 @@ evaluation, with no Python solve:
   checks the dependent block, and a new partition is chosen as in the compiled loop
   (``ReducedRun.resume``).
 
+Drive elements (motors, PIDs, signals): their states ``z`` follow the mechanical state in
+``y`` (``[q, v, z]``, or ``[x_i, qd_i, z]``) and the same C functions give their rates, as in
+the compiled loops; ``z`` (the workspace's attribute) holds the states of the last
+``full_state``, the sample the driver records.
+
 A stretch (``Stretch``) is what a formulation's ``scipy_stretch`` hook returns: the workspace
 the solver steps (``workspace``) and ``close()``, which undoes the C configuration.
 """
@@ -47,25 +52,35 @@ class Stretch:
             closing()
 
 
-def tree_stretch(formulation, kernel, workspace, tau, method: str, setup=None) -> Stretch:
+def tree_stretch(formulation, kernel, workspace, tau, method: str, setup=None, z0=None) -> Stretch:
     """The tree-state workspace ``workspace`` stepping ``rhs_value``; ``setup``: the context
-    (``compiled_setup``) that configures the C solve for it, entered here."""
+    (``compiled_setup``) that configures the C solve for it, entered here; ``z0``: the drive
+    elements' states at the start (None: no drive elements)."""
     stack = contextlib.ExitStack()
     if setup is not None:
         stack.enter_context(setup)
-    return Stretch(CompiledRhsWorkspace(workspace, kernel, tau, method), stack.close, compiled_jacobian(kernel, tau))
+    return Stretch(CompiledRhsWorkspace(workspace, kernel, tau, method, z0=z0), stack.close,
+                   compiled_jacobian(kernel, tau))
+
+
+def _states(z0) -> np.ndarray:
+    return np.zeros(0) if z0 is None else np.array(z0, dtype=float).reshape(-1)
 
 
 class CompiledRhsWorkspace:
     """A formulation workspace (``inner``) on the tree state whose right-hand side is the
     compiled ``rhs_value``; ``tau`` constant generalised forces (nv values or None); ``method``
-    names the stepping in errors.  Everything else is the inner one's."""
+    names the stepping in errors; ``z0`` the drive elements' states at the start (their
+    rates come from ``rhs_value`` too: ``y = [q, v, z]``).  Everything else is the inner
+    one's."""
 
-    def __init__(self, inner, kernel, tau, method: str, failure=None):
+    def __init__(self, inner, kernel, tau, method: str, failure=None, z0=None):
         object.__setattr__(self, "inner", inner)
         d = self.__dict__
         d["kernel"], d["method"] = kernel, method
         d["failure"] = failure  # () -> the error of a failed friction solve (Painleve) or None
+        d["z"] = _states(z0)  #: the drive states of the last full_state (the sample's)
+        d["m"] = inner.y0.size  # (the mechanical part of y)
         lib = kernel.compiled.functions.lib
         fn = lib.rhs_value
         fn.argtypes = [_VOID, _VOID, _DBL, _VOID, _VOID, _VOID]
@@ -81,6 +96,22 @@ class CompiledRhsWorkspace:
 
     def __setattr__(self, name, value):
         setattr(self.inner, name, value)
+
+    @property
+    def y0(self) -> np.ndarray:
+        return np.concatenate((self.inner.y0, self.z)) if self.z.size else self.inner.y0
+
+    def full_state(self, t, y):
+        if not self.z.size:
+            return self.inner.full_state(t, y)
+        self.__dict__["z"] = np.array(y[self.m:], dtype=float)
+        return self.inner.full_state(t, y[:self.m])
+
+    def after_step(self, t, y):
+        if not self.z.size:
+            return self.inner.after_step(t, y)
+        corrected = self.inner.after_step(t, y[:self.m])
+        return None if corrected is None else np.concatenate((corrected, y[self.m:]))
 
     def rhs(self, t, y):
         y = np.ascontiguousarray(y, dtype=float)
@@ -100,10 +131,13 @@ class CompiledReducedWorkspace:
     partition decisions are the run's (its Python workspace's ``repartition``), as in the
     compiled loop."""
 
-    def __init__(self, run, method: str):
+    def __init__(self, run, method: str, z0=None):
         self.run, self.method = run, method
         lib = run.lib
         self.n, self.nq = run.n, run.nq
+        self.z = _states(z0)  #: the drive states of the last full_state (the sample's)
+        if self.z.size:
+            run.drive_states(self.z)  # (the accepted state's: a retreat goes back to them)
         self._rhs = lib.lagrange_rhs
         self._rhs.argtypes, self._rhs.restype = [_DBL, _VOID, _VOID, _VOID, _VOID], ctypes.c_int
         self._full = lib.lagrange_full
@@ -118,7 +152,7 @@ class CompiledReducedWorkspace:
     # -- what the driver and scipy's stepping read ------------------------------------------------
     @property
     def y0(self) -> np.ndarray:
-        return np.ascontiguousarray(self.run.y0, dtype=float)
+        return np.ascontiguousarray(np.concatenate((self.run.y0, self.z)), dtype=float)
 
     @property
     def offsets(self):
@@ -155,6 +189,8 @@ class CompiledReducedWorkspace:
 
     def full_state(self, t, y):
         y = np.ascontiguousarray(y, dtype=float)
+        if self.z.size:
+            self.z = np.array(y[len(y) - self.z.size:])
         q, qd = np.empty(self.nq), np.empty(self.n)
         if self._full(float(t), pointer(y), pointer(q), pointer(qd), pointer(self.run.kernel.p)):
             raise self._trial_failed(float(t), "a sample")
@@ -188,6 +224,7 @@ class CompiledReducedWorkspace:
     def retreat(self):
         """``(t, y)`` of the last accepted state, the partition chosen afresh there."""
         self.run.sync()
+        z = self.run.accepted_states()
         t_back, y_back = self.run.workspace.retreat()
         self.run.reconfigure()
-        return t_back, y_back
+        return t_back, np.concatenate((y_back, z))

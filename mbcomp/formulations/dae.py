@@ -87,16 +87,16 @@ class DaeFormulation(Formulation):
             return "no consistent configuration was found at compile time"
         return None
 
-    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method=""):
+    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method="", z0=None):
         """The compiled KKT solve on the tree state (``Formulation.scipy_stretch``): the rows of
         the constraints (``compiled_setup``) or, with contacts, of the stretch between events
         (``DaeRun``: the held contacts' rows too)."""
         if not self.compiled.contact_rows:   # (contacts or collision features)
-            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
+            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method, z0)
         from mbcomp.codegen.integrators import compiled_jacobian
         from mbcomp.formulations.compiled_rhs import Stretch, CompiledRhsWorkspace
         run = DaeRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
-        return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method, run.friction_failure), run.close,
+        return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method, run.friction_failure, z0), run.close,
                        compiled_jacobian(kernel, tau))
 
     @property
@@ -157,6 +157,10 @@ class DaeFormulation(Formulation):
         M, f = kernel.checked_dynamics(t, q, qd, tau)
         cv = self.constraint_values(kernel, t, q, qd, offsets, contacts)
         return self.solve_constrained(kernel, M, f, cv.J, self.acceleration_targets(cv, qd), q, t, contacts, qd)
+
+    def evaluation_gains(self) -> tuple[float, float]:
+        """This formulation's Baumgarte gains (1/s): its solve at a state includes them."""
+        return self.baumgarte
 
     def acceleration_targets(self, cv, qd):
         """``-bias - 2 alpha gdot - beta^2 g`` (Baumgarte)."""

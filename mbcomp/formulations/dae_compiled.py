@@ -59,6 +59,48 @@ def motor_programs(formulation) -> dict[int, np.ndarray | None]:
     return out
 
 
+def row_tables(formulation, kernel, rows, offsets: dict | None, contacts: tuple = ()):
+    """``(spec, data, programs)``: the arrays ``dae_configure_rows`` (and ``dae_evaluate``)
+    read for the KKT rows ``rows`` (equation indices of the formulation's constraints; ``nc``
+    and on: the held ``contacts``, in order); ``offsets``: the speed motors' start values.
+    ``ModelError`` for a motor whose position is a Python callable."""
+    constraints = formulation.constraints
+    topology = kernel.topology
+    nc = 0 if constraints is None else constraints.nc
+    rows = [int(r) for r in rows]
+    spec = np.zeros((len(rows), SPEC_LONGS), dtype=np.int64)
+    data = np.zeros((len(rows), DATA_DOUBLES))
+    programs: list[np.ndarray] = []
+    start = 0
+    compiled = motor_programs(formulation)
+    for k, r in enumerate(rows):
+        spec[k, 4] = -1
+        if r >= nc:
+            spec[k, :2] = (ROW_CONTACT, contacts[r - nc])
+            continue
+        eq = constraints.equations[r]
+        if r not in constraints.coordinate_rows:
+            spec[k, :2] = (ROW_GEOMETRIC, constraints.geometric_rows.index(r))
+            continue
+        joint = eq.joint if isinstance(eq.joint, str) else eq.joint.name
+        spec[k, :4] = (ROW_MOTOR, r, topology.q_slice[joint].start, topology.v_slice[joint].start)
+        speed = constraints.motor_speed(kernel, r)
+        if speed is not None:
+            if offsets is None or r not in offsets:
+                raise SimulationError(f"motor {constraints.owner[r]!r}: no start value for its coordinate")
+            data[k] = (speed, offsets[r])
+            continue
+        program = compiled.get(r)
+        if program is None:
+            raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
+                                                           "evaluated in compiled code")
+        spec[k, 4] = start
+        programs.append(program)
+        start += len(program)
+    return (np.ascontiguousarray(spec), np.ascontiguousarray(data),
+            np.ascontiguousarray(np.concatenate(programs) if programs else np.zeros(1)))
+
+
 class DaeRows:
     """The configured KKT rows of one compiled dae run: ``rows`` are equation indices of
     the formulation's constraints (``nc`` and on: the held contacts, in ``contacts`` order).
@@ -66,43 +108,8 @@ class DaeRows:
 
     def __init__(self, formulation, kernel, lib, rows, offsets: dict | None, contacts: tuple = ()):
         self.formulation, self.lib = formulation, lib
-        constraints = formulation.constraints
-        topology = kernel.topology
-        nc = 0 if constraints is None else constraints.nc
-        rows = [int(r) for r in rows]
-        spec = np.zeros((len(rows), SPEC_LONGS), dtype=np.int64)
-        data = np.zeros((len(rows), DATA_DOUBLES))
-        programs: list[np.ndarray] = []
-        start = 0
-        compiled = motor_programs(formulation)
-        for k, r in enumerate(rows):
-            spec[k, 4] = -1
-            if r >= nc:
-                spec[k, :2] = (ROW_CONTACT, contacts[r - nc])
-                continue
-            eq = constraints.equations[r]
-            if r not in constraints.coordinate_rows:
-                spec[k, :2] = (ROW_GEOMETRIC, constraints.geometric_rows.index(r))
-                continue
-            joint = eq.joint if isinstance(eq.joint, str) else eq.joint.name
-            spec[k, :4] = (ROW_MOTOR, r, topology.q_slice[joint].start, topology.v_slice[joint].start)
-            speed = constraints.motor_speed(kernel, r)
-            if speed is not None:
-                if offsets is None or r not in offsets:
-                    raise SimulationError(f"motor {constraints.owner[r]!r}: no start value for its coordinate")
-                data[k] = (speed, offsets[r])
-                continue
-            program = compiled.get(r)
-            if program is None:
-                raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
-                                                               "evaluated in compiled code")
-            spec[k, 4] = start
-            programs.append(program)
-            start += len(program)
-        self.spec = np.ascontiguousarray(spec)
-        self.data = np.ascontiguousarray(data)
-        self.programs = np.ascontiguousarray(np.concatenate(programs) if programs else np.zeros(1))
-        self.nr = len(rows)
+        self.spec, self.data, self.programs = row_tables(formulation, kernel, rows, offsets, contacts)
+        self.nr = len(self.spec)
         configure = _bind_configure(lib)
         alpha, beta = formulation.baumgarte
         if configure(self.nr, _ptr(self.spec), _ptr(self.data), _ptr(self.programs), alpha, beta,

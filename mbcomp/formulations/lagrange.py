@@ -256,19 +256,19 @@ class LagrangeFormulation(Formulation):
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         return ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
 
-    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method=""):
+    def scipy_stretch(self, kernel, lib, t0, q0, qd0, tau, contacts=(), offsets=None, method="", z0=None):
         """The compiled reduced right-hand side (``Formulation.scipy_stretch``): with
         constraints or contacts, a ``ReducedRun``'s configuration stepped by scipy
-        (``compiled_rhs.CompiledReducedWorkspace``)."""
+        (``compiled_rhs.CompiledReducedWorkspace``; the drive states ``z0`` after ``[x_i, qd_i]``)."""
         if self.constraints is None and not self.compiled.contact_rows:   # (contacts or collision features)
-            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method)
+            return super().scipy_stretch(kernel, lib, t0, q0, qd0, tau, contacts, offsets, method, z0)
         from mbcomp.formulations.compiled_rhs import CompiledReducedWorkspace, Stretch
         from mbcomp.formulations.lagrange_compiled import ReducedRun
         run = ReducedRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
         if self.compiled.contact_rows:  # (armed, the C code evaluates the held contacts' gaps)
             from mbcomp.formulations.impact import GAP_TOLERANCE
             run.watch_contacts(kernel.contacts(q0, qd0).g, GAP_TOLERANCE)
-        return Stretch(CompiledReducedWorkspace(run, method), run.close)
+        return Stretch(CompiledReducedWorkspace(run, method, z0), run.close)
 
     def compiled_session(self, kernel, lib, q0, qd0, tau):
         """The Python side of the compiled reduced loop (None without constraints)."""

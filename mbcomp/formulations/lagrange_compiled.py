@@ -261,6 +261,10 @@ class ReducedRun(ContactWatching):
         writes them after every accepted step."""
         self.acc[1 + self.nq + self.n:] = z
 
+    def accepted_states(self) -> np.ndarray:
+        """The drive states of the last accepted state (empty without drive elements)."""
+        return self.acc[1 + self.nq + self.n:].copy()
+
     def sync(self) -> None:
         """The Python workspace's accepted state becomes the loop's."""
         ws = self.workspace
@@ -285,7 +289,7 @@ class ReducedRun(ContactWatching):
         (``state`` is updated in place: a restart sets a new first step)."""
         ws = self.workspace
         self.sync()
-        z = self.acc[1 + self.nq + self.n:].copy()  # the accepted drive states
+        z = self.accepted_states()
         if status == PAUSED:
             t, q, qd = self.accepted()
             chart = ws.chart

@@ -288,7 +288,7 @@ def run_steps(stepping: Stepping, kernel, formulation, options: RunOptions, q0: 
     if not stepping.finite_checked and not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise SimulationError("solver returned non-finite states")
     stats = run_stats(options, formulation.name, stepping.counts, wall, integrator=stepping.integrator,
-                      method=stepping.method, path=str(path))
+                      method=stepping.method, path=str(path), rhs=stepping.rhs)
     return _result(kernel, formulation, t=t, q=q, qd=qd, z=z, stats=stats, tau=stepping.result_tau, offsets=offsets,
                    events=watch.events if watch else [],
                    persistent_contacts=[watch.names[i] for i in watch.persistent] if watch else [],

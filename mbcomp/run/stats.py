@@ -27,12 +27,15 @@ class Counts:
 
 
 def run_stats(options: RunOptions, formulation: str, counts: Counts, wall_time: float, *, integrator: str,
-              method: str, path: str, message: str = FINISHED) -> dict:
+              method: str, path: str, message: str = FINISHED, rhs: str = "python") -> dict:
     """The ``Result.stats`` of a finished run.  ``integrator``: ``"compiled"`` (the loop
     compiled with the model), ``"scipy"`` (scipy's stepping of the compiled right-hand side)
     or ``"none"`` (nothing to integrate); ``path``: ``System.integration_path``'s answer for
-    the run (``"compiled"`` or ``"scipy: <why>"``); ``wall_time`` in s."""
-    return {"method": method, "integrator": integrator, "path": path,
+    the run (``"compiled"`` or ``"scipy: <why>"``); ``rhs``: what evaluated the right-hand
+    side, ``"compiled"`` (one C function per evaluation: the compiled loops, or scipy's
+    stepping of the compiled right-hand side) or ``"python"`` (the formulation's Python
+    workspace, which calls the compiled model's pieces); ``wall_time`` in s."""
+    return {"method": method, "integrator": integrator, "path": path, "rhs": rhs,
             "nfev": int(counts.nfev), "njev": int(counts.njev), "nlu": int(counts.nlu),
             "steps": int(counts.steps), "rejected": None if counts.rejected is None else int(counts.rejected),
             "restarts": int(counts.restarts), "status": 0, "message": message, "success": True,

@@ -69,9 +69,11 @@ class Stepping(Protocol):
     ``integrator`` (the name ``Result.stats`` gives it), ``method``, ``counts`` (``Counts``),
     ``applied`` (the applied forces contact events see), ``records_start`` (its rows include
     the start sample), ``state_columns`` (drive states in a sample, ``states()`` their values),
-    ``error_prefix``, ``result_tau``, ``nothing_to_integrate`` (after ``begin``)."""
+    ``error_prefix``, ``result_tau``, ``nothing_to_integrate`` (after ``begin``), ``rhs``
+    (``"compiled"`` or ``"python"``: ``Result.stats["rhs"]``)."""
 
     integrator: str
+    rhs: str
     records_start: bool
     error_prefix: str
     finite_checked: bool
@@ -119,21 +121,24 @@ class ScipyStepping:
         self.kernel, self.formulation, self.options, self.counts = kernel, formulation, options, counts
         self.cls = solver_class(options.method)
         self.method = getattr(self.cls, "__name__", str(options.method))
-        #: The solver steps the compiled right-hand side (``run/compiled_rhs.py``): the model
-        #: could run in the compiled loops (only the method is scipy's), its formulation steps
-        #: the tree state there, and there are no drive elements.  With contacts, each stretch
-        #: between events configures its rows through ``Formulation.contact_run``.
-        self.compiled_rhs = bool(compiled_rhs and not kernel.compiled.drives.elements
-                                 and (formulation.constraints is not None or kernel.topology.contacts)
+        drives = bool(kernel.compiled.drives.elements)
+        #: The solver steps the compiled right-hand side (``formulations/compiled_rhs.py``): the
+        #: model could run in the compiled loops (only the method is scipy's) and has
+        #: constraints, contacts or drive elements (whose states the C code integrates, as in
+        #: the compiled loops).  With contacts, each stretch between events configures its
+        #: rows through ``Formulation.contact_run``.
+        self.compiled_rhs = bool(compiled_rhs
+                                 and (formulation.constraints is not None or kernel.topology.contacts or drives)
                                  and why_not_compiled(kernel, formulation, "DOP853", tau) is None)
         self.setup = contextlib.ExitStack()
         self.stretch = None  #: the compiled rows of the stretch between contact events (compiled_rhs)
         self.drive = None
-        if kernel.compiled.drives.elements:  # drive elements: their forces join tau, their states y
-            tau = self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float),
-                                           z0)
+        if drives:  # drive elements: their forces join tau, their states y
+            self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
+            if not self.compiled_rhs:  # (the compiled rhs evaluates them itself)
+                tau = self.drive
         self.tau = tau
-        self.applied = tau  #: what contact events see as applied forces
+        self.applied = tau if self.drive is None else self.drive  #: what contact events see as applied forces
         self.state_columns = 0 if self.drive is None else len(self.drive.z)  #: drive states in a sample
         self.max_step = options.max_step
         self.solver_options: dict = {}
@@ -156,9 +161,18 @@ class ScipyStepping:
                     self.formulation.explain_compiled_failure(self.kernel.compiled.functions.lib)
                 raise
 
+    @property
+    def rhs(self) -> str:
+        """What evaluates the right-hand side (``Result.stats["rhs"]``)."""
+        return "compiled" if self.compiled_rhs else "python"
+
     def states(self) -> np.ndarray:
         """The drive elements' states at the sample just evaluated."""
-        return self.drive.z if self.drive is not None else np.zeros(0)
+        if self.drive is None:
+            return np.zeros(0)
+        if self.compiled_rhs and self.workspace is not None:
+            return self.workspace.z  # (the compiled workspace's, set by its full_state)
+        return self.drive.z
 
     def begin(self, t0: float, q0: np.ndarray, qd0: np.ndarray, offsets: dict, contacts: tuple, watched: bool) -> None:
         """Start from the consistent state ``(q0, qd0)`` at ``t0``."""
@@ -268,8 +282,9 @@ class ScipyStepping:
         tau = self.tau if self.tau is None or callable(self.tau) else \
             np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)  # (a callable: the input callback's)
         self._close_stretch()
+        z0 = None if self.drive is None else np.array(self.states())
         self.stretch = self.formulation.scipy_stretch(self.kernel, self.kernel.compiled.functions.lib, t0, q0, qd0, tau,
-                                                      contacts, self.offsets, self.method)
+                                                      contacts, self.offsets, self.method, z0)
         return self.stretch.workspace
 
     def _close_stretch(self) -> None:
@@ -308,6 +323,7 @@ class CompiledStepping:
     with an event comes back to the driver."""
 
     integrator = "compiled"
+    rhs = "compiled"
     error_prefix = ""  # (the compiled loops' messages name the method and the time)
     finite_checked = True  # (the compiled loops stop at a non-finite state: NOT_FINITE)
 

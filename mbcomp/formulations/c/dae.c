@@ -25,6 +25,7 @@ static __thread double dae_alpha, dae_beta, dae_scale, dae_tol = MB_RANK_TOLERAN
 static __thread double dae_time = 0.0;            /* the time of the state being evaluated */
 static __thread int dae_has_geo, dae_has_contacts, dae_has_collisions;
 static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
+static __thread int dae_dropped = 0;              /* the last Gram solve dropped a direction */
 
 /* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
 double dae_motor_failure(void) {
@@ -175,6 +176,7 @@ static int dae_gram_solve(double *A, const double *r, double *lam, int nr, doubl
         for (int k = i + 1; k < nr; ++k) s -= A[k * DAE_NR + i] * lam[k];
         lam[i] = A[i * DAE_NR + i] > 0.0 ? s / A[i * DAE_NR + i] : 0.0;
     }
+    dae_dropped = dropped;
     return dropped;
 }
 
@@ -227,6 +229,40 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
     return 0;
 }
 #endif
+
+/* The KKT solve at one state, for the evaluation calls (System.accelerations, reactions and
+   the analyses through them: formulations/compiled_eval.py): the rows, gains and tolerances
+   given here (as dae_configure_rows takes them), at time t; the configuration of a run on
+   this thread is left as it was (and a friction configuration is not used).  qdd (NQ) and
+   lam (nr: the multiplier of each given row, the sign of the KKT system's J^T lam).
+   Returns 0; 1 when M is not positive definite; 2 when a direction of the rows was dropped
+   (a singular position: the caller falls back to the Python solve); -4 too many rows. */
+int dae_evaluate(int nr, const long *spec, const double *data, const double *programs, double alpha, double beta,
+                 double scale, double tol, const double *p, const double *tau, double t, const double *q,
+                 const double *qd, double *qdd, double *lam, double *work) {
+    if (nr > DAE_NR || nr < 0) return -4;
+    const int nr0 = dae_nr, geo0 = dae_has_geo, contacts0 = dae_has_contacts, collisions0 = dae_has_collisions;
+    const long *spec0 = dae_spec;
+    const double *data0 = dae_data, *programs0 = dae_programs;
+    const double alpha0 = dae_alpha, beta0 = dae_beta, scale0 = dae_scale, tol0 = dae_tol, time0 = dae_time;
+    const double bad0 = dae_bad_time;
+    const int fr0 = mb_fr_n;
+    double lam0[DAE_NR + 1], u[1] = {0.0};
+    for (int k = 0; k < DAE_NR; ++k) lam0[k] = dae_lam[k];
+    dae_configure_rows(nr, spec, data, programs, alpha, beta, scale, tol);
+    mb_fr_n = 0;
+    dae_time = t;
+    dae_dropped = 0;
+    int status = dae_accelerations(q, qd, p, u, tau, qdd, work);
+    if (status == 0 && dae_dropped) status = 2;
+    for (int k = 0; k < nr; ++k) lam[k] = dae_lam[k];
+    dae_nr = nr0; dae_spec = spec0; dae_data = data0; dae_programs = programs0;
+    dae_alpha = alpha0; dae_beta = beta0; dae_scale = scale0; dae_tol = tol0; dae_time = time0;
+    dae_has_geo = geo0; dae_has_contacts = contacts0; dae_has_collisions = collisions0; dae_bad_time = bad0;
+    mb_fr_n = fr0;
+    for (int k = 0; k < DAE_NR; ++k) dae_lam[k] = lam0[k];
+    return status;
+}
 
 /* Move y = [q, qd] back onto the constraints after an accepted step at dae_time: positions
    by Newton (minimum-norm steps on the configured rows), speeds by the mass-orthogonal
