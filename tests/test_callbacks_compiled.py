@@ -144,6 +144,10 @@ class TestCallableDriveSignal:
         # closed form: INERTIA phi'' = 2 * 0.25 sin(3 t) from rest
         t = T[:9]
         np.testing.assert_allclose(res["phi"], 0.5 / INERTIA * (t / 3 - np.sin(3 * t) / 9), rtol=0, atol=1e-9)
+        # a scipy method on the compiled right-hand side (drive elements: their inputs called back too)
+        rk45 = called.simulate(2.0, [0.0], t_eval=t, method="RK45", rtol=1e-10, atol=1e-12)
+        assert rk45.stats["integrator"] == "scipy" and rk45.stats["rhs"] == "compiled"
+        np.testing.assert_allclose(rk45["phi"], 0.5 / INERTIA * (t / 3 - np.sin(3 * t) / 9), rtol=0, atol=1e-8)
 
     def test_motor_voltage_callable_with_drive_states(self):
         def model(voltage, name):
