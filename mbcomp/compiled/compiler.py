@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from mbcomp.codegen import cache, printer as codegen
+from mbcomp.core import c_text
 from mbcomp.build import recursive
 from mbcomp.build.c_sizes import CSizes
 from mbcomp.codegen.backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, EARLY_OUTPUT_STATEMENTS, FUNCTIONS,
@@ -230,7 +231,7 @@ class CompiledModel:
         if self.constraint_set is not None or self.contact_rows:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
         return (reduced + sizes.header() + (codegen.c_dense_stub() if lazy_dense else "")
-                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree + codegen.c_collide()
+                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + c_text.read("mbcomp.codegen", "inputs.h") + "\n" + tree + codegen.c_collide()
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"

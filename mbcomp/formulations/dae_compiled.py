@@ -21,6 +21,7 @@ import ctypes
 import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.codegen.callbacks import constant_tau
 from mbcomp.codegen.expressions_c import compile_position
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
@@ -143,7 +144,7 @@ class DaeRun(ContactWatching):
         self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
         if offsets is not None:
             self.workspace.offsets = offsets
-        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.tau = constant_tau(tau)  # (a callable tau: the input callback's)
         self.restarts = 0
         self.gaps = self.event = self.held = None
         nc = 0 if formulation.constraints is None else formulation.constraints.nc

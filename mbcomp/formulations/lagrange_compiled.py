@@ -35,6 +35,7 @@ import numpy as np
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.statemap import Chart
 from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
+from mbcomp.codegen.callbacks import constant_tau
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, bind_reduced
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.friction import has_friction
@@ -126,7 +127,7 @@ class ReducedRun(ContactWatching):
         self.acc = np.concatenate(([t0], q0, qd0, np.zeros(self.nz)))
         self.info = np.array([0.0, np.nan])  # [condition, time of a non-finite motor position]
         self.programs = None if constraints is None else motor_programs(constraints)
-        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.tau = constant_tau(tau)  # (a callable tau: the input callback's)
         self.retries, self.t_retry = 0, -np.inf
         self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
         configure = lib.lagrange_configure

@@ -2,10 +2,11 @@
 compiled right-hand side, and why.
 
 The compiled loop is the product path: every model whose forces, drives and motors are
-expressions runs there in either formulation.  A run leaves it only for a reason this module
-names (``IntegrationPath.reason``): a scipy method asked for, Python callables in the model or
-in ``tau``, a formulation option that steps in Python (``Formulation.compiled_loop``), a model
-compiled without a C compiler.  ``System.integration_path`` reports the choice.
+expressions runs there in either formulation, and so does a model with Python callables
+(callable forces or torques, drive signals, a callable ``tau``), which the loop calls back
+(``codegen/callbacks.py``).  A run leaves it only for a reason this module names
+(``IntegrationPath.reason``): a scipy method asked for, a formulation option that steps in
+Python (``Formulation.compiled_loop``), a model compiled without a C compiler.  ``System.integration_path`` reports the choice.
 """
 from __future__ import annotations
 
@@ -54,13 +55,7 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
     friction = compiled_friction_problem(kernel, formulation)
     if friction is not None:
         return friction
-    if kernel.n_inputs:
-        return "the model has callable forces or torques"
-    if kernel.compiled.drives.callables:
-        return "the model's drives or signals use Python callables"
-    if callable(tau):
-        return "tau is a Python callable"
-    return None
+    return None  # (Python callables in the model or in tau are called back from the loop: codegen/callbacks.py)
 
 
 def choose_path(kernel, formulation, options: RunOptions, tau: Any = None) -> IntegrationPath:

@@ -420,12 +420,13 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
    solve's state in friction.h); 0, or nonzero when it failed. */
 static int dae_solve_at(double s, double t_old, double h, const double *y_old, const double *F, int ny,
                         const double *p, const double *tau) {
-    double y[2 * NQ + 1], qdd[NQ + 1], u[1] = {0.0};
+    double y[2 * NQ + 1], qdd[NQ + 1], tau_buf[NQ + 1];
+    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
+    if (mb_inputs(s, y, y + NQ, 0)) return MB_INPUT_FAILED;  /* (Python callables at this state: inputs.h) */
     double *work = malloc(sizeof(double) * (NDAEWORK + 1));
     if (!work) return -4;
-    mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
     dae_time = s;
-    const int status = dae_accelerations(y, y + NQ, p, u, tau, qdd, work);
+    const int status = dae_accelerations(y, y + NQ, p, mb_input_u(), mb_input_tau(tau, tau_buf), qdd, work);
     free(work);
     return status;
 }

@@ -171,10 +171,8 @@ static const double *lag_drive_forces(double t, const double *q, const double *q
     if (!lag_drives) {
         for (int i = 0; i < DRIVES_SIZE; ++i) lag_dv[i] = 0.0;
     } else {
-        double u[1 + LAG_NZ];
-        u[0] = t;
-        for (int k = 0; k < LAG_NZ; ++k) u[1 + k] = z[k];
-        drives(q, qd, p, u, lag_dv);
+        double buf[1 + LAG_NZ];
+        drives(q, qd, p, mb_drive_u(t, z, buf), lag_dv);
     }
     return lag_dv + DRIVES_FORCES_OFF;
 }
@@ -471,11 +469,16 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    double tau_buf[NQ + 1];
+    if (mb_in_hook) {  /* Python callables (inputs.h) at this full state */
+        if (mb_inputs(t, q, qd, lag_drives ? y + nqi + ni : 0)) return MB_INPUT_FAILED;
+        tau = mb_input_tau(tau, tau_buf);
+    }
     if (nr == 0 && lag_nc == 0 && ni == n && !HAS_DRIVES) {
         /* no row held (colliding shapes apart): the tree's own accelerations, by the recursive
            program where the model has it, instead of the dense reduced solve */
         double *qdd = lag_eig;
-        if (accelerations(q, qd, p, lag_u, tau, qdd, lag_dyn)) return 1;
+        if (accelerations(q, qd, p, mb_input_u(), tau, qdd, lag_dyn)) return 1;
         for (int k = 0; k < ni; ++k) f[nqi + k] = qdd[lag_ind[k]];
         if (MB_HAS_QUAT) {
             lag_chart_rate(lag_x, qd, lag_rate);
@@ -485,7 +488,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
         }
         return 0;
     }
-    dynamics(q, qd, p, lag_u, lag_dyn);
+    dynamics(q, qd, p, mb_input_u(), lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
     if (mb_fr_n > 0) {
@@ -688,6 +691,8 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
     int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
     if (status) return lag_failed(status);
+    double tau_buf[NQ + 1];
+    tau = mb_input_tau(tau, tau_buf);  /* (with a callable tau: its values at this state, just evaluated) */
     if (mb_fr_n > 0) {  /* with friction: the friction solve's multipliers (J^T lam is not all of M qdd - f) */
         const double *all = lag_friction_lam();
         for (int a = 0; a < nr; ++a) lam[a] = all[lag_rows[a]];
