@@ -210,8 +210,12 @@ class CompiledModel:
         aba, parents = None, ()
         if self.dynamics == "recursive":
             aba, parents = recursive.aba_sizes(self.topology, self.n_inputs, factors=bool(ng))
+        features = 0
+        if self.contact_rows:
+            from mbcomp.compiled.collision_kernel import shape_features
+            features = len(shape_features(self.topology)[2])
         return CSizes.of(self.output_layout, nq=nv, ng=ng, state_map=self.topology.state_map, nz=self.drives.nz,
-                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents)
+                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents, features=features)
 
     def _c_templates(self, sizes: CSizes, lazy_dense: bool | None = None, reduced_loop: bool | None = None) -> str:
         """The hand-written C linked into every model: the tree accelerations, the
