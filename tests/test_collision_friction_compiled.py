@@ -86,11 +86,13 @@ def features_at(kernel, q, qd, within: float = np.inf):
             if np.any(values.J[[i]]) and values.g[i] < within]
 
 
-@pytest.mark.parametrize("case", ["ball_on_box", "box_on_incline", "ball_on_ball", "box_on_box_spinning"])
+@pytest.mark.parametrize("case", ["ball_on_box", "box_on_incline", "ball_on_ball", "box_on_box_spinning",
+                                  "capsule_on_box_and_plane"])
 def test_c_tangential_rows_are_the_python_rows_at_random_states(case):
-    """Sphere-box faces, box-box corners, sphere-sphere (a turning normal) and box-box edges
-    and corners of a tumbling box: C's rows, biases, slip velocities and bases (as Python
-    keeps them) are ``CollisionKernel.tangent_rows``'s at random states."""
+    """Sphere-box faces, box-box corners, sphere-sphere (a turning normal), box-box edges and
+    corners of a tumbling box, capsule ends on a box and a plane: C's rows, biases, slip
+    velocities and bases (as Python keeps them) are ``CollisionKernel.tangent_rows``'s at
+    random states."""
     rng = np.random.default_rng(11)
     if case == "ball_on_box":
         system = ball_on_box("lagrange")
@@ -106,6 +108,18 @@ def test_c_tangential_rows_are_the_python_rows_at_random_states(case):
             d[2] = abs(d[2]) + 1.0
             quat = rng.normal(size=4)
             states.append((np.concatenate((-0.1 * np.array([0, 0, 1]) + 0.199 * d / np.linalg.norm(d),
+                                           quat / np.linalg.norm(quat))), rng.normal(size=6)))
+    elif case == "capsule_on_box_and_plane":
+        m = mb.Model("capsule", gravity=(0, 0, -G))
+        rod = m.add(mb.Body("rod", mass=1.0, inertia=(0.01, 0.01, 0.002), shape=mb.Capsule(0.03, 0.3, axis="x")))
+        m.add(mb.Free("free", m.ground, rod))
+        m.add(mb.Collision("box", rod, (m.ground, mb.Box((0.2, 1.0, 0.2), origin=(0.15, 0, -0.1))), friction=0.4))
+        m.add(mb.Collision("floor", rod, (m.ground, mb.Plane(origin=(0, 0, -0.01))), friction=0.6))
+        system = m.compile(formulation="lagrange")
+        states = []
+        for _ in range(3):
+            quat = np.array([1.0, 0.0, 0.0, 0.0]) + 0.1 * rng.normal(size=4)
+            states.append((np.concatenate(([0.02 * rng.normal(), 0.02 * rng.normal(), 0.03],
                                            quat / np.linalg.norm(quat))), rng.normal(size=6)))
     else:
         m = mb.Model("tumbling", gravity=(0, 0, -G))
