@@ -273,3 +273,24 @@ def test_a_ball_rolling_off_a_ball_runs_compiled_as_python_steps_it():
 def test_collisions_with_friction_run_compiled_in_both_formulations():
     for formulation in FORMULATIONS:
         assert ball_on_box(formulation).integration_path() == "compiled"
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_a_ball_launched_over_a_hill_stops_sliding_rolls_slips_and_leaves(formulation):
+    """A ball (planar) launched sliding at 1 m/s without spin over the top of a fixed ball of
+    radius 1 m (a sphere-sphere feature whose normal turns as it goes, mu = 0.4): its slip
+    stops (located on the turned normal), it rolls, slips when the cone cannot hold it, and
+    leaves the surface; compiled, with the events and end state of Python stepping."""
+    m = mb.Model("hill", gravity=(0, 0, -G))
+    ball = m.add(mb.Body("ball", mass=1.0, inertia=ball_inertia(1.0, 0.1), shape=mb.Sphere(0.1)))
+    m.add(mb.Planar("plane", m.ground, ball, normal="y", coords=["z", "x", "phi"]))
+    m.add(mb.Collision("hill", ball, (m.ground, mb.Sphere(1.0, origin=(0, 0, -1.0))), friction=0.4))
+    system = m.compile(formulation=formulation)
+    compiled = system.simulate(0.9, [0.1, 0.0, 0.0], [0.0, 1.0, 0.0], **TOL)
+    python = system.simulate(0.9, [0.1, 0.0, 0.0], [0.0, 1.0, 0.0], **TOL, integrator="scipy", method="DOP853")
+    assert_compiled(system, compiled)
+    assert [e.kind for e in compiled.events] == ["stick", "slip", "release"]
+    assert [(e.kind, e.contact) for e in compiled.events] == [(e.kind, e.contact) for e in python.events]
+    np.testing.assert_allclose([e.time for e in compiled.events], [e.time for e in python.events], atol=1e-8)
+    np.testing.assert_allclose(compiled.q[-1], python.q[-1], atol=1e-7)
+    np.testing.assert_allclose(compiled.qd[-1], python.qd[-1], atol=1e-7)

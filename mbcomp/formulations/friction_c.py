@@ -118,6 +118,21 @@ class FrictionRows:
         configure(len(moded), self.cap, pointer(self.data), pointer(self.out), pointer(self.scratch),
                   pointer(self.fail))
 
+    def tangent_coordinates(self, j: int, direction) -> tuple[float, float]:
+        """A world ``direction`` (3,) as the ``(e0, e1)`` of friction contact ``j`` (its
+        position among ``indices``) that ``friction.h``'s ``mb_friction_along`` takes (the
+        slip locators): coordinates on the contact's tangents in its data row.  A plane's
+        tangents are fixed; a collision feature's turn with its normal, so its data row takes
+        the direction itself as its first tangent (that row's basis serves only this) and the
+        coordinates are (1, 0): the slip along it is then Python's exactly."""
+        d = self.data[j]
+        direction = np.asarray(direction, dtype=float)
+        if d[FEATURE] >= 0:
+            d[11:14], d[14:17] = direction, 0.0
+            return 1.0, 0.0
+        e = d[11:17].reshape(2, 3) @ direction
+        return float(e[0]), float(e[1])
+
     def failure(self) -> SimulationError | None:
         """The error of a friction solve that failed in the loop (None when none did), with the
         Python path's words."""

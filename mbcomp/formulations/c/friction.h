@@ -23,7 +23,8 @@
 
    A collision feature's basis turns with its normal: its rows come from collide.c's
    measurement at the state (mb_fr_feature_rows: CollisionKernel.tangent_rows), and its
-   data basis [8..16] is the one at the stretch's start (for the locators' directions).
+   data basis [11..16] holds the world direction a slip locator asks about
+   (FrictionRows.tangent_coordinates: the direction, then zeros; mb_friction_along).
    fail: [kind (1 Painleve, 2 inconsistent rows), t, value, contact index] of a failed solve.
 
    The touching point is c = p - r n, its velocity v0 + w x c along the tangents t1, t2
@@ -354,8 +355,9 @@ static double mb_friction_margin(int j) {
 }
 
 /* Friction contact j's slip velocity (m/s) at (q, qd) along the world direction B0^T (e0, e1)
-   (ContactWatch.slip_speed), B0 the tangent rows of its data basis (the one at the stretch's
-   start; a plane's is fixed): the world slip velocity B^T (Jt qd) at the state, along it. */
+   (ContactWatch.slip_speed), B0 the tangent rows of its data basis (a plane's fixed tangents;
+   a collision feature's: the direction asked about, FrictionRows.tangent_coordinates): the
+   world slip velocity B^T (Jt qd) at the state, along it. */
 static double mb_friction_along(int j, const double *q, const double *qd, const double *p, double e0, double e1) {
     double Jt[2 * NQ + 1], bias[2], slip[2], B[6];
     const double *T = mb_fr_data + (MB_FR_DATA + NQ) * j + 11;
