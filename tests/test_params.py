@@ -10,6 +10,26 @@ from mbcomp.core.params import ParameterSpec, in_range, nonnegative, positive, s
 
 
 class TestValidate:
+    @pytest.mark.parametrize("spec", [ParameterSpec("k", ()), ParameterSpec("m", (), check=positive),
+                                      ParameterSpec("c", (), check=nonnegative), ParameterSpec("e", (), check=in_range(0, 1)),
+                                      ParameterSpec("r", (3,)), ParameterSpec("a", (3,), check=unit_vector),
+                                      ParameterSpec("i", (3,), check=spd_inertia)])
+    def test_plain_numbers_get_the_verdict_of_the_general_path(self, spec):
+        """Python numbers and tuples of them take a quick path: the same stored value, or the
+        same message, as the same numbers given as a numpy array (the general path)."""
+        values = [3, 2.5, -0.0, -2.0, 0.5, 1e100, -1e100, 1.5e100, float("inf"), float("nan"), (1, 2, 3), [0.0, 0.0, 0.0],
+                  (1e200, 0, 0), (1.0, -2.0, 0.5), (3.0, 1.0, 1.0), [1, 2], (1.0, float("nan"), 0.0)]
+
+        def verdict(value):
+            try:
+                return validate(spec, value, "x")
+            except mb.ModelError as exc:
+                return str(exc)
+        for value in values:
+            assert verdict(value) == verdict(np.array(value, dtype=float)), value
+        for value in values:
+            assert type(verdict(value)) is type(verdict(np.array(value, dtype=float))), value
+
     def test_number_is_stored_as_float(self):
         assert validate(ParameterSpec("k", ()), np.float32(2.5), "x") == 2.5
         assert type(validate(ParameterSpec("k", ()), 3, "x")) is float

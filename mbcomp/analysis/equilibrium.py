@@ -71,7 +71,7 @@ def equilibrium(system, q_guess: Any, tau: Any = None, t: float | None = None, m
     def residual(y):
         q, z = split(y)
         f = drives.forces(q, z)
-        rates = drives.rates(q, z) / drives.rate_scale
+        rates = drives.rates(q, z) / drives.row_scale
         if not r:
             return np.concatenate((f / scale, rates))
         cv = system.constraint_values(q, None, t)
@@ -176,6 +176,7 @@ class DriveRest:
         self.n = len(speed_names(system))
         self.active = np.arange(0)
         self.rate_scale = 1.0
+        self.row_scale = np.ones(0)
         if self.nz and q is not None:
             self.active = self._acting(q)
 
@@ -218,7 +219,10 @@ class DriveRest:
 
     def rest(self, q: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """States at rest for a fixed ``(q, v)`` (least squares over the acting ones); also sets
-        ``rate_scale`` (the size of the rates' terms, for the tolerances)."""
+        ``rate_scale`` (the size of the rates' terms, for the tolerances) and ``row_scale``
+        (each acting state's rate's own terms: the search weighs the rates by it, so that a
+        slow rate, a PID's integral of the error beside a motor current's fast one, is not
+        drowned, which left the search creeping along a narrow valley for thousands of steps)."""
         z = np.zeros(self.nz)
         if not len(self.active):
             return z
@@ -246,6 +250,7 @@ class DriveRest:
             slope = self.rates(q, z + e, v) - self.rates(q, z, v)
             terms.append(np.abs(slope) * max(1.0, abs(z[j])))
         self.rate_scale = max(1.0, float(np.max(np.concatenate(terms), initial=0.0)))
+        self.row_scale = np.maximum(1.0, np.max(np.vstack(terms), axis=0))
         return z
 
     def check_never_at_rest(self, q: np.ndarray) -> None:

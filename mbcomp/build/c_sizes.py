@@ -14,6 +14,7 @@ is not compiled.
 """
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 from typing import Mapping
@@ -107,23 +108,39 @@ class CSizes:
 
     def check_generic(self, text: str) -> str:
         """``text`` unchanged, or an AssertionError where a preprocessor test reads a size
-        (directly or through a macro defined from one): such a name reads as 0 in ``#if``."""
-        runtime = set(self.values) | set(self.tables)
-        defines = re.findall(r"^\s*#define (\w+)(?:\(.*?\))? (.*)$", text, re.M)
-        grew = True
-        while grew:  # macros defined from sizes are sizes too
-            grew = False
-            for name, body in defines:
-                if name not in runtime and set(re.findall(r"[A-Za-z_]\w*", body)) & runtime:
-                    runtime.add(name)
-                    grew = True
-        for line in text.splitlines():
-            stripped = line.strip()
-            if stripped.startswith(("#if ", "#elif ")):
-                used = set(re.findall(r"[A-Za-z_]\w*", stripped.split("/*")[0][3:])) & runtime
-                if used:
-                    raise AssertionError(f"the C templates test sizes {sorted(used)} in {stripped!r}: test them with an if")
-            match = re.match(r"#define (\w+) -?\d+\s*$", stripped)
-            if match and match.group(1) in self.values:
-                raise AssertionError(f"the C templates define the size {match.group(1)} as a number")
+        (directly or through a macro defined from one): such a name reads as 0 in ``#if``.
+        The verdict depends only on the text and the sizes' names: it is kept per process
+        (every model of one kind compiles the same templates; the scan takes about 10 ms)."""
+        problem = _size_tests(text, tuple(self.values), tuple(self.tables))
+        if problem:
+            raise AssertionError(problem)
         return text
+
+
+_DEFINE = re.compile(r"^\s*#define (\w+)(?:\(.*?\))? (.*)$", re.M)
+_NAME = re.compile(r"[A-Za-z_]\w*")
+_NUMBER_DEFINE = re.compile(r"#define (\w+) -?\d+\s*$")
+
+
+@functools.lru_cache(maxsize=32)
+def _size_tests(text: str, values: tuple[str, ...], tables: tuple[str, ...]) -> str:
+    """The first way ``text`` tests a size in the preprocessor (``CSizes.check_generic``), or ""."""
+    runtime = set(values) | set(tables)
+    defines = [(name, set(_NAME.findall(body))) for name, body in _DEFINE.findall(text)]
+    grew = True
+    while grew:  # macros defined from sizes are sizes too
+        grew = False
+        for name, used in defines:
+            if name not in runtime and used & runtime:
+                runtime.add(name)
+                grew = True
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith(("#if ", "#elif ")):
+            used = set(_NAME.findall(stripped.split("/*")[0][3:])) & runtime
+            if used:
+                return f"the C templates test sizes {sorted(used)} in {stripped!r}: test them with an if"
+        match = _NUMBER_DEFINE.match(stripped)
+        if match and match.group(1) in values:
+            return f"the C templates define the size {match.group(1)} as a number"
+    return ""

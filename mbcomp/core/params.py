@@ -11,6 +11,7 @@ evaluated to a number) are checked the same way as values typed by hand.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -124,12 +125,15 @@ def _inertia_problem(arr: np.ndarray) -> "str | None":
     if scale == 0.0:
         return None  # a point mass
     unit = matrix / scale  # entries in [-1, 1]: no overflow below
-    if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
-        return "matrix is not symmetric"
-    try:
-        a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
-    except np.linalg.LinAlgError:
-        return "has no computable principal moments"
+    if arr.shape == (3,):  # principal values: the moments themselves (what eigvalsh gives for a diagonal)
+        a, b, c = sorted(float(v) for v in np.diag(unit))
+    else:
+        if not np.allclose(unit, unit.T, rtol=0, atol=1e-12):
+            return "matrix is not symmetric"
+        try:
+            a, b, c = np.linalg.eigvalsh(0.5 * (unit + unit.T))
+        except np.linalg.LinAlgError:
+            return "has no computable principal moments"
     with np.errstate(all="ignore"):
         moments = np.array([a, b, c]) * scale
     if not np.all(np.isfinite(moments)):
@@ -230,6 +234,14 @@ def validate(spec: ParameterSpec, value: Any, owner: Any) -> Any:
     if spec.time_input and callable(value):
         return value
     check = spec.check
+    plain = _plain(spec, value)
+    if plain is not None:  # finite floats of the spec's shape, in range: what most values are
+        problem = check(plain)
+        if problem:
+            raise ParameterError(owner, name, f"{problem}")
+        if check.normalise is not None:
+            return check.normalise(plain)
+        return float(plain) if plain.ndim == 0 else tuple(float(v) for v in plain)
     if check.convert is not None:
         try:
             value = check.convert(value)
@@ -265,6 +277,39 @@ def validate(spec: ParameterSpec, value: Any, owner: Any) -> Any:
     if tuple(spec.shape) == (-1,) and arr.size == 1:
         return float(arr[0])
     return tuple(float(v) for v in arr)
+
+
+_NUMBER_TYPES = (float, int, np.float64)
+
+
+def _plain(spec: ParameterSpec, value: Any) -> "np.ndarray | None":
+    """``value`` as a float array when it is a plain Python (or numpy) number, or a tuple or
+    list of them, of the spec's own shape (``()`` or ``(n,)``), finite and within
+    ``MAX_MAGNITUDE``: such a value needs none of ``validate``'s conversions and messages
+    (a quick path: the model files and constructors give about 80,000 of them in the tests).
+    None for anything else (``validate``'s general path decides)."""
+    if spec.check.convert not in (None, _axis_name):  # (an axis name's conversion leaves numbers as they are)
+        return None
+    shape = spec.shape
+    kind = type(value)
+    if kind in _NUMBER_TYPES and kind is not bool:
+        if shape != ():
+            return None
+        numbers = (value,)
+    elif (kind is tuple or kind is list) and len(shape) == 1 and len(value) == shape[0]:
+        numbers = value
+        if not all(type(v) in _NUMBER_TYPES for v in numbers):
+            return None
+    else:
+        return None
+    try:
+        floats = [float(v) for v in numbers]
+    except OverflowError:  # an int beyond the float range: the general path says so
+        return None
+    limit = np.inf if spec.check.normalise is _unit else MAX_MAGNITUDE
+    if not all(-limit <= v <= limit and math.isfinite(v) for v in floats):
+        return None
+    return np.array(floats[0] if shape == () else floats)
 
 
 def _shaped(spec: ParameterSpec, arr: np.ndarray, owner: Any, value: Any) -> np.ndarray:

@@ -1,6 +1,7 @@
 """The model library: ready-made model files shipped with mbcomp, found by name."""
 from __future__ import annotations
 
+import functools
 import os
 import site
 import sys
@@ -19,14 +20,20 @@ def library_dirs() -> list[Path]:
     install), and ``<prefix>/share/mbcomp/library`` (an installed data-files copy)."""
     dirs = [Path(p) for p in os.environ.get("MBCOMP_LIBRARY", "").split(os.pathsep) if p]
     dirs.append(Path(__file__).resolve().parents[2] / "library")
-    # Where pip puts the data files: the environment's prefix, and the user base for --user.
-    for base in (sys.prefix, sysconfig.get_paths().get("data", sys.prefix), site.getuserbase()):
-        dirs.append(Path(base) / "share" / "mbcomp" / "library")
+    dirs.extend(_installed_dirs())
     unique: list[Path] = []
     for d in dirs:
         if d.is_dir() and d.resolve() not in [u.resolve() for u in unique]:
             unique.append(d)
     return unique
+
+
+@functools.lru_cache(maxsize=1)
+def _installed_dirs() -> tuple[Path, ...]:
+    """Where pip puts the data files: the environment's prefix, and the user base for
+    ``--user`` (fixed for the process; ``sysconfig.get_paths`` takes about 0.5 ms a call)."""
+    return tuple(Path(base) / "share" / "mbcomp" / "library"
+                 for base in (sys.prefix, sysconfig.get_paths().get("data", sys.prefix), site.getuserbase()))
 
 
 def library_models() -> dict[str, Path]:
