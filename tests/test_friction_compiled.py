@@ -149,8 +149,8 @@ def test_tangential_rows_in_c_are_the_python_rows(formulation):
         Jt, bias, slip = np.zeros(2 * kernel.nv), np.zeros(2), np.zeros(2)
         fn = lib.mb_friction_rows_at
         fn.argtypes = [np.ctypeslib.ndpointer(dtype=float)] * 3 + [np.ctypeslib.ctypes.c_int] + \
-            [np.ctypeslib.ndpointer(dtype=float)] * 3
-        fn(q, qd, kernel.p, 0, Jt, bias, slip)
+            [np.ctypeslib.ndpointer(dtype=float)] * 4
+        fn(q, qd, kernel.p, 0, Jt, bias, slip, np.zeros(6))
     finally:
         rows.close()
     expected = plane_contact_rows(kernel, q, qd, [0])

@@ -29,6 +29,10 @@ from mbcomp.core.params import ParameterSpec
 GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world frame")
 from mbcomp.build.topology import build_topology
 
+#: Held collision features the dae solve has room for, per speed (plus 8): a box resting on
+#: another holds four corners on three speeds (planar) or six (free).
+HELD_FEATURES_PER_SPEED = 4
+
 
 def structure_description(model, topology, layout, inputs, drives=None) -> str:
     """Everything that decides the generated code, as text (names included)."""
@@ -211,8 +215,14 @@ class CompiledModel:
         aba, parents = None, ()
         if self.dynamics == "recursive":
             aba, parents = recursive.aba_sizes(self.topology, self.n_inputs, factors=bool(ng))
+        features = 0
+        if self.contact_rows:  # room for the held collision features of the least-norm friction solve
+            from mbcomp.compiled.collision_kernel import shape_features
+            # (at most HELD_FEATURES_PER_SPEED a speed: the dae work grows with its rows squared,
+            # and a model of many shapes has many more features than can touch at once)
+            features = min(len(shape_features(self.topology)[2]), HELD_FEATURES_PER_SPEED * nv + 8)
         return CSizes.of(self.output_layout, nq=nv, ng=ng, state_map=self.topology.state_map, nz=self.drives.nz,
-                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents)
+                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents, features=features)
 
     def _c_templates(self, sizes: CSizes, lazy_dense: bool | None = None, reduced_loop: bool | None = None) -> str:
         """The hand-written C linked into every model: the tree accelerations, the

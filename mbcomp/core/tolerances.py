@@ -62,8 +62,12 @@ CONE_FLOOR = 1e-12
 STOP_SPEED = 1e-8
 
 #: m/s: the slip speed below which the slip direction at a step's start is not its own
-#: (the contact's direction is used instead) when a stop is watched for.  C ``MB_SLIP_FLOOR``.
-SLIP_FLOOR = 1e-12
+#: (the contact's direction is used instead) when a stop is watched for.  ``STOP_SPEED``: a
+#: contact set sliding slower than that is watched along the direction it was set sliding
+#: in, since the slip a sticking phase leaves (~1e-12 m/s, from the integration error under
+#: the ``STICK_RATE`` feedback; a ball rolling off a ball) points anywhere, and taken as the
+#: direction it made the contact "stop" at once, sliding "back".  C ``MB_SLIP_FLOOR``.
+SLIP_FLOOR = STOP_SPEED
 
 #: The friction solve's least-squares cut-off: singular values of its (non-symmetric) KKT
 #: Schur matrix below this fraction of the largest are dropped (redundant rows share the

@@ -89,10 +89,8 @@ class EventStepFunctions:
         return self.run.friction.indices.index(int(i))
 
     def _tangent(self, i: int, direction) -> tuple[float, float]:
-        """A world direction (3,) in contact ``i``'s tangent coordinates."""
-        basis = self.run.friction.data[self._friction_index(i), 11:17].reshape(2, 3)
-        e = basis @ np.asarray(direction, dtype=float)
-        return float(e[0]), float(e[1])
+        """A world direction (3,) in contact ``i``'s tangent coordinates (``FrictionRows.tangent_coordinates``)."""
+        return self.run.friction.tangent_coordinates(self._friction_index(i), direction)
 
     def _friction_fn(self, what: str):
         fn = getattr(self.run.lib, f"{self.prefix}_{what}_at")

@@ -47,10 +47,6 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
     if kernel.topology.contacts and not formulation.compiled_contacts:
         return "the model has contacts"
-    if any(getattr(c, "kind", "") == "collision" and float(kernel.parameters.get(c.friction_key, 0.0)) > 0.0
-           for c in kernel.topology.contacts):
-        return ("collision features with friction step in Python (the compiled loops hold frictionless collision "
-                "features only)")
     from mbcomp.formulations.friction_c import compiled_friction_problem
     friction = compiled_friction_problem(kernel, formulation)
     if friction is not None:

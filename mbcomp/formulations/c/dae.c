@@ -1,7 +1,7 @@
 #ifdef DAE_LOOP
 #define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
-/* most KKT rows: geometric, one motor per speed, every contact */
-#define DAE_NR (NG + NQ + DAE_NK)
+/* most KKT rows: geometric, one motor per speed, every contact and collision feature */
+#define DAE_NR (NG + NQ + DAE_NK + MB_NCF)
 /* work: dynamics, constraints, contacts, then the rows' g, J, g_t, bias, then Y, A, r, lam, u */
 #define DAE_C_OFF DYNAMICS_SIZE
 #define DAE_K_OFF (DAE_C_OFF + CONSTRAINTS_SIZE)
