@@ -11,6 +11,7 @@ import pytest
 import mbcomp as mb
 from mbcomp.formulations.friction import Closed, plane_contact_rows
 from mbcomp.formulations.friction_c import FrictionRows
+from test_friction_compiled import assert_compiled_rhs_is_the_python_one
 
 G = 9.81
 FORMULATIONS = ("lagrange", "dae")
@@ -168,19 +169,7 @@ def test_the_compiled_rhs_equals_the_python_friction_solve(formulation):
     corners = features_at(kernel, np.asarray(q, dtype=float), np.asarray(qd, dtype=float), 1e-9)
     assert len(corners) == 4
     closed = Closed(corners, stick=corners[:2], slip={i: np.array([-1.0, 0.0, 0.0]) for i in corners[2:]})
-    lib = kernel.compiled.functions.lib
-    stretch = formulation_.scipy_stretch(kernel, lib, 0.0, q0, qd0, None, contacts=closed, offsets={}, method="test")
-    try:
-        compiled = stretch.workspace
-        python = compiled.run.workspace if formulation == "lagrange" else compiled.inner
-        rng = np.random.default_rng(7)
-        for _ in range(3):
-            y = python.y0.copy()
-            y[len(y) // 2:] += rng.normal(scale=0.2, size=len(y) - len(y) // 2)
-            expected, got = python.rhs(0.01, y), compiled.rhs(0.01, y)
-            np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
-    finally:
-        stretch.close()
+    assert_compiled_rhs_is_the_python_one(system, q0, qd0, closed)
 
 
 # -- closed forms, compiled, and compiled against Python stepping ---------------------------------------
