@@ -7,6 +7,7 @@
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
 #include "friction.h"
 #include "brentq.h"
+#include "least_norm.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -553,36 +554,10 @@ rates:
     return 0;
 }
 
-/* Smallest and largest eigenvalue of the symmetric n x n matrix A (destroyed): cyclic Jacobi. */
+/* Smallest and largest eigenvalue of the symmetric n x n matrix A (destroyed): cyclic Jacobi
+   (mb_jacobi_eigen, least_norm.h), the eigenvalues left on A's diagonal. */
 static void lag_eig_range(double *A, int n, double *lo, double *hi) {
-    for (int sweep = 0; sweep < 60; ++sweep) {
-        double off = 0.0, diag = 0.0;
-        for (int i = 0; i < n; ++i) {
-            diag += A[i * n + i] * A[i * n + i];
-            for (int j = 0; j < i; ++j) off += A[i * n + j] * A[i * n + j];
-        }
-        if (!(off > 1e-30 * diag)) break;
-        for (int a = 0; a < n; ++a)
-            for (int b = a + 1; b < n; ++b) {
-                const double apq = A[a * n + b];
-                if (apq == 0.0) continue;
-                const double theta = (A[b * n + b] - A[a * n + a]) / (2.0 * apq);
-                double tt = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
-                if (theta < 0.0) tt = -tt;
-                if (!isfinite(tt)) tt = 0.0;
-                const double c = 1.0 / sqrt(tt * tt + 1.0), s = tt * c;
-                for (int k = 0; k < n; ++k) {  /* columns a, b */
-                    const double x = A[k * n + a], y = A[k * n + b];
-                    A[k * n + a] = c * x - s * y;
-                    A[k * n + b] = s * x + c * y;
-                }
-                for (int k = 0; k < n; ++k) {  /* rows a, b */
-                    const double x = A[a * n + k], y = A[b * n + k];
-                    A[a * n + k] = c * x - s * y;
-                    A[b * n + k] = s * x + c * y;
-                }
-            }
-    }
+    mb_jacobi_eigen(n, A, n, NULL, NULL, 0);
     double l = INFINITY, h = -INFINITY;
     for (int i = 0; i < n; ++i) { if (A[i * n + i] < l) l = A[i * n + i]; if (A[i * n + i] > h) h = A[i * n + i]; }
     *lo = l; *hi = h;

@@ -19,10 +19,11 @@
 
 /* Eigen-decomposition of the symmetric n x n matrix a (full storage, row stride lda;
    destroyed: its diagonal becomes the eigenvalues, copied to w) with the eigenvectors in
-   the columns of v (row stride ldv).  Returns the sweeps used, or -1 when not converged. */
+   the columns of v (row stride ldv); w or v NULL: not wanted.  Returns the sweeps used, or -1 when not converged. */
 static int mb_jacobi_eigen(int n, double *a, int lda, double *w, double *v, int ldv) {
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) v[i * ldv + j] = i == j ? 1.0 : 0.0;
+    if (v)
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) v[i * ldv + j] = i == j ? 1.0 : 0.0;
     int sweep = 0;
     for (; sweep < MB_JACOBI_SWEEPS; ++sweep) {
         double off = 0.0, diag = 0.0;
@@ -54,14 +55,14 @@ static int mb_jacobi_eigen(int n, double *a, int lda, double *w, double *v, int 
                     a[q * lda + k] = s * apk + c * aqk;
                 }
                 a[p * lda + q] = a[q * lda + p] = 0.0;
-                for (int k = 0; k < n; ++k) {
+                for (int k = 0; v && k < n; ++k) {
                     const double vkp = v[k * ldv + p], vkq = v[k * ldv + q];
                     v[k * ldv + p] = c * vkp - s * vkq;
                     v[k * ldv + q] = s * vkp + c * vkq;
                 }
             }
     }
-    for (int i = 0; i < n; ++i) w[i] = a[i * lda + i];
+    for (int i = 0; w && i < n; ++i) w[i] = a[i * lda + i];
     return sweep < MB_JACOBI_SWEEPS ? sweep : -1;
 }
 
