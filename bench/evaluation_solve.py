@@ -12,33 +12,25 @@ the compiled one off (``Formulation.compiled_solve`` returning None) on a fresh 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import timeit
+from pathlib import Path
 
 import numpy as np
 
-import mbcomp as mb
-from mbcomp.files.toml_model import library_models, load
+from mbcomp.files.toml_model import library_models
 from mbcomp.formulations.base import Formulation
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scipy_methods import initial, model_of  # noqa: E402
 
 MODELS = ("four_bar", "slider_crank", "stewart_platform", "four_bar_pid")
 
 
-def model_of(name: str, files: dict):
-    """A library model, or the four-bar with a PID-driven DC motor on its crank (``four_bar_pid``)."""
-    if name != "four_bar_pid":
-        return load(files[name])
-    model = load(files["four_bar"])
-    pid = model.add(mb.PID("pid", mb.Angle("A"), 1.2, kp=20.0, ki=10.0, kd=1.0, limit=12.0))
-    model.add(mb.DCMotor("motor", "A", ratio=5.0, resistance=1.5, inductance=0.02, k=0.05, voltage=pid))
-    return model
-
-
 def start(model, system):
-    neutral = system.topology.state_map.neutral()
-    q = np.array([model.initial["q"].get(c, neutral[i]) for i, c in enumerate(system.coords)])
-    qd = np.array([model.initial["qd"].get(c, 0.0) for c in system.speeds])
-    return system.assemble(q, qd)
+    """The model's initial state moved onto its constraints."""
+    return system.assemble(*initial(model, system))
 
 
 def per_call(fn, rounds: int) -> float:

@@ -2,7 +2,7 @@
 
 ``System.accelerations`` and ``System.reactions`` of a constrained model solve the KKT system
 in C (``formulations/compiled_eval.py``: ``dae_evaluate``, the solve of the compiled loops);
-the formulation's Python solve is the oracle here, and answers where the C solve drops a
+the formulation's Python solve is the oracle here, also where the C solve drops a lost row
 direction.  scipy's methods on a model with drive elements step the compiled right-hand side
 with the drive states in it (``formulations/compiled_rhs.py``)."""
 from __future__ import annotations
@@ -110,15 +110,22 @@ def test_a_speed_motors_start_value_enters_the_compiled_solve():
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)
-def test_the_python_solve_answers_where_the_compiled_one_drops_a_direction(formulation):
-    """Every bar along x (off the loop: a closure row of zeros): the C solve drops the
-    direction and declines; the evaluation call gives the Python solve's answer."""
+def test_where_a_row_direction_is_lost_the_compiled_solve_gives_the_least_norm_answer(formulation):
+    """Every bar along x (off the loop: a closure row of zeros): the C solve drops the lost
+    direction (``c/least_norm.h``) and answers what the Python least-squares solve (numpy's
+    ``lstsq``, the oracle) answers: the same accelerations and reactions."""
     system = drive_system(formulation)
     kernel, form = system.kernel, system._formulation
     q, qd, tau = np.zeros(3), np.array([0.5, -0.2, 0.3]), np.array([0.1, 0.0, -0.2])
-    assert form.compiled_solve(kernel).solve(0.0, q, qd, tau) is None
-    expected = form.accelerations(kernel, 0.0, q, qd, tau + system.drive_outputs(0.0, q, qd, np.zeros(2))[0])
-    assert np.array_equal(system.accelerations(q, qd, tau=tau), expected)
+    applied = tau + system.drive_outputs(0.0, q, qd, np.zeros(2))[0]
+    solved = form.compiled_solve(kernel).solve(0.0, q, qd, applied)
+    assert solved is not None
+    expected = form.accelerations(kernel, 0.0, q, qd, applied)
+    assert_relative(solved[0], expected, 1e-10, "qdd")
+    assert_relative(system.accelerations(q, qd, tau=tau), expected, 1e-10, "System.accelerations")
+    got = system.reactions(q, qd, tau=tau)
+    for key, value in form.reactions(kernel, 0.0, q, qd, applied).items():
+        assert_relative(got[key], value, 1e-10, f"reaction {key}")
 
 
 @pytest.mark.parametrize("formulation", FORMULATIONS)

@@ -147,8 +147,8 @@ def test_tangential_rows_in_c_are_the_python_rows(formulation):
         Jt, bias, slip = np.zeros(2 * kernel.nv), np.zeros(2), np.zeros(2)
         fn = lib.mb_friction_rows_at
         fn.argtypes = [np.ctypeslib.ndpointer(dtype=float)] * 3 + [np.ctypeslib.ctypes.c_int] + \
-            [np.ctypeslib.ndpointer(dtype=float)] * 3
-        fn(q, qd, kernel.p, 0, Jt, bias, slip)
+            [np.ctypeslib.ndpointer(dtype=float)] * 4
+        fn(q, qd, kernel.p, 0, Jt, bias, slip, np.zeros(6))
     finally:
         rows.close()
     expected = plane_contact_rows(kernel, q, qd, [0])
@@ -246,11 +246,19 @@ def test_the_compiled_friction_rhs_equals_the_python_friction_solve(formulation)
     formulation_, kernel = system._formulation, system.kernel
     q0, qd0 = formulation_.assemble(kernel, np.array([0.05, 0.0, 0.0, 0.4]), np.array([0.0, 0.3, 0.0, 2.0]))
     closed = Closed((0, 1), stick=(0,), slip={1: np.array([1.0, 0.0, 0.0])})
+    assert_compiled_rhs_is_the_python_one(system, q0, qd0, closed)
+
+
+def assert_compiled_rhs_is_the_python_one(system, q0, qd0, closed) -> None:
+    """The compiled right-hand side of the stretch with the contacts ``closed`` (friction in C,
+    through the formulation's ``scipy_stretch``) equals the Python workspace's (the oracle) to
+    1e-9 at three states with randomly perturbed speeds."""
+    formulation_, kernel = system._formulation, system.kernel
     lib = kernel.compiled.functions.lib
     stretch = formulation_.scipy_stretch(kernel, lib, 0.0, q0, qd0, None, contacts=closed, offsets={}, method="test")
     try:
         compiled = stretch.workspace
-        python = compiled.run.workspace if formulation == "lagrange" else compiled.inner
+        python = compiled.run.workspace if formulation_.name == "lagrange" else compiled.inner
         rng = np.random.default_rng(7)
         for _ in range(3):
             y = python.y0.copy()

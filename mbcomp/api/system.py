@@ -350,7 +350,7 @@ class System:
         (``mbcomp.codegen.fastcall``); anything else is converted and checked.  With
         constraints, the compiled KKT solve of the compiled loops answers
         (``Formulation.compiled_solve``; the dae formulation's includes its Baumgarte terms),
-        the Python solve where there is no C or at a singular position."""
+        the Python solve where there is no C or at a dead point at rest."""
         if tau is None and states is None:
             qdd = (self._fast or self._bind_fast())[1].accelerations(q, qd)
             if qdd is not None:
@@ -365,8 +365,7 @@ class System:
     def _compiled_solution(self, t: float, q: np.ndarray, qd: np.ndarray, applied, offsets: dict | None = None):
         """``(qdd, lam)`` from the compiled KKT solve (``Formulation.compiled_solve``: the C of
         the compiled loops), or None where the formulation's Python solve answers: no
-        constraints, no C, a singular position (a row direction dropped), a failure it
-        explains."""
+        constraints, no C, a dead point at rest, a failure it explains."""
         solver = self.__dict__.get("_solver", False)
         if solver is False:  # (bound on first use)
             solver = self._formulation.compiled_solve(self._kernel)

@@ -42,12 +42,15 @@ class CSizes:
 
     @classmethod
     def of(cls, layout, *, nq: int, ng: int, state_map, nz: int, drives: bool,
-           aba: tuple[int, int, int] | None = None, aba_parents: tuple[int, ...] = ()) -> "CSizes":
+           aba: tuple[int, int, int] | None = None, aba_parents: tuple[int, ...] = (),
+           features: int = 0) -> "CSizes":
         """The sizes of a model: ``layout`` (``OutputLayout``), ``nq`` speeds of the mass
         matrix, ``ng`` geometric constraint rows, its ``StateMap``, ``nz`` drive states
         (``drives``: it has drive elements), and for the recursive program ``aba`` =
         (speeds, inputs, output length) with ``aba_parents`` (parent speed per speed, -1 at
-        the root) when the dae KKT solve runs on it."""
+        the root) when the dae KKT solve runs on it; ``features``: the collision features
+        (contact rows after the model's own: the dae solve's rows have room for them all, as
+        the least-norm friction solve holds every closed contact)."""
         values = layout.c_names()
         ncoord, nv = state_map.nq, state_map.nv
         nk = layout.block("contacts", "gap").shape[0]
@@ -59,7 +62,8 @@ class CSizes:
         if aba is not None:
             values.update(ABA_NV=aba[0], ABA_NU=aba[1], ABA_OUT=aba[2])
             tables["ABA_PRED"] = tuple(aba_parents)
-        dae_rows = ng + nq + nk  # DAE_NR of formulations/dae_c.py
+        values["MB_NCF"] = int(features)
+        dae_rows = ng + nq + nk + int(features)  # DAE_NR of formulations/dae_c.py
         buffers = {
             "lag_dv": ("double", layout.size("drives") + 1),     # formulations/lagrange_c.py
             "lag_kc": ("double", layout.size("contacts") + 1),

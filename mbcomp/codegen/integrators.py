@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mbcomp.codegen.callbacks import constant_tau, python_watch, raise_pending
 from mbcomp.core import c_text
 
 #: Status codes returned by the compiled loops.
@@ -353,7 +354,7 @@ def compiled_jacobian(kernel, tau):
     fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
     fn.restype = ctypes.c_int
     n2 = kernel.nq + kernel.nv + kernel.compiled.drives.nz
-    tau_arr = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+    tau_arr = constant_tau(tau)  # (a callable tau: the input callback's)
     tau_ptr = None if tau_arr is None else tau_arr.ctypes.data
     p = kernel.p
 
@@ -393,6 +394,7 @@ def rhs_failure(kernel, status: int, t: float, y: np.ndarray, method: str) -> No
 
 def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int | None = None,
           t_end: float | None = None):
+    raise_pending()  # (a Python callable's exception stopped the loop: INPUT_FAILED)
     n = kernel.nq
     if status == RANK_LOST:
         raise RankLost(f"the constraint rows lost rank at t = {t:.6g} s")
@@ -405,8 +407,10 @@ def _fail(kernel, status: int, t: float, y: np.ndarray, method: str, steps: int 
         raise SimulationError(f"mass matrix is singular at t = {t:.6g} s")
     if status == COLLAPSED:
         from mbcomp.core.limits import max_steps
-        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds,
-                                               steps=steps, t_end=t_end, budget=max_steps()))
+        window, budget = python_watch() or (COLLAPSE_WINDOW, max_steps())  # (with callbacks: the Python-stepped check)
+        raise SimulationError(collapse_message(f"compiled {method}", t, y[n:], kernel.topology.speeds, window,
+                                               budget if window == COLLAPSE_WINDOW else budget / 30,
+                                               steps=steps, t_end=t_end, budget=budget))
     if status == NOT_FINITE:
         raise SimulationError(f"compiled {method}: state became non-finite at t = {t:.6g} s")
     raise SimulationError(f"compiled {method} failed with status {status} at t = {t:.6g} s")
@@ -476,7 +480,9 @@ def collapse_message(who: str, t: float, speeds, names=(), window: int = COLLAPS
 
 
 class RankLost(Exception):
-    """The compiled dae path met a singular position: the caller falls back to Python stepping."""
+    """The compiled dae solve met a dead point at rest (its rows lost rank with every speed
+    below ``REST_SPEED``: the motion is not determined) or rows that are not finite: the
+    caller falls back to Python stepping, whose solve names the cause."""
 
 
 def run_loops(kernel, lib, hook: "_Hook", options: RunOptions, q0: np.ndarray, qd0: np.ndarray, z0: np.ndarray,

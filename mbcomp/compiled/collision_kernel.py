@@ -168,6 +168,57 @@ class RowMatrix:
         return self[:].astype(dtype) if dtype is not None else self[:]
 
 
+def shape_features(topology) -> tuple[list, list, tuple]:
+    """``(entries, pairs, features)`` of a topology's collisions: its collision shapes
+    (``ShapeEntry``), the pairs of them that may touch (``ShapePair``) and their features
+    (``CollisionFeature``, numbered after the topology's own contacts).  ``ModelError`` for a
+    collision without a pair of shapes that can touch."""
+    entries: list[ShapeEntry] = []
+    index = {id(b): k for k, b in enumerate(topology.bodies)}
+    known: dict = {}
+
+    def entry(body: str, shape) -> int:
+        key = (body, id(shape))
+        if key not in known:
+            comp = topology.components[body]
+            known[key] = len(entries)
+            entries.append(ShapeEntry(body, index.get(id(comp), -1), shape))
+        return known[key]
+
+    shape_pairs: list[ShapePair] = []
+    features = []
+    first = len(topology.contacts)
+    for coll in collisions_of(topology):
+        side_a = [entry(*e) for e in _entries_of(topology, coll, "a")]
+        side_b = [entry(*e) for e in _entries_of(topology, coll, "b")]
+        seen, pairs = set(), []
+        for i in side_a:
+            for j in side_b:
+                ea, eb = entries[i], entries[j]
+                if ea.body == eb.body or (ea.index < 0 and eb.index < 0):
+                    continue
+                key = (min(i, j), max(i, j))
+                if key in seen:
+                    continue
+                seen.add(key)
+                count = collide.feature_count(_kind(ea.shape), _kind(eb.shape))
+                if count:
+                    pairs.append((i, j, count))
+        total = sum(c for _, _, c in pairs)
+        if total == 0:
+            raise ModelError(coll, "has no pair of shapes that can touch (two bodies, not both the ground, "
+                                   "and not two planes)")
+        k = 0
+        for i, j, count in pairs:
+            shape_pairs.append(ShapePair(i, j, first, count, f"{coll.name}.restitution"))
+            for slot in range(count):
+                name = coll.name if total == 1 else f"{coll.name}[{k}]"
+                features.append(CollisionFeature(name, coll.name, len(shape_pairs) - 1, slot))
+                k += 1
+            first += count
+    return entries, shape_pairs, tuple(features)
+
+
 class CollisionKernel:
     """A ``Kernel`` (``base``) whose contacts include the collision features; every other
     call goes to ``base``.  ``topology`` is the base topology with the features appended to
@@ -177,50 +228,7 @@ class CollisionKernel:
         import dataclasses
         self.base = base
         topology = base.topology
-        self.entries: list[ShapeEntry] = []
-        index = {id(b): k for k, b in enumerate(topology.bodies)}
-        known: dict = {}
-
-        def entry(body: str, shape) -> int:
-            key = (body, id(shape))
-            if key not in known:
-                comp = topology.components[body]
-                known[key] = len(self.entries)
-                self.entries.append(ShapeEntry(body, index.get(id(comp), -1), shape))
-            return known[key]
-
-        self.pairs: list[ShapePair] = []
-        features = []
-        first = len(topology.contacts)
-        for coll in collisions_of(topology):
-            side_a = [entry(*e) for e in _entries_of(topology, coll, "a")]
-            side_b = [entry(*e) for e in _entries_of(topology, coll, "b")]
-            seen, pairs = set(), []
-            for i in side_a:
-                for j in side_b:
-                    ea, eb = self.entries[i], self.entries[j]
-                    if ea.body == eb.body or (ea.index < 0 and eb.index < 0):
-                        continue
-                    key = (min(i, j), max(i, j))
-                    if key in seen:
-                        continue
-                    seen.add(key)
-                    count = collide.feature_count(_kind(ea.shape), _kind(eb.shape))
-                    if count:
-                        pairs.append((i, j, count))
-            total = sum(c for _, _, c in pairs)
-            if total == 0:
-                raise ModelError(coll, "has no pair of shapes that can touch (two bodies, not both the ground, "
-                                       "and not two planes)")
-            k = 0
-            for i, j, count in pairs:
-                self.pairs.append(ShapePair(i, j, first, count, f"{coll.name}.restitution"))
-                for slot in range(count):
-                    name = coll.name if total == 1 else f"{coll.name}[{k}]"
-                    features.append(CollisionFeature(name, coll.name, len(self.pairs) - 1, slot))
-                    k += 1
-                first += count
-        self.features = tuple(features)
+        self.entries, self.pairs, self.features = shape_features(topology)
         self.n_own = len(topology.contacts)
         self.topology = dataclasses.replace(topology, contacts=tuple(topology.contacts) + self.features)
         # Per-entry local geometry, for placing the shapes from the body kinematics.

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from mbcomp.codegen import cache, printer as codegen
+from mbcomp.core import c_text
 from mbcomp.build import recursive
 from mbcomp.build.c_sizes import CSizes
 from mbcomp.codegen.backend import (C_FLAGS, COLD_FLAGS, COLD_FUNCTIONS, EAGER_STATEMENTS, EARLY_OUTPUT_STATEMENTS, FUNCTIONS,
@@ -27,6 +28,10 @@ from mbcomp.core.params import ParameterSpec
 
 GRAVITY = ParameterSpec("gravity", (3,), "m/s^2", doc="uniform gravity, world frame")
 from mbcomp.build.topology import build_topology
+
+#: Held collision features the dae solve has room for, per speed (plus 8): a box resting on
+#: another holds four corners on three speeds (planar) or six (free).
+HELD_FEATURES_PER_SPEED = 4
 
 
 def structure_description(model, topology, layout, inputs, drives=None) -> str:
@@ -209,8 +214,14 @@ class CompiledModel:
         aba, parents = None, ()
         if self.dynamics == "recursive":
             aba, parents = recursive.aba_sizes(self.topology, self.n_inputs, factors=bool(ng))
+        features = 0
+        if self.contact_rows:  # room for the held collision features of the least-norm friction solve
+            from mbcomp.compiled.collision_kernel import shape_features
+            # (at most HELD_FEATURES_PER_SPEED a speed: the dae work grows with its rows squared,
+            # and a model of many shapes has many more features than can touch at once)
+            features = min(len(shape_features(self.topology)[2]), HELD_FEATURES_PER_SPEED * nv + 8)
         return CSizes.of(self.output_layout, nq=nv, ng=ng, state_map=self.topology.state_map, nz=self.drives.nz,
-                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents)
+                         drives=bool(self.drives.elements), aba=aba, aba_parents=parents, features=features)
 
     def _c_templates(self, sizes: CSizes, lazy_dense: bool | None = None, reduced_loop: bool | None = None) -> str:
         """The hand-written C linked into every model: the tree accelerations, the
@@ -229,7 +240,7 @@ class CompiledModel:
         if self.constraint_set is not None or self.contact_rows:  # the dae KKT solve (formulations/dae_c.py)
             reduced += "#define DAE_LOOP 1\n"
         return (reduced + sizes.header() + (codegen.c_dense_stub() if lazy_dense else "")
-                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + tree + codegen.c_collide()
+                + codegen.c_output_stubs(OUTPUT_FUNCTIONS) + c_text.read("mbcomp.codegen", "inputs.h") + "\n" + tree + codegen.c_collide()
                 + "".join(snippet(nv, ng) for snippet in self.c_snippets)
                 + (recursive.c_dae(self.topology, ng) if self.dynamics == "recursive" else "")
                 + "\n#ifndef NDAEWORK\n#define NDAEWORK 0\n#endif\n"

@@ -15,8 +15,9 @@ from __future__ import annotations
 PIVOT_TOLERANCE = 1e-13
 
 #: Relative rank tolerance of constraint rows: a row whose pivot (column-pivoted QR of the
-#: Jacobian in Python, the Cholesky factor of the Gram matrix ``J M^-1 J^T`` in the dae
-#: formulation's C) falls below this fraction of the largest counts as dependent.  Rounding
+#: Jacobian in Python; in the dae formulation's C, the square root of an eigenvalue of the
+#: Schur complement ``J M^-1 J^T`` at rest, ``c/least_norm.h``) falls below this fraction of
+#: the largest counts as dependent.  Rounding
 #: leaves redundant rows of a planar loop at ~1e-16 relative; a mechanism within 1e-9 of a
 #: dead point is treated as at it.  C name ``MB_RANK_TOLERANCE``.
 RANK_TOLERANCE = 1e-9
@@ -61,8 +62,12 @@ CONE_FLOOR = 1e-12
 STOP_SPEED = 1e-8
 
 #: m/s: the slip speed below which the slip direction at a step's start is not its own
-#: (the contact's direction is used instead) when a stop is watched for.  C ``MB_SLIP_FLOOR``.
-SLIP_FLOOR = 1e-12
+#: (the contact's direction is used instead) when a stop is watched for.  ``STOP_SPEED``: a
+#: contact set sliding slower than that is watched along the direction it was set sliding
+#: in, since the slip a sticking phase leaves (~1e-12 m/s, from the integration error under
+#: the ``STICK_RATE`` feedback; a ball rolling off a ball) points anywhere, and taken as the
+#: direction it made the contact "stop" at once, sliding "back".  C ``MB_SLIP_FLOOR``.
+SLIP_FLOOR = STOP_SPEED
 
 #: The friction solve's least-squares cut-off: singular values of its (non-symmetric) KKT
 #: Schur matrix below this fraction of the largest are dropped (redundant rows share the

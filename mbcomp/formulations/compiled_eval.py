@@ -12,9 +12,11 @@ call per evaluation:
   multipliers are the KKT ones on independent rows.
 
 ``CompiledSolve.solve`` returns None where the C solve does not answer, and the caller then
-takes the formulation's Python solve (which stays the oracle of the tests): a row direction
-dropped (a singular position, ``RankLost`` in a run), a mass matrix that is not positive
-definite, a non-finite result (the Python solve explains these).  Speed motors' rows use the
+takes the formulation's Python solve (which stays the oracle of the tests): a dead point at
+rest whose motion is not determined (``RankLost`` in a run), a mass matrix that is not
+positive definite, a non-finite result (the Python solve explains these).  At a singular
+position in motion the C solve drops the lost row direction (``c/least_norm.h``) and answers
+with the least-norm multipliers, numpy's ``lstsq`` answer.  Speed motors' rows use the
 given start values (``offsets``) or, without one, a residual of zero, as the Python solve
 treats a speed motor without a start value.
 """
@@ -98,7 +100,8 @@ class CompiledSolve:
         status = self.fn(len(self.rows), pointer(self.spec), pointer(data), pointer(self.programs), self.alpha,
                          self.beta, self.scale, self.tol, pointer(self.kernel.p), None if tau is None else pointer(tau),
                          float(t), pointer(q), pointer(qd), pointer(qdd), pointer(lam_rows), pointer(work))
-        if status or not (np.all(np.isfinite(qdd)) and np.all(np.isfinite(lam_rows))):
+        if status not in (0, 2) or not (np.all(np.isfinite(qdd)) and np.all(np.isfinite(lam_rows))):
+            # (2: a row direction dropped; the answer is then the least-norm one, lstsq's)
             return None
         lam = np.zeros(self.nc)
         lam[self.rows] = lam_rows[:len(self.rows)]

@@ -27,6 +27,7 @@ import ctypes
 
 import numpy as np
 
+from mbcomp.codegen.callbacks import INPUT_FAILED, constant_tau, raise_pending
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, compiled_jacobian, rhs_failure
 from mbcomp.core.errors import SimulationError, TrialStateError
 from mbcomp.formulations.compiled_watch import pointer
@@ -87,7 +88,7 @@ class CompiledRhsWorkspace:
         size = lib.rhs_work_size
         size.argtypes, size.restype = [], ctypes.c_long
         d["fn"], d["work"] = fn, np.zeros(max(int(size()), 1))
-        d["tau_arr"] = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        d["tau_arr"] = constant_tau(tau)  # (a callable tau: the input callback's)
         d["tau_ptr"] = None if d["tau_arr"] is None else pointer(d["tau_arr"])
 
     def __getattr__(self, name):
@@ -174,6 +175,8 @@ class CompiledReducedWorkspace:
         y = np.ascontiguousarray(y, dtype=float)
         f = np.empty_like(y)
         status = self._rhs(float(t), pointer(y), pointer(f), pointer(self.run.kernel.p), self._tau)
+        if status == INPUT_FAILED:
+            raise_pending()  # (a Python callable's exception)
         if status:
             error = self.run.friction_failure()  # (a failed friction solve: Painleve)
             if error is not None:

@@ -4,8 +4,10 @@ A compiled run with contacts arms the loop's watch (``<prefix>_watch``): after e
 step the C loop checks the gaps of open contacts and the normal forces of held ones, and on a
 sign change stops with EVENT, writing the step into ``event``: ``[t_new, y_new (ny values),
 (ny values the loop uses), the 7 x ny DOP853 dense-output coefficients]``.  Python then
-locates the event on that step with ``<prefix>_gap_at`` / ``<prefix>_force_at`` (C functions
-of the step's dense output) and applies the impact law.
+locates the event on that step with ``<prefix>_gap_root`` / ``<prefix>_force_root`` /
+``<prefix>_cone_root`` / ``<prefix>_slip_root`` (Brent's method in C, ``codegen/c/brentq.h``,
+on the C functions ``<prefix>_<what>_at`` of the step's dense output: the root scipy's
+``brentq`` finds on them, to rounding) and applies the impact law.
 """
 from __future__ import annotations
 
@@ -93,10 +95,8 @@ class EventStepFunctions:
         return self.run.friction.indices.index(int(i))
 
     def _tangent(self, i: int, direction) -> tuple[float, float]:
-        """A world direction (3,) in contact ``i``'s tangent coordinates."""
-        basis = self.run.friction.data[self._friction_index(i), 11:17].reshape(2, 3)
-        e = basis @ np.asarray(direction, dtype=float)
-        return float(e[0]), float(e[1])
+        """A world direction (3,) in contact ``i``'s tangent coordinates (``FrictionRows.tangent_coordinates``)."""
+        return self.run.friction.tangent_coordinates(self._friction_index(i), direction)
 
     def _friction_fn(self, what: str):
         fn = getattr(self.run.lib, f"{self.prefix}_{what}_at")
@@ -123,15 +123,57 @@ class EventStepFunctions:
                                           *self._tangent(i, direction))
         return self._friction_value(value, s, "slip velocity")
 
+    # -- locating an event on the step: Brent's method in C (``<prefix>_<what>_root``) --
+    def root_failure(self, what: str, a: float, b: float) -> SimulationError:
+        """The error when ``what`` cannot be evaluated at a trial time in [a, b] (a formulation
+        with more to say about it overrides this)."""
+        return SimulationError(f"the {what} cannot be evaluated on [{a:.9g}, {b:.9g}] s")
+
+    def _root(self, kind: str, index: int, a: float, b: float, xtol: float, rtol: float, what: str,
+              extra_types: list, *extra) -> float:
+        """The C function ``<prefix>_<kind>_root(a, b, t_old, h, y_old, F, ny, index, p, *extra,
+        xtol, rtol, &status)``: ``mb_brentq`` (codegen/c/brentq.h, scipy's brentq to rounding)
+        on ``<prefix>_<kind>_at`` over the step's dense output."""
+        fn = getattr(self.run.lib, f"{self.prefix}_{kind}_root")
+        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, *extra_types, _DBL, _DBL, _VOID]
+        fn.restype = _DBL
+        status = ctypes.c_int(0)
+        value = fn(float(a), float(b), *self.args, int(index), self.p, *extra, float(xtol), float(rtol),
+                   ctypes.byref(status))
+        if status.value == 1:
+            raise SimulationError(f"the {what} does not change sign on [{a:.9g}, {b:.9g}] s")
+        if status.value == 3:
+            raise self.root_failure(what, a, b)
+        if status.value:
+            raise SimulationError(f"the {what} could not be located on [{a:.9g}, {b:.9g}] s (status {status.value})")
+        return value
+
     def cone_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where sticking contact ``i``'s force reaches the cone in [a, b] (s): Brent's method."""
-        from scipy.optimize import brentq
-        return brentq(lambda s: self.cone(s, i), a, b, xtol=xtol, rtol=rtol)
+        """Where sticking contact ``i``'s force reaches the cone in [a, b] (s): Brent's method in C."""
+        return self._root("cone", self._friction_index(i), a, b, xtol, rtol, "friction force", [_VOID], self.tau)
 
     def slip_root(self, i: int, direction, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where contact ``i``'s slip along ``direction`` reaches zero in [a, b] (s): Brent's method."""
-        from scipy.optimize import brentq
-        return brentq(lambda s: self.slip(s, i, direction), a, b, xtol=xtol, rtol=rtol)
+        """Where contact ``i``'s slip along the world ``direction`` reaches zero in [a, b] (s):
+        Brent's method in C."""
+        return self._root("slip", self._friction_index(i), a, b, xtol, rtol, "slip velocity", [_DBL, _DBL],
+                          *self._tangent(i, direction))
+
+    def gap_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where contact ``i``'s gap crosses 0 in [a, b] (s): Brent's method in C."""
+        return self._root("gap", i, a, b, xtol, rtol, "gap", [])
+
+    def force_row(self, k: int) -> int | None:
+        """The index ``<prefix>_force_at`` reads held contact ``k``'s normal force at (None: the
+        contact has no force of its own, e.g. dropped as dependent)."""
+        raise NotImplementedError
+
+    def force_root(self, k: int, a: float, b: float, xtol: float, rtol: float) -> float:
+        """Where held contact ``k``'s force crosses 0 in [a, b] (s): Brent's method in C (``a``
+        for a contact without a force of its own)."""
+        row = self.force_row(k)
+        if row is None:
+            return a
+        return self._root("force", row, a, b, xtol, rtol, "contact force", [_VOID], self.tau)
 
     def gap(self, s: float, i: int) -> float:
         """Contact ``i``'s gap (m) at time ``s`` on the step (a formulation's locator defines it)."""
@@ -140,14 +182,3 @@ class EventStepFunctions:
     def force(self, s: float, k: int) -> float:
         """Held contact ``k``'s normal force (N) at time ``s`` on the step."""
         raise NotImplementedError
-
-    def gap_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where contact ``i``'s gap crosses 0 in [a, b] (s): Brent's method on ``gap``
-        (a locator with Brent's method in C overrides it)."""
-        from scipy.optimize import brentq
-        return brentq(lambda s: self.gap(s, i), a, b, xtol=xtol, rtol=rtol)
-
-    def force_root(self, k: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where held contact ``k``'s force crosses 0 in [a, b] (s): Brent's method on ``force``."""
-        from scipy.optimize import brentq
-        return brentq(lambda s: self.force(s, k), a, b, xtol=xtol, rtol=rtol)

@@ -16,9 +16,10 @@ from mbcomp.formulations.friction import has_friction
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
 DEFAULT_BAUMGARTE = (5.0, 5.0)
 
-#: Relative pivot (square root of the Gram matrix's, against its largest) below which a
-#: constraint direction is dropped from the compiled acceleration solve and projections: a
-#: transient singular position.  1e-4 passes the two-four-bar linkage through its singular
+#: Relative size (square root of an eigenvalue of the Schur complement, against its largest:
+#: ``c/least_norm.h``) below which a constraint direction is dropped from the compiled
+#: least-norm acceleration solve in motion and from the projections: a transient singular
+#: position.  1e-4 passes the two-four-bar linkage through its singular
 #: crossings at rtol 1e-8 .. 1e-12 (smaller values stall the step size near the crossings).
 SINGULAR_TOLERANCE = 1e-4
 

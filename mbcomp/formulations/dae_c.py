@@ -27,12 +27,16 @@ def c_dae_accelerations(nq: int, ng: int) -> str:
     defined: a model with constraints or contacts): the KKT system solved through the Schur
     complement, ``M = L L^T``, ``Y = L^-1 J_r^T``, ``(Y^T Y) lam = rhs - Y^T L^-1 f``,
     ``qdd = L^-T (L^-1 f + Y lam)``, on the rows configured per thread with Baumgarte gains.
-    Returns 0, 1 when M is not positive definite, 2 when the rows lost rank (a singular
-    position: the caller falls back to the Python path, which diagnoses it).  ``dae_project``
+    The multipliers are the least-norm ones: the Cholesky solve where its pivots show full
+    rank, else ``c/least_norm.h``'s Jacobi eigen-decomposition of the Schur complement (directions below the singular tolerance dropped in motion, below
+    ``RANK_TOLERANCE`` at rest), so the solve carries on through singular positions.
+    Returns 0, 1 when M is not positive definite, 2 when the rows lost rank at rest (a dead
+    point, where the motion is not determined: the caller's Python path names it) or are not
+    finite.  ``dae_project``
     moves a state back onto the constraints after an accepted step.  The time of motor rows
     is ``dae_time`` (set by the integrators before each call).  Offsets into the packed
     outputs come from the ``OutputLayout`` defines.  The C is ``c/dae.c`` (it includes
-    ``program.h`` and ``brentq.h``), after the ``#define``s of the row kinds, the opcodes and
+    ``program.h``, ``brentq.h`` and ``least_norm.h``), after the ``#define``s of the row kinds, the opcodes and
     the tolerances.
     """
     from mbcomp.codegen import events_c, expressions_c

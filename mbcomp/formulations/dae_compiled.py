@@ -23,6 +23,7 @@ import ctypes
 import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.codegen.callbacks import constant_tau
 from mbcomp.codegen.expressions_c import compile_position
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
@@ -145,7 +146,7 @@ class DaeRun(ContactWatching):
         self.workspace = formulation.workspace_class(formulation, kernel, t0, q0, qd0, tau, self.contacts)
         if offsets is not None:
             self.workspace.offsets = offsets
-        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.tau = constant_tau(tau)  # (a callable tau: the input callback's)
         self.restarts = 0
         self.gaps = self.event = self.held = None
         nc = 0 if formulation.constraints is None else formulation.constraints.nc
@@ -235,46 +236,9 @@ class _Locator(EventStepFunctions):
             if spec[0] == ROW_CONTACT:
                 self.row_of[int(spec[1])] = k
 
-    def _root(self, fn, a: float, b: float, index: int, xtol: float, rtol: float, what: str, *extra) -> float:
-        status = ctypes.c_int(0)
-        value = fn(float(a), float(b), *self.args, int(index), self.p, *extra, float(xtol), float(rtol),
-                   ctypes.byref(status))
-        if status.value == 1:
-            raise SimulationError(f"the {what} does not change sign on [{a:.9g}, {b:.9g}] s")
-        if status.value:
-            raise SimulationError(f"the {what} could not be located on [{a:.9g}, {b:.9g}] s (status {status.value})")
-        return value
-
-    def gap_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where contact ``i``'s gap crosses zero in [a, b] (Brent's method in C, as scipy's brentq)."""
-        fn = self.run.lib.dae_gap_root
-        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _DBL, _DBL, _VOID]
-        fn.restype = _DBL
-        return self._root(fn, a, b, i, xtol, rtol, "gap")
-
-    def force_root(self, k: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where the k-th held contact's normal force crosses zero in [a, b] (in C)."""
-        row = self.row_of.get(self.run.contacts[k])
-        if row is None:
-            return a  # (dropped as dependent: no force of its own)
-        fn = self.run.lib.dae_force_root
-        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID, _DBL, _DBL, _VOID]
-        fn.restype = _DBL
-        return self._root(fn, a, b, row, xtol, rtol, "contact force", self.tau)
-
-    def cone_root(self, i: int, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where sticking contact ``i``'s force reaches the cone in [a, b] (Brent's method in C)."""
-        fn = self.run.lib.dae_cone_root
-        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _VOID, _DBL, _DBL, _VOID]
-        fn.restype = _DBL
-        return self._root(fn, a, b, self._friction_index(i), xtol, rtol, "friction force", self.tau)
-
-    def slip_root(self, i: int, direction, a: float, b: float, xtol: float, rtol: float) -> float:
-        """Where contact ``i``'s slip along the world ``direction`` reaches zero in [a, b] (in C)."""
-        fn = self.run.lib.dae_slip_root
-        fn.argtypes = [_DBL, _DBL, _DBL, _DBL, _VOID, _VOID, _INT, _LONG, _VOID, _DBL, _DBL, _DBL, _DBL, _VOID]
-        fn.restype = _DBL
-        return self._root(fn, a, b, self._friction_index(i), xtol, rtol, "slip velocity", *self._tangent(i, direction))
+    def force_row(self, k: int) -> int | None:
+        """The configured row of the k-th held contact (None: dropped as dependent)."""
+        return self.row_of.get(self.run.contacts[k])
 
     def gap(self, s: float, i: int) -> float:
         value = self._gap(float(s), *self.args, int(i), self.p)
@@ -283,7 +247,7 @@ class _Locator(EventStepFunctions):
         return value
 
     def force(self, s: float, k: int) -> float:
-        row = self.row_of.get(self.run.contacts[k])
+        row = self.force_row(k)
         if row is None:
             return 0.0
         value = self._force(float(s), *self.args, row, self.p, self.tau)

@@ -29,14 +29,17 @@ from mbcomp.formulations.friction import (Closed, friction_of, inconsistent_mess
                                           plane_contact_rows)
 
 #: Doubles per contact before its speed mask, doubles it reads back, modes (``friction.h``).
-DATA, OUT, STICK, SLIP = 24, 9, 1, 2
+DATA, OUT, STICK, SLIP = 24, 21, 1, 2
+#: Where a contact's collision feature index sits in its data row (-1: a point on a plane).
+FEATURE = 21
 
 _VOID, _INT = ctypes.c_void_p, ctypes.c_int
 
 
 def compiled_friction_problem(kernel, formulation=None) -> str | None:
     """Why this model's friction cannot run in the compiled loops (None when it can): every
-    contact with friction must be a body point or sphere on a world plane (``Contact``); and
+    contact with friction must be a body point or sphere on a world plane (``Contact``) or a
+    collision feature (``Collision``: its rows from ``codegen/c/collide.c``); and
     the dae formulation's KKT solve must be the dense one (with the recursive dynamics and
     geometric constraints it is the recursive program's, which has no friction rows)."""
     topology = kernel.topology
@@ -44,6 +47,8 @@ def compiled_friction_problem(kernel, formulation=None) -> str | None:
     if not with_friction:
         return None
     for contact in with_friction:
+        if getattr(contact, "kind", "") == "collision":
+            continue
         if not hasattr(contact, "point") or not hasattr(contact, "normal"):
             return (f"contact {contact.name!r} has friction but is not a body point or sphere on a plane: its friction "
                     f"steps in Python")
@@ -79,22 +84,30 @@ class FrictionRows:
         self.out = np.zeros((max(len(moded), 1), OUT))
         self.fail = np.zeros(4)
         rows = plane_contact_rows(kernel, q, qd, moded, normal_rows=False)
+        n_own = getattr(kernel, "n_own", len(topology.contacts))
         for j, i in enumerate(moded):
             contact = topology.contacts[i]
-            body = topology.resolve(contact.body)
             d = self.data[j]
             d[0] = STICK if i in contacts.stick else SLIP
             d[1] = normal_row[i]
-            d[2] = -1 if body is topology.ground else topology.body_index(body)
             d[3] = rows.mu[j]
-            d[4:7] = np.asarray(kernel.parameters[f"{contact.name}.point"], dtype=float)
-            d[7] = float(kernel.parameters.get(f"{contact.name}.radius", 0.0))
-            d[8:17] = rows.basis[j].reshape(-1)
+            d[8:17] = rows.basis[j].reshape(-1)  # (a collision feature's: at the start, for the locators)
             d[17:20] = contacts.slip.get(i, np.zeros(3))
             d[20] = i
-            if body is not topology.ground:
-                d[DATA + np.asarray(list(topology.speed_indices_of_body(body)), dtype=int)] = 1.0
-            self.out[j, 5:7] = rows.tangent[j] @ qd  # the slip velocity at the start: the watch's first
+            d[FEATURE] = -1
+            if getattr(contact, "kind", "") == "collision":  # its rows from collide.c's measurement
+                d[2] = -1
+                d[FEATURE] = i - n_own
+            else:
+                body = topology.resolve(contact.body)
+                d[2] = -1 if body is topology.ground else topology.body_index(body)
+                d[4:7] = np.asarray(kernel.parameters[f"{contact.name}.point"], dtype=float)
+                d[7] = float(kernel.parameters.get(f"{contact.name}.radius", 0.0))
+                if body is not topology.ground:
+                    d[DATA + np.asarray(list(topology.speed_indices_of_body(body)), dtype=int)] = 1.0
+            slip = rows.tangent[j] @ qd  # the slip velocity at the start: the watch's first
+            self.out[j, 5:7] = slip
+            self.out[j, 12:15] = rows.basis[j, 1:].T @ slip
         self.cap = nr + 2 * len(moded)
         layout = kernel.layout
         self.scratch = np.zeros(scratch_size(self.cap, nv, layout.size("kinematics")))
@@ -104,6 +117,21 @@ class FrictionRows:
         configure.restype = ctypes.c_int
         configure(len(moded), self.cap, pointer(self.data), pointer(self.out), pointer(self.scratch),
                   pointer(self.fail))
+
+    def tangent_coordinates(self, j: int, direction) -> tuple[float, float]:
+        """A world ``direction`` (3,) as the ``(e0, e1)`` of friction contact ``j`` (its
+        position among ``indices``) that ``friction.h``'s ``mb_friction_along`` takes (the
+        slip locators): coordinates on the contact's tangents in its data row.  A plane's
+        tangents are fixed; a collision feature's turn with its normal, so its data row takes
+        the direction itself as its first tangent (that row's basis serves only this) and the
+        coordinates are (1, 0): the slip along it is then Python's exactly."""
+        d = self.data[j]
+        direction = np.asarray(direction, dtype=float)
+        if d[FEATURE] >= 0:
+            d[11:14], d[14:17] = direction, 0.0
+            return 1.0, 0.0
+        e = d[11:17].reshape(2, 3) @ direction
+        return float(e[0]), float(e[1])
 
     def failure(self) -> SimulationError | None:
         """The error of a friction solve that failed in the loop (None when none did), with the

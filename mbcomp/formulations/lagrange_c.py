@@ -55,7 +55,8 @@ def c_lagrange(nv: int, ng: int) -> str:
     configuration (``lagrange_configure``) and prescribed motion without degrees of freedom
     (``lagrange_prescribed``), for a model with ``nv`` speeds and ``ng`` geometric
     constraint rows (offsets from the ``OutputLayout`` defines)."""
+    from mbcomp.codegen import events_c
     from mbcomp.core import c_text, tolerances
-    return (C_PROGRAM + tolerances.c_defines()
+    return (C_PROGRAM + events_c.C_DEFINES + tolerances.c_defines()
             + c_text.fill(c_text.read("mbcomp.formulations", "lagrange.c"), TRIAL=TRIAL_FAILED, PAUSED=PAUSED, EVENT=EVENT))
 

@@ -35,6 +35,7 @@ import numpy as np
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.statemap import Chart
 from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
+from mbcomp.codegen.callbacks import constant_tau
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, bind_reduced
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.friction import has_friction
@@ -126,7 +127,7 @@ class ReducedRun(ContactWatching):
         self.acc = np.concatenate(([t0], q0, qd0, np.zeros(self.nz)))
         self.info = np.array([0.0, np.nan])  # [condition, time of a non-finite motor position]
         self.programs = None if constraints is None else motor_programs(constraints)
-        self.tau = None if tau is None else np.ascontiguousarray(tau, dtype=float)
+        self.tau = constant_tau(tau)  # (a callable tau: the input callback's)
         self.retries, self.t_retry = 0, -np.inf
         self.restarts = 0  #: new partitions and retreats (as Python stepping counts them)
         configure = lib.lagrange_configure
@@ -362,6 +363,15 @@ class _Locator(EventStepFunctions):
     def gap(self, s: float, i: int) -> float:
         return self._checked(self._gap(float(s), *self.args, int(i), self.p), s, "gap")
 
+    def force_row(self, k: int) -> int:
+        """The row of the k-th held contact (after the model's own constraint rows)."""
+        return self.nm + int(k)
+
+    def root_failure(self, what: str, a: float, b: float) -> SimulationError:
+        self.run.check_motors()
+        return SimulationError(f"the {what} cannot be evaluated on [{a:.9g}, {b:.9g}] s (no dependent coordinates "
+                               f"near the step's start)")
+
     def force(self, s: float, k: int) -> float:
-        value = self._force(float(s), *self.args, self.nm + int(k), self.p, self.tau)
+        value = self._force(float(s), *self.args, self.force_row(k), self.p, self.tau)
         return self._checked(value, s, "contact force")

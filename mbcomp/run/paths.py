@@ -2,10 +2,11 @@
 compiled right-hand side, and why.
 
 The compiled loop is the product path: every model whose forces, drives and motors are
-expressions runs there in either formulation.  A run leaves it only for a reason this module
-names (``IntegrationPath.reason``): a scipy method asked for, Python callables in the model or
-in ``tau``, a formulation option that steps in Python (``Formulation.compiled_loop``), a model
-compiled without a C compiler.  ``System.integration_path`` reports the choice.
+expressions runs there in either formulation, and so does a model with Python callables
+(callable forces or torques, drive signals, a callable ``tau``), which the loop calls back
+(``codegen/callbacks.py``).  A run leaves it only for a reason this module names
+(``IntegrationPath.reason``): a scipy method asked for, a formulation option that steps in
+Python (``Formulation.compiled_loop``), a model compiled without a C compiler.  ``System.integration_path`` reports the choice.
 """
 from __future__ import annotations
 
@@ -46,21 +47,11 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
         return f"the {formulation.name} formulation of this model has no compiled {method} loop"
     if kernel.topology.contacts and not formulation.compiled_contacts:
         return "the model has contacts"
-    if any(getattr(c, "kind", "") == "collision" and float(kernel.parameters.get(c.friction_key, 0.0)) > 0.0
-           for c in kernel.topology.contacts):
-        return ("collision features with friction step in Python (the compiled loops hold frictionless collision "
-                "features only)")
     from mbcomp.formulations.friction_c import compiled_friction_problem
     friction = compiled_friction_problem(kernel, formulation)
     if friction is not None:
         return friction
-    if kernel.n_inputs:
-        return "the model has callable forces or torques"
-    if kernel.compiled.drives.callables:
-        return "the model's drives or signals use Python callables"
-    if callable(tau):
-        return "tau is a Python callable"
-    return None
+    return None  # (Python callables in the model or in tau are called back from the loop: codegen/callbacks.py)
 
 
 def choose_path(kernel, formulation, options: RunOptions, tau: Any = None) -> IntegrationPath:

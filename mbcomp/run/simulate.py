@@ -174,9 +174,10 @@ def simulate(kernel, formulation, t_end: float, q0: np.ndarray, qd0: np.ndarray,
 def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarray, *, tau: Any = None,
         z0: np.ndarray | None = None) -> Result:
     """The driver: checks what the options and inputs ask for, chooses the stepping
-    (``paths.choose_path``) and runs ``run_steps`` with it.  A compiled run that meets a singular
-    position of the constraints (``RankLost``) is run again in scipy's stepping, which
-    handles it, unless the options insist on compiled code.  ``contact_mode="timestepping"``
+    (``paths.choose_path``) and runs ``run_steps`` with it.  The compiled dae solve passes
+    singular positions itself (least-norm multipliers); one that meets a dead point at rest,
+    where the motion is not determined (``RankLost``), is run again in Python stepping, whose
+    solve raises the error naming the constraints, unless the options insist on compiled code.  ``contact_mode="timestepping"``
     runs ``timestepping.simulate_timestepping`` instead."""
     if options.contact_mode == "timestepping":
         from mbcomp.run.timestepping import simulate_timestepping
@@ -204,8 +205,9 @@ def run(kernel, formulation, options: RunOptions, q0: np.ndarray, qd0: np.ndarra
                          formulation, options, q0, qd0, path, budget)
         except RankLost:
             if options.method == "RK4" or options.integrator == "compiled":
-                raise SimulationError(f"compiled {options.method} met a singular position of the constraints; "
-                                      f"use integrator='scipy', which handles it") from None
+                raise SimulationError(f"compiled {options.method} met a singular position of the constraints at "
+                                      f"rest (a dead point: the motion is not determined); integrator='scipy' "
+                                      f"names the constraints involved") from None
             path = IntegrationPath("scipy", "the compiled loop met a singular position of the constraints")
     elif options.integrator == "compiled":
         raise ModelError("simulate", f"integrator='compiled' is not possible: {path.reason}")

@@ -21,6 +21,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from mbcomp.codegen.callbacks import input_hook
 from mbcomp.codegen.integrators import (EVENT, FINISHED, CollapseWatch, compiled_jacobian, dop853_segment, hooked,
                                         poll_step_hooks, run_loops, step_hook)
 from mbcomp.core.errors import ModelError, SimulationError, TrialStateError
@@ -181,6 +182,8 @@ class ScipyStepping:
         if self.compiled_rhs:  # the C configuration of the last stretch is undone at the end of the run
             self.setup.callback(self._close_stretch)
         try:
+            # the model's Python callables, called back from the compiled right-hand side and Jacobian
+            self.setup.enter_context(input_hook(self.kernel, self.drive.tau if self.drive is not None else self.tau))
             self._begin(t0, q0, qd0, contacts, watched)
         except BaseException:
             self.setup.close()
@@ -198,7 +201,7 @@ class ScipyStepping:
                 and why_not_compiled(self.kernel, self.formulation, "DOP853", self.tau) is None):
             tau = self.tau
             self.solver_options["jac"] = compiled_jacobian(
-                self.kernel, None if tau is None else self.kernel.tau(tau, 0.0, q0, qd0))
+                self.kernel, tau if tau is None or callable(tau) else self.kernel.tau(tau, 0.0, q0, qd0))
         try:
             self.solver = self._solver(t0, self.workspace.y0)  # (scipy evaluates the right-hand side here)
         except SimulationError as exc:
@@ -284,7 +287,8 @@ class ScipyStepping:
         if not self.compiled_rhs:
             workspace = self.formulation.start(self.kernel, t0, q0, qd0, self.tau, contacts)
             return workspace if self.drive is None else DriveWorkspace(workspace, self.drive)
-        tau = None if self.tau is None else np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)
+        tau = self.tau if self.tau is None or callable(self.tau) else \
+            np.ascontiguousarray(self.kernel.tau(self.tau, t0, q0, qd0), dtype=float)  # (a callable: the input callback's)
         self._close_stretch()
         z0 = None if self.drive is None else np.array(self.states())
         self.stretch = self.formulation.scipy_stretch(self.kernel, self.kernel.compiled.functions.lib, t0, q0, qd0, tau,
@@ -347,7 +351,7 @@ class CompiledStepping:
         #: ``drive.z`` (set by the event step's ``full_state``), which the events' forces read.
         self.drive = None
         if self.watched and kernel.compiled.drives.elements:
-            self.drive = DriveTorque(kernel, None if tau is None else np.asarray(tau, dtype=float), z0)
+            self.drive = DriveTorque(kernel, tau if tau is None or callable(tau) else np.asarray(tau, dtype=float), z0)
             self.applied = self.drive
         self.max_step = options.max_step
         self.nothing_to_integrate = False
@@ -362,7 +366,7 @@ class CompiledStepping:
         asks to stop, so the run and its result are unchanged)."""
         progress = step_hook(lambda t: bar.update_to(t) and False, interval=interval) if bar.enabled \
             else contextlib.nullcontext()
-        with progress, hooked(self.lib) as hook:
+        with progress, hooked(self.lib) as hook, input_hook(self.kernel, self.tau):
             self.hook = hook
             try:
                 yield
@@ -378,8 +382,11 @@ class CompiledStepping:
         self.t, self.q, self.qd = t0, q0, qd0
         self.contacts = contacts
         tau = self.tau
-        self.tau_arr = None if tau is None else np.ascontiguousarray(self.kernel.tau(tau, 0.0, q0, qd0), dtype=float)
-        self.tau_ptr = None if self.tau_arr is None else self.tau_arr.ctypes.data
+        if callable(tau):  # (evaluated at every evaluation by the input callback: running)
+            self.tau_arr, self.tau_ptr = tau, None
+        else:
+            self.tau_arr = None if tau is None else np.ascontiguousarray(self.kernel.tau(tau, 0.0, q0, qd0), dtype=float)
+            self.tau_ptr = None if self.tau_arr is None else self.tau_arr.ctypes.data
         self.finished = False
 
     def advance(self, recorder, gaps: np.ndarray | None) -> Step | None:

@@ -59,9 +59,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
             for (int i = 0; i < n; ++i) s += Ja[i] * X[i * DAE_NR + b];
             A[a * DAE_NR + b] = s;
         }
-    const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
-    if (dropped < 0) return 2;
-    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
+    if (dae_schur_solve(A, r, lam, nr, qd, n)) return 2;  /* not finite, or a dead point at rest */
     for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
     for (int i = 0; i < n; ++i) {
         double s = free_[i];

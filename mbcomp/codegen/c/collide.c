@@ -44,6 +44,7 @@ typedef struct {
 typedef struct {
     double gap, n[3], pa[3], pb[3], dist;
     int owner, sa, sb;   /* sa, sb: pa (pb) slides along a (b) */
+    double ra, rb;       /* rounding radii at pa, pb: the surfaces touch at pa + ra n, pb - rb n */
     double a[3], b[3];
 } mbc_feature;
 
@@ -116,7 +117,7 @@ static void mbc_place(long e, mbc_shape *s) {
 }
 
 static void mbc_set(mbc_feature *f, double gap, const double *n, const double *pa, const double *pb, int owner) {
-    f->gap = gap; f->owner = owner; f->dist = 0.0; f->sa = f->sb = 0;
+    f->gap = gap; f->owner = owner; f->dist = 0.0; f->sa = f->sb = 0; f->ra = f->rb = 0.0;
     for (int i = 0; i < 3; ++i) { f->n[i] = n[i]; f->pa[i] = pa[i]; f->pb[i] = pb[i]; f->a[i] = f->b[i] = 0.0; }
 }
 
@@ -128,6 +129,7 @@ static void mbc_line(mbc_feature *f, const double *pa, const double *pb, double 
     for (int i = 0; i < 3; ++i) n[i] = dist > 1e-12 ? d[i] / dist : fallback[i];
     mbc_set(f, dist - ra - rb, n, pa, pb, MBC_OWNER_LINE);
     f->dist = dist > 1e-12 ? dist : 1e-12;
+    f->ra = ra; f->rb = rb;
 }
 
 /* collide._point_plane */
@@ -137,6 +139,7 @@ static void mbc_point_plane(mbc_feature *f, const double *p, double radius, cons
     const double height = mbc_dot(plane->n, d);
     for (int i = 0; i < 3; ++i) foot[i] = p[i] - height * plane->n[i];
     mbc_set(f, height - radius, plane->n, foot, p, MBC_OWNER_A);
+    f->rb = radius;
 }
 
 /* collide._point_box: a sphere (a corner: radius 0) against box A */
@@ -158,6 +161,7 @@ static void mbc_point_box(mbc_feature *f, const double *p, double radius, const 
             mbc_col(R, k, n);
             for (int i = 0; i < 3; ++i) n[i] *= sign;
             mbc_set(f, fabs(local[k]) - h[k] - radius, n, pa, p, MBC_OWNER_A);
+            f->rb = radius;
             return;
         }
         double fb[3], sg[3];
@@ -180,6 +184,7 @@ static void mbc_point_box(mbc_feature *f, const double *p, double radius, const 
     local[k] = sign * h[k];
     for (int i = 0; i < 3; ++i) pa[i] = box->c[i] + R[3 * i] * local[0] + R[3 * i + 1] * local[1] + R[3 * i + 2] * local[2];
     mbc_set(f, -depth[k] - radius, n, pa, p, MBC_OWNER_A);
+    f->rb = radius;
 }
 
 /* corner k of a box (collide._CORNERS order: x slowest) */
@@ -287,6 +292,7 @@ static void mbc_swap(mbc_feature *f) {
         t = f->a[i]; f->a[i] = f->b[i]; f->b[i] = t;
     }
     const int s = f->sa; f->sa = f->sb; f->sb = s;
+    t = f->ra; f->ra = f->rb; f->rb = t;
     if (f->owner == MBC_OWNER_A) f->owner = MBC_OWNER_B;
     else if (f->owner == MBC_OWNER_B) f->owner = MBC_OWNER_A;
 }

@@ -47,6 +47,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
     int status = 0;
     double t = state[0], h_abs = state[1], window_t0 = state[0];
     long window_n = 0;
+    if (t == step_t_last) { window_t0 = step_window_t0; window_n = step_window_n; }  /* (the next chunk of one run) */
     if (!K || !work || !y_new || !y_stage || !F) { status = -4; goto done; }
     if (h_abs <= 0) {
         RHS_OR_FAIL(LOOP_RHS(t, y, f));
@@ -206,7 +207,7 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
 #if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, dummy_input, work))) {  /* back onto the constraints */
+        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, mb_input_u(), work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
         }
@@ -216,8 +217,13 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
             mb_copy(y_steps + (*n_steps) * LOOP_NY, y, sizeof(double) * LOOP_NY);
             ++*n_steps;
         }
-        if (++window_n == COLLAPSE_WINDOW) {  /* step-size collapse: the run could never finish */
-            if (t < t_end && (t_end - t) > step_budget * ((t - window_t0) / COLLAPSE_WINDOW)) {
+        if (++window_n == step_window) {  /* step-size collapse: the run could never finish */
+            const double pace = (t - window_t0) / step_window, rest = t_end - t;
+            if (pace > step_best) step_best = pace;
+            /* (with step_drop, also once the pace fell a hundredfold below the run's best and
+               the rest would need a thirtieth of the budget: the Python-stepped loops' rule) */
+            if (t < t_end && (rest > step_budget * pace
+                              || (step_drop && rest > step_budget / 30 * pace && pace < 1e-2 * step_best))) {
                 status = -7;
                 goto done;
             }
@@ -229,6 +235,7 @@ done:
 #if LOOP_REDUCED
     lagrange_span_end();  /* (an event step or a failure leaves the loop inside a step's outputs) */
 #endif
+    step_t_last = t; step_window_t0 = window_t0; step_window_n = window_n;
     state[0] = t;
     state[1] = h_abs;
     free(K); free(work); free(y_new); free(y_stage); free(F);

@@ -2,11 +2,25 @@
    limits.max_steps()). */
 static __thread double step_budget = COLLAPSE_STEPS;
 void set_step_budget(double steps) { step_budget = steps > 0 ? steps : COLLAPSE_STEPS; }
+/* The collapse check's window (accepted steps) and whether it also gives up on a pace that
+   fell a hundredfold (step_drop): Python sets them for runs that call Python back at every
+   evaluation (codegen/callbacks.py), whose steps cost as much as Python-stepped ones. */
+static __thread long step_window = COLLAPSE_WINDOW;
+static __thread int step_drop = 0;
+static __thread double step_best = 0.0;  /* the best pace (s per step) of the run so far, over its calls of the loop */
+/* The collapse window where this thread's last loop call returned at step_t_last: a call
+   starting there (the next chunk of the same run) goes on with it. */
+static __thread double step_t_last = -1.0 / 0.0, step_window_t0 = 0.0;
+static __thread long step_window_n = 0;
+void set_step_watch(long window, int drop) {
+    step_window = window > 0 ? window : COLLAPSE_WINDOW;
+    step_drop = drop;
+    step_best = 0.0;
+}
 
-static double dummy_input[1];
 /* Evaluate the right-hand side or leave with its status (-5: constraint rows lost rank; -8: a
-   trial state without dependent coordinates). */
-#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = (rs_ == -5 || rs_ == -8) ? rs_ : -2; goto done; } } while (0)
+   trial state without dependent coordinates; MB_INPUT_FAILED: a Python callable failed). */
+#define RHS_OR_FAIL(call) do { int rs_ = (call); if (rs_) { status = (rs_ == -5 || rs_ == -8 || rs_ == MB_INPUT_FAILED) ? rs_ : -2; goto done; } } while (0)
 
 /* y = [q, v]: f = [q'(q, v), v']; returns the accelerations() status (the dae formulation's
    when this thread configured it, -5 when its constraint rows lost rank). */
@@ -29,11 +43,11 @@ static int mech_rhs(double t, const double *y, double *f, const double *p, const
 #ifdef DAE_LOOP
     if (dae_nr >= 0) {
         dae_time = t;
-        int status = dae_accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+        int status = dae_accelerations(y, v, p, mb_input_u(), tau, f + NCOORD, work);
         return status == 2 ? -5 : status;
     }
 #endif
-    return accelerations(y, v, p, dummy_input, tau, f + NCOORD, work);
+    return accelerations(y, v, p, mb_input_u(), tau, f + NCOORD, work);
 }
 
 /* Quaternions back to unit length (after each accepted step). */
@@ -48,10 +62,8 @@ static void normalize_state(double *y) {
 /* y = [mechanical state, z]: the drive elements' forces (at time t and states z) join tau;
    f[NMECH..] gets the states' rates. */
 static int drive_rhs(double t, const double *y, double *f, const double *p, const double *tau, double *work) {
-    double u[1 + NZ], out[NV + NZ], tau_all[NV];
-    u[0] = t;
-    for (int k = 0; k < NZ; ++k) u[1 + k] = y[NMECH + k];
-    drives(y, y + NCOORD, p, u, out);
+    double buf[1 + NZ], out[NV + NZ], tau_all[NV];
+    drives(y, y + NCOORD, p, mb_drive_u(t, y + NMECH, buf), out);
     for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
     for (int k = 0; k < NZ; ++k) f[NMECH + k] = out[NV + k];
     return mech_rhs(t, y, f, p, tau_all, work);
@@ -61,6 +73,13 @@ static int drive_rhs(double t, const double *y, double *f, const double *p, cons
    (inlined at every call: one call per evaluation, as before HAS_DRIVES was read at run time). */
 static inline __attribute__((always_inline)) int rhs(double t, const double *y, double *f, const double *p,
                                                      const double *tau, double *work) {
+    if (mb_in_hook) {  /* Python callables (inputs.h): evaluated once, at this state */
+        const int status = mb_inputs(t, y, y + NCOORD, y + NMECH);
+        if (status) return status;
+        double buf[NV + 1];
+        const double *all = mb_input_tau(tau, buf);
+        return HAS_DRIVES ? drive_rhs(t, y, f, p, all, work) : mech_rhs(t, y, f, p, all, work);
+    }
     return HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
 }
 /* The step hook: called with the simulated time about every `hook_interval` s of processor

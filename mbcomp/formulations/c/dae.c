@@ -1,7 +1,7 @@
 #ifdef DAE_LOOP
 #define DAE_NK (CONTACTS_JACOBIAN_OFF - CONTACTS_GAP_OFF)
-/* most KKT rows: geometric, one motor per speed, every contact */
-#define DAE_NR (NG + NQ + DAE_NK)
+/* most KKT rows: geometric, one motor per speed, every contact and collision feature */
+#define DAE_NR (NG + NQ + DAE_NK + MB_NCF)
 /* work: dynamics, constraints, contacts, then the rows' g, J, g_t, bias, then Y, A, r, lam, u */
 #define DAE_C_OFF DYNAMICS_SIZE
 #define DAE_K_OFF (DAE_C_OFF + CONSTRAINTS_SIZE)
@@ -10,6 +10,7 @@
 #define NDAEWORK (DAE_SOLVE_OFF + NQ * DAE_NR + DAE_NR * DAE_NR + 3 * DAE_NR + NQ)
 #include "program.h"
 #include "brentq.h"
+#include "least_norm.h"
 #include "friction.h"
 /* defined below, or after this code by the recursive program (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
@@ -137,27 +138,21 @@ static int dae_at_rest(const double *qd, int n) {
     return 1;
 }
 
-/* lam = A^-1 r for the Gram matrix A (lower triangle, rows of DAE_NR, nr x nr) by a Cholesky
-   factorisation in place that drops the directions whose pivot falls below dae_tol relative
-   to the largest (and scale): their multiplier is zero.  Returns 1 when one was dropped,
-   -1 on a non-finite pivot, 0 otherwise. */
-static int dae_gram_solve(double *A, const double *r, double *lam, int nr, double scale) {
+/* lam = A^-1 r for the Gram matrix A (lower triangle, rows of DAE_NR, nr x nr; overwritten)
+   by a Cholesky factorisation when every pivot is above tol relative to the largest
+   diagonal entry (and scale) and above rounding (least_norm.h's MB_EIGEN_ROUNDING): then A
+   has full rank and this is the one solution.  Returns 0, 1 at the first pivot that is not
+   (lam not set), -1 on a non-finite pivot. */
+static int dae_cholesky_solve(double *A, const double *r, double *lam, int nr, double scale, double tol) {
     double amax = 0.0;
     for (int j = 0; j < nr; ++j) if (A[j * DAE_NR + j] > amax) amax = A[j * DAE_NR + j];
-    amax = sqrt(amax);
-    const double floor_ = dae_tol * (amax > scale ? amax : scale);
-    int dropped = 0;
+    const double top = sqrt(amax) > scale ? sqrt(amax) : scale, floor_ = tol * top;
+    const double zero = MB_EIGEN_ROUNDING * nr * DBL_EPSILON * amax;
     for (int j = 0; j < nr; ++j) {
         double s = A[j * DAE_NR + j];
         for (int k = 0; k < j; ++k) s -= A[j * DAE_NR + k] * A[j * DAE_NR + k];
         if (s != s) return -1;
-        if (!(s > floor_ * floor_)) {
-            dropped = 1;
-            A[j * DAE_NR + j] = 0.0;
-            for (int k = 0; k < j; ++k) A[j * DAE_NR + k] = 0.0;
-            for (int i = j + 1; i < nr; ++i) A[i * DAE_NR + j] = 0.0;
-            continue;
-        }
+        if (!(s > floor_ * floor_ && s > zero)) return 1;
         const double d = sqrt(s);
         A[j * DAE_NR + j] = d;
         for (int i = j + 1; i < nr; ++i) {
@@ -169,15 +164,58 @@ static int dae_gram_solve(double *A, const double *r, double *lam, int nr, doubl
     for (int i = 0; i < nr; ++i) {
         double s = r[i];
         for (int k = 0; k < i; ++k) s -= A[i * DAE_NR + k] * lam[k];
-        lam[i] = A[i * DAE_NR + i] > 0.0 ? s / A[i * DAE_NR + i] : 0.0;
+        lam[i] = s / A[i * DAE_NR + i];
     }
     for (int i = nr - 1; i >= 0; --i) {
         double s = lam[i];
         for (int k = i + 1; k < nr; ++k) s -= A[k * DAE_NR + i] * lam[k];
-        lam[i] = A[i * DAE_NR + i] > 0.0 ? s / A[i * DAE_NR + i] : 0.0;
+        lam[i] = s / A[i * DAE_NR + i];
     }
-    dae_dropped = dropped;
-    return dropped;
+    return 0;
+}
+
+/* lam = the least-norm solution of A lam = r for the Gram matrix A (lower triangle, rows of
+   DAE_NR, nr x nr; overwritten): the Cholesky solve where A has full rank by its pivots (the
+   one solution; the regular case, at the cost of a Cholesky factorisation), else
+   least_norm.h's Jacobi eigen-decomposition, dropping the directions whose sqrt(eigenvalue)
+   falls below tol relative to the largest (and scale): they get no multiplier.  Returns the
+   number dropped (dae_dropped: whether one was), or -1 when A is not finite. */
+static __thread double *dae_eig_work = 0;
+
+static int dae_least_norm(double *A, const double *r, double *lam, int nr, double scale, double tol) {
+    if (nr <= 0) return 0;
+    if (!dae_eig_work) dae_eig_work = malloc(sizeof(double) * (2 * DAE_NR * DAE_NR + DAE_NR + 1));
+    if (!dae_eig_work) return -1;
+    double *copy = dae_eig_work + DAE_NR * DAE_NR + DAE_NR;
+    for (int i = 0; i < nr; ++i)
+        for (int j = 0; j <= i; ++j) copy[i * DAE_NR + j] = A[i * DAE_NR + j];
+    int status = dae_cholesky_solve(A, r, lam, nr, scale, tol);
+    if (status > 0) {
+        for (int i = 0; i < nr; ++i)
+            for (int j = 0; j <= i; ++j) A[i * DAE_NR + j] = copy[i * DAE_NR + j];
+        status = mb_least_norm(A, DAE_NR, r, lam, nr, scale, tol, dae_eig_work);
+    }
+    dae_dropped = status > 0;
+    return status;
+}
+
+/* The same with the configured tolerance (dae_tol): 1 when a direction was dropped, -1 when
+   A is not finite, 0 otherwise. */
+static int dae_gram_solve(double *A, const double *r, double *lam, int nr, double scale) {
+    const int dropped = dae_least_norm(A, r, lam, nr, scale, dae_tol);
+    return dropped > 0 ? 1 : dropped;
+}
+
+/* The multipliers of the acceleration solve (A the Schur complement J M^-1 J^T, r its
+   right-hand side): in motion, least norm with the configured tolerance (dae_tol, a
+   transient singular position passes with its near-singular directions dropped); at rest
+   (every speed below MB_REST_SPEED), least norm with the rank tolerance MB_RANK_TOLERANCE,
+   and a direction below it means a dead point at rest, where the motion is not determined.
+   Returns 0, or 2 (not finite, or a dead point at rest: the caller's Python path names it). */
+static int dae_schur_solve(double *A, const double *r, double *lam, int nr, const double *qd, int n) {
+    const int rest = dae_at_rest(qd, n);
+    const int dropped = dae_least_norm(A, r, lam, nr, dae_scale, rest ? MB_RANK_TOLERANCE : dae_tol);
+    return dropped < 0 || (dropped > 0 && rest) ? 2 : 0;
 }
 
 #ifndef MBCOMP_RECURSIVE_DAE  /* the recursive program brings its own (recursive.c_dae) */
@@ -216,9 +254,7 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
             for (int i = 0; i < n; ++i) s += Y[i * DAE_NR + a] * Y[i * DAE_NR + b];
             A[a * DAE_NR + b] = s;
         }
-    const int dropped = dae_gram_solve(A, r, lam, nr, dae_scale);
-    if (dropped < 0) return 2;
-    if (dropped && dae_at_rest(qd, n)) return 2;  /* at rest on a singular position the motion is not determined */
+    if (dae_schur_solve(A, r, lam, nr, qd, n)) return 2;  /* not finite, or a dead point at rest */
     for (int k = 0; k < nr; ++k) dae_lam[k] = lam[k];
     for (int i = 0; i < n; ++i) {  /* qdd = L^-T (uvec + Y lam) */
         double s = uvec[i];
@@ -385,20 +421,21 @@ double dae_gap_at(double s, double t_old, double h, const double *y_old, const d
    forces at the step's drive states (y after [q, v]) join tau, as in the loop (drive_rhs). */
 static int dae_solve_at(double s, double t_old, double h, const double *y_old, const double *F, int ny,
                         const double *p, const double *tau) {
-    double y[NMECH + NZ + 1], qdd[NQ + 1], u[1] = {0.0}, tau_all[NQ + 1];
-    double *work = malloc(sizeof(double) * (NDAEWORK + 1));
-    if (!work) return -4;
+    double y[NMECH + NZ + 1], qdd[NQ + 1], tau_buf[NQ + 1], tau_all[NQ + 1];
     mb_dop853_dense(s, t_old, h, y_old, F, ny, y);
-    if (HAS_DRIVES) {
-        double in[1 + NZ], out[NV + NZ + 1];
-        in[0] = s;
-        for (int k = 0; k < NZ; ++k) in[1 + k] = y[NMECH + k];
-        drives(y, y + NCOORD, p, in, out);
+    const double *z = ny > NMECH ? y + NMECH : 0;
+    if (mb_inputs(s, y, y + NCOORD, z)) return MB_INPUT_FAILED;  /* (Python callables at this state: inputs.h) */
+    tau = mb_input_tau(tau, tau_buf);
+    if (HAS_DRIVES && z) {
+        double buf[1 + NZ], out[NV + NZ + 1];
+        drives(y, y + NCOORD, p, mb_drive_u(s, z, buf), out);
         for (int i = 0; i < NV; ++i) tau_all[i] = out[i] + (tau ? tau[i] : 0.0);
         tau = tau_all;
     }
+    double *work = malloc(sizeof(double) * (NDAEWORK + 1));
+    if (!work) return -4;
     dae_time = s;
-    const int status = dae_accelerations(y, y + NCOORD, p, u, tau, qdd, work);
+    const int status = dae_accelerations(y, y + NCOORD, p, mb_input_u(), tau, qdd, work);
     free(work);
     return status;
 }

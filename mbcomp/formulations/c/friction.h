@@ -10,12 +10,21 @@
      [2] its body's index in the generated kinematics (-1: the ground), [3] mu,
      [4..6] the point in the body frame (m), [7] the sphere's radius (m),
      [8..16] the rows n, t1, t2 of its world basis, [17..19] the world slip direction it
-     started sliding in, [20] its contact index, [MB_FR_DATA..+NQ) 1 on the speeds that move
-     its body (the others' motion columns do not act on it).
+     started sliding in, [20] its contact index, [21] its collision feature (the index
+     collide.c knows it by; -1: a point or sphere on a plane), [MB_FR_DATA..+NQ) 1 on the
+     speeds that move its body (the others' motion columns do not act on it).
    out: [0..1] the tangential force (N, tangent coordinates) and [2] the normal force of the
    last solve, [3..4] the slip velocity (m/s, tangent coordinates) of the last solve,
-   [5..6] the slip velocity at the last accepted step (the watch's), [7..8] the unit slip
-   direction (tangent coordinates) of the last solve of a sliding contact.
+   [5..6] the slip velocity at the last accepted step (tangent coordinates), [7..8] the unit
+   slip direction (tangent coordinates) of the last solve of a sliding contact, [9..11] the
+   world slip velocity of the last solve (B^T slip, B the tangent rows of the basis as
+   Python keeps it), [12..14] the world slip velocity at the last accepted step (the
+   watch's), [15..20] B of the last solve.
+
+   A collision feature's basis turns with its normal: its rows come from collide.c's
+   measurement at the state (mb_fr_feature_rows: CollisionKernel.tangent_rows), and its
+   data basis [11..16] holds the world direction a slip locator asks about
+   (FrictionRows.tangent_coordinates: the direction, then zeros; mb_friction_along).
    fail: [kind (1 Painleve, 2 inconsistent rows), t, value, contact index] of a failed solve.
 
    The touching point is c = p - r n, its velocity v0 + w x c along the tangents t1, t2
@@ -28,7 +37,8 @@
    (A A^T) y = b by a Cholesky factorisation that drops the directions below
    MB_FRICTION_RCOND (squared) of the largest pivot. */
 #define MB_FR_DATA 24
-#define MB_FR_OUT 9
+#define MB_FR_OUT 21
+#define MB_FR_FEATURE 21
 #define MB_FR_STICK 1
 #define MB_FR_SLIP 2
 #define MB_FR_PAINLEVE 7
@@ -61,13 +71,81 @@ static void mb_fr_cross(const double *a, const double *b, double *out) {
     out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
+/* Collision feature k's tangential rows (CollisionKernel.tangent_rows) from the body
+   kinematics kin: the slip velocity of B's touching point (pb - rb n) relative to A's
+   (pa + ra n) along the tangents t1, t2 of the feature's normal n (A to B; t1 = n x e / |.|
+   with e the axis of n's smallest component, t2 = n x t1: collision_kernel.tangent_plane),
+   Jt (2 x NQ), their bias (2: each touching point's a0 + alpha x c + w x v at its material
+   point, at zero generalised acceleration), and B = -(t1, t2): the tangent rows of the basis
+   Python keeps (seen from A, the collision's side a).  Zero rows when the pair has none. */
+static void mb_fr_feature_rows(long k, const double *kin, double *Jt, double *bias, double *B) {
+    mbc_feature f;
+    int ia, ib;
+    for (int i = 0; i < 2 * NQ; ++i) Jt[i] = 0.0;
+    bias[0] = bias[1] = 0.0;
+    for (int i = 0; i < 6; ++i) B[i] = 0.0;
+    double *saved = mbc_kin;
+    mbc_kin = (double *)kin;  /* (collide.c places the shapes from mbc_kin) */
+    if (mbc_measure(k, &f, &ia, &ib)) { mbc_kin = saved; return; }
+    const double *n = f.n;
+    int m = 0;
+    for (int a = 1; a < 3; ++a) if (fabs(n[a]) < fabs(n[m])) m = a;
+    double e[3] = {0.0, 0.0, 0.0}, T[6], c[2][3], acc[2][3];
+    e[m] = 1.0;
+    mb_fr_cross(n, e, T);
+    const double size = sqrt(T[0] * T[0] + T[1] * T[1] + T[2] * T[2]);
+    for (int a = 0; a < 3; ++a) T[a] /= size;
+    mb_fr_cross(n, T, T + 3);
+    const int body[2] = {ia, ib};
+    const double *material[2] = {f.pa, f.pb};
+    for (int a = 0; a < 3; ++a) { c[0][a] = f.pa[a] + f.ra * n[a]; c[1][a] = f.pb[a] - f.rb * n[a]; }
+    for (int s = 0; s < 2; ++s) {
+        acc[s][0] = acc[s][1] = acc[s][2] = 0.0;
+        if (body[s] < 0) continue;
+        const double *row = mbc_body(body[s]), *V = row + 12, *A = row + 18;
+        double vp[3], x[3], y[3];
+        mb_fr_cross(V, material[s], vp);
+        for (int a = 0; a < 3; ++a) vp[a] += V[3 + a];
+        mb_fr_cross(A, c[s], x);
+        mb_fr_cross(V, vp, y);
+        for (int a = 0; a < 3; ++a) acc[s][a] = A[3 + a] + x[a] + y[a];
+    }
+    for (int r = 0; r < 2; ++r) {
+        const double *t = T + 3 * r;
+        bias[r] = t[0] * (acc[1][0] - acc[0][0]) + t[1] * (acc[1][1] - acc[0][1]) + t[2] * (acc[1][2] - acc[0][2]);
+    }
+    const double *cols = kin + KINEMATICS_COLUMNS_OFF;
+    const double *ma = ia < 0 ? 0 : mbc_mask + (long)ia * NQ, *mb = ib < 0 ? 0 : mbc_mask + (long)ib * NQ;
+    for (int i = 0; i < NQ; ++i) {
+        const double *S = cols + 6 * i;
+        double w[3] = {0.0, 0.0, 0.0}, x[3];
+        if (mb && mb[i] != 0.0) {
+            mb_fr_cross(S, c[1], x);
+            for (int a = 0; a < 3; ++a) w[a] += mb[i] * (S[3 + a] + x[a]);
+        }
+        if (ma && ma[i] != 0.0) {
+            mb_fr_cross(S, c[0], x);
+            for (int a = 0; a < 3; ++a) w[a] -= ma[i] * (S[3 + a] + x[a]);
+        }
+        for (int r = 0; r < 2; ++r) Jt[r * NQ + i] = T[3 * r] * w[0] + T[3 * r + 1] * w[1] + T[3 * r + 2] * w[2];
+    }
+    for (int i = 0; i < 6; ++i) B[i] = -T[i];
+    mbc_kin = saved;
+}
+
 /* The tangential rows Jt (2 x NQ) and their bias (2) of friction contact j from the body
-   kinematics kin (the generated `kinematics` at the state). */
-static void mb_fr_rows(int j, const double *kin, double *Jt, double *bias) {
+   kinematics kin (the generated `kinematics` at the state), and the tangent rows B (2 x 3)
+   of its world basis as Python keeps it (world vectors are B^T times tangent coordinates). */
+static void mb_fr_rows(int j, const double *kin, double *Jt, double *bias, double *B) {
     const double *d = mb_fr_data + (MB_FR_DATA + NQ) * j, *n = d + 8, *T = d + 11;
+    if (d[MB_FR_FEATURE] >= 0.0) {
+        mb_fr_feature_rows((long)d[MB_FR_FEATURE], kin, Jt, bias, B);
+        return;
+    }
     const long b = (long)d[2];
     for (int i = 0; i < 2 * NQ; ++i) Jt[i] = 0.0;
     bias[0] = bias[1] = 0.0;
+    for (int i = 0; i < 6; ++i) B[i] = T[i];
     if (b < 0) return;  /* a point of the ground: nothing moves */
     const double *body = kin + KINEMATICS_BODIES_OFF + 24 * b, *R = body, *origin = body + 9, *V = body + 12, *A = body + 18;
     double p[3], c[3], vp[3], t[3], u[3];
@@ -93,12 +171,13 @@ static void mb_fr_rows(int j, const double *kin, double *Jt, double *bias) {
 }
 
 /* Friction contact j's tangential rows at (q, qd) (the generated kinematics there), for
-   the watch and tests: Jt (2 x NQ), bias (2), and the slip velocity Jt qd (2). */
+   the watch and tests: Jt (2 x NQ), bias (2), the slip velocity Jt qd (2) and the basis's
+   tangent rows B (6, as Python keeps them; NULL: not wanted). */
 void mb_friction_rows_at(const double *q, const double *qd, const double *p, int j, double *Jt, double *bias,
-                         double *slip) {
-    double kin[KINEMATICS_SIZE + 1];
+                         double *slip, double *B) {
+    double kin[KINEMATICS_SIZE + 1], B0[6];
     kinematics(q, qd, p, mb_fr_u, kin);
-    mb_fr_rows(j, kin, Jt, bias);
+    mb_fr_rows(j, kin, Jt, bias, B ? B : B0);
     for (int r = 0; r < 2; ++r) {
         double s = 0.0;
         for (int i = 0; i < NQ; ++i) s += Jt[r * NQ + i] * qd[i];
@@ -164,12 +243,13 @@ static int mb_friction_solve(double t, const double *q, const double *qd, const 
     for (int j = 0; j < mb_fr_n; ++j) {
         const double *d = mb_fr_data + (MB_FR_DATA + n) * j;
         double *o = mb_fr_out + MB_FR_OUT * j;
-        mb_fr_rows(j, kin, Jt, bt);
+        mb_fr_rows(j, kin, Jt, bt, o + 15);
         for (int r = 0; r < 2; ++r) {
             double s = 0.0;
             for (int i = 0; i < n; ++i) s += Jt[r * n + i] * qd[i];
             o[3 + r] = s;
         }
+        for (int a = 0; a < 3; ++a) o[9 + a] = o[15 + a] * o[3] + o[18 + a] * o[4];
         if (d[0] == MB_FR_STICK) {
             for (int r = 0; r < 2; ++r) {
                 for (int i = 0; i < n; ++i) Jall[(row + r) * n + i] = Wall[(row + r) * n + i] = Jt[r * n + i];
@@ -182,7 +262,7 @@ static int mb_friction_solve(double t, const double *q, const double *qd, const 
             if (speed > MB_DIRECTION_SPEED) {
                 s0 /= speed; s1 /= speed;
             } else {
-                const double *T = d + 11, *dir = d + 17;
+                const double *T = o + 15, *dir = d + 17;
                 s0 = T[0] * dir[0] + T[1] * dir[1] + T[2] * dir[2];
                 s1 = T[3] * dir[0] + T[4] * dir[1] + T[5] * dir[2];
                 const double size = sqrt(s0 * s0 + s1 * s1);
@@ -274,12 +354,17 @@ static double mb_friction_margin(int j) {
     return size - mu * (lam_n > 0.0 ? lam_n : 0.0) - tol;
 }
 
-/* Friction contact j's slip velocity (m/s) at (q, qd) along the tangent-coordinate direction
-   (e0, e1) (ContactWatch.slip_speed). */
+/* Friction contact j's slip velocity (m/s) at (q, qd) along the world direction B0^T (e0, e1)
+   (ContactWatch.slip_speed), B0 the tangent rows of its data basis (a plane's fixed tangents;
+   a collision feature's: the direction asked about, FrictionRows.tangent_coordinates): the
+   world slip velocity B^T (Jt qd) at the state, along it. */
 static double mb_friction_along(int j, const double *q, const double *qd, const double *p, double e0, double e1) {
-    double Jt[2 * NQ + 1], bias[2], slip[2];
-    mb_friction_rows_at(q, qd, p, j, Jt, bias, slip);
-    return e0 * slip[0] + e1 * slip[1];
+    double Jt[2 * NQ + 1], bias[2], slip[2], B[6];
+    const double *T = mb_fr_data + (MB_FR_DATA + NQ) * j + 11;
+    mb_friction_rows_at(q, qd, p, j, Jt, bias, slip, B);
+    double along = 0.0;
+    for (int a = 0; a < 3; ++a) along += (e0 * T[a] + e1 * T[3 + a]) * (B[a] * slip[0] + B[3 + a] * slip[1]);
+    return along;
 }
 
 /* The friction watch after a solve at an accepted step's end (out holds that solve): 1 when
@@ -295,18 +380,14 @@ static int mb_friction_event(void) {
         if (d[0] == MB_FR_STICK) {
             if (mb_friction_margin(j) > 0.0) event = 1;
         } else {
-            const double speed = sqrt(o[5] * o[5] + o[6] * o[6]), *T = d + 11, *dir = d + 17;
-            double e0, e1;
-            if (speed > MB_SLIP_FLOOR) {
-                e0 = o[5] / speed; e1 = o[6] / speed;
-            } else {
-                e0 = T[0] * dir[0] + T[1] * dir[1] + T[2] * dir[2];
-                e1 = T[3] * dir[0] + T[4] * dir[1] + T[5] * dir[2];
-            }
-            const double along = e0 * o[3] + e1 * o[4];
+            /* (world vectors, as ContactWatch: a collision feature's tangents turn with its normal) */
+            const double *v0 = o + 12, *v1 = o + 9, *dir = d + 17;
+            const double speed = sqrt(v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2]);
+            const double *e = speed > MB_SLIP_FLOOR ? v0 : dir, scale = speed > MB_SLIP_FLOOR ? speed : 1.0;
+            const double along = (e[0] * v1[0] + e[1] * v1[1] + e[2] * v1[2]) / scale;
             if (speed <= MB_STOP_SPEED) {  /* set sliding at (nearly) zero slip: stops only sliding back */
                 if (along >= -MB_STOP_SPEED) continue;
-            } else if (along > 0.0 && sqrt(o[3] * o[3] + o[4] * o[4]) > MB_STOP_SPEED) {
+            } else if (along > 0.0 && sqrt(v1[0] * v1[0] + v1[1] * v1[1] + v1[2] * v1[2]) > MB_STOP_SPEED) {
                 continue;  /* still sliding forward, faster than MB_STOP_SPEED */
             }
             event = 1;
@@ -316,6 +397,7 @@ static int mb_friction_event(void) {
         for (int j = 0; j < mb_fr_n; ++j) {
             double *o = mb_fr_out + MB_FR_OUT * j;
             o[5] = o[3]; o[6] = o[4];
+            o[12] = o[9]; o[13] = o[10]; o[14] = o[11];
         }
     return event;
 }

@@ -6,6 +6,8 @@
 #define LAG_NEWTON_ITER 25
 #define LAG_MIJ(L, i, j) ((i) >= (j) ? (L)[IDX(i, j)] : (L)[IDX(j, i)])
 #include "friction.h"
+#include "brentq.h"
+#include "least_norm.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -170,10 +172,8 @@ static const double *lag_drive_forces(double t, const double *q, const double *q
     if (!lag_drives) {
         for (int i = 0; i < DRIVES_SIZE; ++i) lag_dv[i] = 0.0;
     } else {
-        double u[1 + LAG_NZ];
-        u[0] = t;
-        for (int k = 0; k < LAG_NZ; ++k) u[1 + k] = z[k];
-        drives(q, qd, p, u, lag_dv);
+        double buf[1 + LAG_NZ];
+        drives(q, qd, p, mb_drive_u(t, z, buf), lag_dv);
     }
     return lag_dv + DRIVES_FORCES_OFF;
 }
@@ -470,11 +470,16 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     int status = lagrange_full(t, y, q, qd, p);
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
+    double tau_buf[NQ + 1];
+    if (mb_in_hook) {  /* Python callables (inputs.h) at this full state */
+        if (mb_inputs(t, q, qd, lag_drives ? y + nqi + ni : 0)) return MB_INPUT_FAILED;
+        tau = mb_input_tau(tau, tau_buf);
+    }
     if (nr == 0 && lag_nc == 0 && ni == n && !HAS_DRIVES) {
         /* no row held (colliding shapes apart): the tree's own accelerations, by the recursive
            program where the model has it, instead of the dense reduced solve */
         double *qdd = lag_eig;
-        if (accelerations(q, qd, p, lag_u, tau, qdd, lag_dyn)) return 1;
+        if (accelerations(q, qd, p, mb_input_u(), tau, qdd, lag_dyn)) return 1;
         for (int k = 0; k < ni; ++k) f[nqi + k] = qdd[lag_ind[k]];
         if (MB_HAS_QUAT) {
             lag_chart_rate(lag_x, qd, lag_rate);
@@ -484,7 +489,7 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
         }
         return 0;
     }
-    dynamics(q, qd, p, lag_u, lag_dyn);
+    dynamics(q, qd, p, mb_input_u(), lag_dyn);
     const double *M = lag_dyn + DYNAMICS_MASS_MATRIX_OFF, *force = lag_dyn + DYNAMICS_FORCES_OFF;
     const double *drive = lag_drive_forces(t, q, qd, y + nqi + ni, p);
     if (mb_fr_n > 0) {
@@ -549,36 +554,10 @@ rates:
     return 0;
 }
 
-/* Smallest and largest eigenvalue of the symmetric n x n matrix A (destroyed): cyclic Jacobi. */
+/* Smallest and largest eigenvalue of the symmetric n x n matrix A (destroyed): cyclic Jacobi
+   (mb_jacobi_eigen, least_norm.h), the eigenvalues left on A's diagonal. */
 static void lag_eig_range(double *A, int n, double *lo, double *hi) {
-    for (int sweep = 0; sweep < 60; ++sweep) {
-        double off = 0.0, diag = 0.0;
-        for (int i = 0; i < n; ++i) {
-            diag += A[i * n + i] * A[i * n + i];
-            for (int j = 0; j < i; ++j) off += A[i * n + j] * A[i * n + j];
-        }
-        if (!(off > 1e-30 * diag)) break;
-        for (int a = 0; a < n; ++a)
-            for (int b = a + 1; b < n; ++b) {
-                const double apq = A[a * n + b];
-                if (apq == 0.0) continue;
-                const double theta = (A[b * n + b] - A[a * n + a]) / (2.0 * apq);
-                double tt = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
-                if (theta < 0.0) tt = -tt;
-                if (!isfinite(tt)) tt = 0.0;
-                const double c = 1.0 / sqrt(tt * tt + 1.0), s = tt * c;
-                for (int k = 0; k < n; ++k) {  /* columns a, b */
-                    const double x = A[k * n + a], y = A[k * n + b];
-                    A[k * n + a] = c * x - s * y;
-                    A[k * n + b] = s * x + c * y;
-                }
-                for (int k = 0; k < n; ++k) {  /* rows a, b */
-                    const double x = A[a * n + k], y = A[b * n + k];
-                    A[a * n + k] = c * x - s * y;
-                    A[b * n + k] = s * x + c * y;
-                }
-            }
-    }
+    mb_jacobi_eigen(n, A, n, NULL, NULL, 0);
     double l = INFINITY, h = -INFINITY;
     for (int i = 0; i < n; ++i) { if (A[i * n + i] < l) l = A[i * n + i]; if (A[i * n + i] > h) h = A[i * n + i]; }
     *lo = l; *hi = h;
@@ -687,6 +666,8 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
     double *A = lag_eig + 4 * NQ, *lam = A + (long)nr * nr;
     int status = lagrange_rhs(t, y, f, p, tau);  /* leaves M, f, the drive forces, X, J at this state */
     if (status) return lag_failed(status);
+    double tau_buf[NQ + 1];
+    tau = mb_input_tau(tau, tau_buf);  /* (with a callable tau: its values at this state, just evaluated) */
     if (mb_fr_n > 0) {  /* with friction: the friction solve's multipliers (J^T lam is not all of M qdd - f) */
         const double *all = lag_friction_lam();
         for (int a = 0; a < nr; ++a) lam[a] = all[lag_rows[a]];
@@ -781,6 +762,58 @@ double lagrange_slip_at(double s, double t_old, double h, const double *y_old, c
     double *q = lag_q + NCOORD, *qd = lag_qd + NQ;
     if (lagrange_full(s, y, q, qd, p)) return NAN;
     return mb_friction_along((int)j, q, qd, p, e0, e1);
+}
+
+/* The event's time on its step by Brent's method in C (codegen/c/brentq.h, as scipy's
+   brentq): where the gap of contact `index` (lagrange_gap_root), the normal force of the
+   held contact whose row is `index` (lagrange_force_root), sticking contact `index`'s
+   distance outside the cone (lagrange_cone_root) or sliding contact `index`'s slip along
+   (e0, e1) (lagrange_slip_root) crosses zero in [a, b]; *status as mb_brentq's (3: the
+   state could not be found at a trial time). */
+struct lag_root_ctx { double t_old, h; const double *y_old, *F; int ny; long index; const double *p, *tau; double e0, e1; };
+
+static double lag_gap_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_gap_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p);
+}
+
+static double lag_force_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_force_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+static double lag_cone_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_cone_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->tau);
+}
+
+static double lag_slip_fn(double s, void *c) {
+    const struct lag_root_ctx *x = c;
+    return lagrange_slip_at(s, x->t_old, x->h, x->y_old, x->F, x->ny, x->index, x->p, x->e0, x->e1);
+}
+
+double lagrange_gap_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                         long index, const double *p, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, 0, 0.0, 0.0};
+    return mb_brentq(lag_gap_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_force_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                           long index, const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, tau, 0.0, 0.0};
+    return mb_brentq(lag_force_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_cone_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                          long index, const double *p, const double *tau, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, tau, 0.0, 0.0};
+    return mb_brentq(lag_cone_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
+}
+
+double lagrange_slip_root(double a, double b, double t_old, double h, const double *y_old, const double *F, int ny,
+                          long index, const double *p, double e0, double e1, double xtol, double rtol, int *status) {
+    struct lag_root_ctx c = {t_old, h, y_old, F, ny, index, p, 0, e0, e1};
+    return mb_brentq(lag_slip_fn, &c, a, b, xtol, rtol, MB_BRENTQ_ITERATIONS, status);
 }
 
 /* The contact watch after an accepted step to (t, y) (before it is taken): 1 when a free
