@@ -27,6 +27,7 @@ import ctypes
 import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.core.tolerances import REST_SPEED
 from mbcomp.formulations.compiled_watch import pointer
 from mbcomp.formulations.dae_compiled import row_tables
 
@@ -100,8 +101,11 @@ class CompiledSolve:
         status = self.fn(len(self.rows), pointer(self.spec), pointer(data), pointer(self.programs), self.alpha,
                          self.beta, self.scale, self.tol, pointer(self.kernel.p), None if tau is None else pointer(tau),
                          float(t), pointer(q), pointer(qd), pointer(qdd), pointer(lam_rows), pointer(work))
-        if status not in (0, 2) or not (np.all(np.isfinite(qdd)) and np.all(np.isfinite(lam_rows))):
-            # (2: a row direction dropped; the answer is then the least-norm one, lstsq's)
+        moving = float(np.max(np.abs(qd), initial=0.0)) > REST_SPEED
+        if status not in (0, 2) or (status == 2 and not moving) or not (
+                np.all(np.isfinite(qdd)) and np.all(np.isfinite(lam_rows))):
+            # (2: a row direction dropped: in motion the least-norm answer, lstsq's; at rest a
+            # dead point whose motion is not determined, which the Python solve explains)
             return None
         lam = np.zeros(self.nc)
         lam[self.rows] = lam_rows[:len(self.rows)]
