@@ -9,7 +9,8 @@ import numpy as np
 from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.formulations.base import Formulation, Workspace
 from mbcomp.formulations.dae_c import c_dae_accelerations
-from mbcomp.formulations.dae_compiled import DaeRows, DaeRun, motor_programs
+from mbcomp.codegen.callbacks import raise_pending
+from mbcomp.formulations.dae_compiled import DaeRows, DaeRun
 from mbcomp.formulations.friction import has_friction
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
@@ -75,10 +76,6 @@ class DaeFormulation(Formulation):
             return None
         if self.projection:
             return "projection=True steps in Python"
-        for r, program in motor_programs(self).items():
-            if program is None:
-                return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
-                        f"which is evaluated in Python")
         if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
@@ -113,6 +110,7 @@ class DaeFormulation(Formulation):
         failure.argtypes, failure.restype = [], ctypes.c_double
         t = float(failure())
         if t == t:
+            raise_pending()  # (a callable motor's own error, kept by the motor callback)
             rows = [r for r in self.constraints.coordinate_rows if self.constraints.equations[r].speed is None]
             self.constraints.explain_position_failure(rows, t)
 
