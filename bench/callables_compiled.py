@@ -13,7 +13,8 @@ of the samples.  The old path is the ``ScipyStepping`` of the Python solve
 from __future__ import annotations
 
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from mbcomp.run.paths import IntegrationPath
 from mbcomp.run.simulate import run_steps
 from mbcomp.run.stats import Counts
 from mbcomp.run.stepping import CompiledStepping, ScipyStepping
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import interleaved_medians  # noqa: E402
 
 T_END = 5.0
 DAMPING = 0.05  # N m s/rad, the callables' law: -DAMPING qd on every joint
@@ -57,9 +61,7 @@ def one_run(system, q0, qd0, tau, compiled: bool):
     else:
         stepping = ScipyStepping(kernel, formulation, options, tau, z0, Counts(), compiled_rhs=False)
         path = IntegrationPath("scipy", "bench: the old path of models with Python callables")
-    started = time.perf_counter()
-    res = run_steps(stepping, kernel, formulation, options, q0, qd0, path)
-    return time.perf_counter() - started, res
+    return run_steps(stepping, kernel, formulation, options, q0, qd0, path)
 
 
 def cases():
@@ -82,14 +84,11 @@ def main() -> None:
     args = parser.parse_args()
     print(f"{'model':26s} {'form':9s} {'old s':>8s} {'compiled s':>10s} {'speed-up':>8s} {'max |dq|':>9s}")
     for label, formulation, system, q0, qd0, tau in cases():
-        times = {True: [], False: []}
-        results = {}
-        for _ in range(args.repeat):
-            for compiled in (False, True):  # (interleaved: the machine's load hits both alike)
-                seconds, results[compiled] = one_run(system, q0, qd0, tau, compiled)
-                times[compiled].append(seconds)
-        slow, fast = float(np.median(times[False])), float(np.median(times[True]))
-        dq = float(np.abs(results[True].q - results[False].q).max())
+        times, results = interleaved_medians(
+            {path: (lambda path=path: one_run(system, q0, qd0, tau, path == "compiled")) for path in ("old", "compiled")},
+            args.repeat)
+        slow, fast = times["old"], times["compiled"]
+        dq = float(np.abs(results["compiled"].q - results["old"].q).max())
         print(f"{label:26s} {formulation:9s} {slow:8.3f} {fast:10.4f} {slow / fast:8.1f} {dq:9.1e}", flush=True)
 
 

@@ -15,7 +15,8 @@ the crank angle against the closed form of the branch (``theta'' = 6 g / (5 L) s
 from __future__ import annotations
 
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -26,6 +27,9 @@ from mbcomp.run.paths import IntegrationPath
 from mbcomp.run.simulate import run_steps
 from mbcomp.run.stats import Counts
 from mbcomp.run.stepping import ScipyStepping
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import interleaved_medians  # noqa: E402
 
 L, D, G = 0.3, 0.7, 9.81
 DEAD = np.array([-np.pi / 2, np.pi / 2, -np.pi / 2])
@@ -54,9 +58,7 @@ def branch(eps: float, times: np.ndarray) -> np.ndarray:
 
 
 def compiled_run(system, q0, qd0, times):
-    started = time.perf_counter()
-    res = system.simulate(times[-1], q0, qd0, t_eval=times)
-    return time.perf_counter() - started, res
+    return system.simulate(times[-1], q0, qd0, t_eval=times)
 
 
 def python_run(system, q0, qd0, times):
@@ -65,9 +67,7 @@ def python_run(system, q0, qd0, times):
     options = RunOptions.checked(times[-1], t_eval=times)
     stepping = ScipyStepping(kernel, formulation, options, None, np.zeros(kernel.compiled.drives.nz), Counts(),
                              compiled_rhs=False)
-    started = time.perf_counter()
-    res = run_steps(stepping, kernel, formulation, options, q0, qd0, IntegrationPath("scipy", "bench"))
-    return time.perf_counter() - started, res
+    return run_steps(stepping, kernel, formulation, options, q0, qd0, IntegrationPath("scipy", "bench"))
 
 
 def main() -> None:
@@ -81,13 +81,11 @@ def main() -> None:
     for eps in (1e-5, 1e-6):
         q0, qd0 = system.assemble(DEAD + np.array([eps, -eps, eps]), [0.0, 0.0, 0.0])
         exact = branch(eps, times)
-        runs = {"python": [], "compiled": []}
-        results = {}
-        for _ in range(args.repeat):  # (interleaved: the machine's load hits both alike)
-            for name, fn in (("python", python_run), ("compiled", compiled_run)):
-                seconds, results[name] = fn(system, q0, qd0, times)
-                runs[name].append(seconds)
-        slow, fast = float(np.median(runs["python"])), float(np.median(runs["compiled"]))
+        medians, results = interleaved_medians(
+            {name: (lambda fn=fn: fn(system, q0, qd0, times)) for name, fn in (("python", python_run),
+                                                                                ("compiled", compiled_run))},
+            args.repeat)
+        slow, fast = medians["python"], medians["compiled"]
         err = {k: float(np.abs(r["A"] - exact).max()) for k, r in results.items()}
         print(f"{eps:7.0e} {slow:9.3f} {fast:10.4f} {slow / fast:7.0f} {err['python']:10.1e} {err['compiled']:12.1e} "
               f"{results['compiled'].stats['path']}", flush=True)

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+import time
+from typing import Any, Callable
 
 import numpy as np
 
@@ -57,3 +59,17 @@ def bounce_height(t: float, z0: float, radius: float, e: float, g: float) -> flo
             return radius + speed * s - 0.5 * g * s * s
         start += duration
     return radius
+
+
+def interleaved_medians(runs: dict[str, Callable[[], Any]], repeat: int) -> tuple[dict[str, float], dict[str, Any]]:
+    """Median wall seconds and last result of each zero-argument run of ``runs`` ({name: run}),
+    each run ``repeat`` times, interleaved (the machine's load, which changes from second to
+    second on a shared machine, hits every run alike): the paired timing of the benchmarks."""
+    seconds: dict[str, list[float]] = {name: [] for name in runs}
+    results: dict[str, Any] = {}
+    for _ in range(repeat):
+        for name, run in runs.items():
+            started = time.perf_counter()
+            results[name] = run()
+            seconds[name].append(time.perf_counter() - started)
+    return {name: float(np.median(s)) for name, s in seconds.items()}, results

@@ -15,7 +15,8 @@ positions) and reports the largest difference of the samples::
 from __future__ import annotations
 
 import argparse
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -26,6 +27,9 @@ from mbcomp.run.paths import IntegrationPath
 from mbcomp.run.simulate import run_steps
 from mbcomp.run.stats import Counts
 from mbcomp.run.stepping import ScipyStepping
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from models import interleaved_medians  # noqa: E402
 
 MODELS = ("four_bar", "stewart_platform", "slider_crank", "arm3d", "four_bar_pid", "servo_arm")
 T_END = 2.0
@@ -53,9 +57,7 @@ def one_run(system, q0, qd0, method: str, compiled_rhs: bool):
     options = RunOptions.checked(T_END, method=method, rtol=1e-8, atol=1e-10, t_eval=np.linspace(0, T_END, 21))
     stepping = ScipyStepping(kernel, formulation, options, None, np.zeros(kernel.compiled.drives.nz), Counts(),
                              compiled_rhs=compiled_rhs)
-    started = time.perf_counter()
-    res = run_steps(stepping, kernel, formulation, options, q0, qd0, IntegrationPath("scipy", "bench"))
-    return time.perf_counter() - started, res
+    return run_steps(stepping, kernel, formulation, options, q0, qd0, IntegrationPath("scipy", "bench"))
 
 
 def main() -> None:
@@ -72,14 +74,11 @@ def main() -> None:
             system = model.compile(formulation)
             q0, qd0 = initial(model, system)
             for method in ("RK45", "Radau"):
-                times = {True: [], False: []}
-                results = {}
-                for _ in range(args.repeat):
-                    for compiled_rhs in (False, True):  # (interleaved: the machine's load hits both alike)
-                        seconds, results[compiled_rhs] = one_run(system, q0, qd0, method, compiled_rhs)
-                        times[compiled_rhs].append(seconds)
-                slow, fast = float(np.median(times[False])), float(np.median(times[True]))
-                dq = float(np.abs(results[True].q - results[False].q).max())
+                times, results = interleaved_medians(
+                    {rhs: (lambda rhs=rhs: one_run(system, q0, qd0, method, rhs == "compiled"))
+                     for rhs in ("python", "compiled")}, args.repeat)
+                slow, fast = times["python"], times["compiled"]
+                dq = float(np.abs(results["compiled"].q - results["python"].q).max())
                 print(f"{name:18s} {formulation:9s} {method:6s} {slow:9.3f} {fast:10.3f} {fast / slow:6.2f} {dq:9.1e}",
                       flush=True)
 

@@ -77,7 +77,7 @@ class TestRK4:
 
     def test_rk4_refused_where_no_compiled_loop_runs(self):
         from conftest import fourbar
-        system = fourbar().compile("dae", projection=True)  # (projection steps in Python)
+        system = fourbar().compile("dae", projection=True)  # (only the DOP853 loop projects)
         q, qd = system.assemble([1.0, -0.5, 1.5], [1.0, 0.0, 0.0])
         with pytest.raises(mb.ModelError, match="RK4.*projection"):
             system.simulate(1.0, q, qd, method="RK4", dt=0.01)
@@ -156,10 +156,21 @@ class TestCompiledDae:
         assert status == 0
         np.testing.assert_allclose(out, loop.accelerations(q, qd), rtol=1e-10, atol=1e-10)
 
-    def test_projection_steps_in_python_lagrange_compiled(self, loop):
+    def test_projection_runs_in_the_compiled_loop_which_projects_every_step(self, loop):
+        """The compiled dae loop moves the state back onto the constraints after every accepted
+        step (c/dae.c dae_project) whatever the option: projection=True runs there, with the
+        numbers of projection=False, and its constraint residual stays at the Newton level
+        where scipy's unprojected stepping drifts."""
         from conftest import fourbar
         q, qd = loop.assemble([1.0, -0.5, 1.5], [1.0, 0.0, 0.0])
         assert fourbar().compile("lagrange").simulate(0.2, q, qd).stats["integrator"] == "compiled"
-        assert fourbar().compile("dae", projection=True).simulate(0.2, q, qd).stats["integrator"] == "scipy"
-        with pytest.raises(mb.ModelError, match="projection"):
-            fourbar().compile("dae", projection=True).simulate(0.2, q, qd, integrator="compiled")
+        projected = fourbar().compile("dae", baumgarte=(0, 0), projection=True)
+        assert projected.integration_path() == "compiled"
+        a = projected.simulate(2.0, q, qd, rtol=1e-6, atol=1e-8)
+        b = fourbar().compile("dae", baumgarte=(0, 0)).simulate(2.0, q, qd, rtol=1e-6, atol=1e-8)
+        c = fourbar().compile("dae", baumgarte=(0, 0)).simulate(2.0, q, qd, rtol=1e-6, atol=1e-8,
+                                                               integrator="scipy")
+        assert a.stats["integrator"] == "compiled" and np.array_equal(a.q, b.q)
+        assert np.max(a.constraint_violation()) < 1e-10 < np.max(c.constraint_violation())
+        with pytest.raises(mb.ModelError, match="RK4.*projection"):
+            projected.simulate(0.2, q, qd, method="RK4", dt=0.01)

@@ -16,9 +16,8 @@ from scipy.integrate import solve_ivp
 import mbcomp as mb
 from components.test_constraints import DEAD, G, parallelogram, two_fourbars
 from mbcomp.core.small_linalg import least_norm
-from mbcomp.core.tolerances import RANK_TOLERANCE, REST_SPEED
+from mbcomp.core.tolerances import RANK_TOLERANCE, REST_SPEED, SINGULAR_TOLERANCE
 from mbcomp.formulations.compiled_rhs import CompiledRhsWorkspace
-from mbcomp.formulations.dae import SINGULAR_TOLERANCE
 
 L, D = 0.3, 0.7  # the parallelogram's crank and coupler lengths (m)
 

@@ -22,6 +22,14 @@ PIVOT_TOLERANCE = 1e-13
 #: dead point is treated as at it.  C name ``MB_RANK_TOLERANCE``.
 RANK_TOLERANCE = 1e-9
 
+#: Relative size (square root of an eigenvalue of the constraint Schur complement against
+#: its largest, ``c/least_norm.h``) below which a constraint direction is dropped from a
+#: KKT solve in motion (the dae loop, the compiled evaluation calls, an FMU) and from the
+#: projections: a transient singular position.  1e-4 passes the two-four-bar linkage
+#: through its singular crossings at rtol 1e-8 .. 1e-12 (smaller values stall the step
+#: size near the crossings).  Passed to the C as an argument (``dae_configure_rows``).
+SINGULAR_TOLERANCE = 1e-4
+
 #: Speed (m/s or rad/s, every entry of ``qd``) below which a state on a singular position
 #: counts as at rest: there a dropped constraint direction leaves the motion undetermined.
 #: C name ``MB_REST_SPEED``.

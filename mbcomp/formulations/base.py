@@ -11,7 +11,7 @@ import numpy as np
 from mbcomp.build.constraint_set import ConstraintValues
 from mbcomp.core.errors import format_state, ModelError, SimulationError
 from mbcomp.core.small_linalg import orthonormal_basis, pivoted_qr
-from mbcomp.core.tolerances import RANK_TOLERANCE, REST_SPEED
+from mbcomp.core.tolerances import RANK_TOLERANCE, REST_SPEED, SINGULAR_TOLERANCE
 
 
 #: Newton tolerance on position residuals (m for point equations, rad-like for angles).
@@ -129,6 +129,12 @@ class Formulation:
     name = "base"
     option_names: tuple[str, ...] = ()
     workspace_class = Workspace
+    #: Baumgarte gains ``(alpha, beta)`` in 1/s of a KKT solve of this formulation's
+    #: constraints; (0, 0): the exact constraint accelerations (constraints reduced away).
+    baumgarte: tuple[float, float] = (0.0, 0.0)
+    #: Where a KKT solve of this formulation drops a constraint direction
+    #: (``core.tolerances.SINGULAR_TOLERANCE``).
+    singular_tolerance: float = SINGULAR_TOLERANCE
 
     def __init__(self, compiled, **options: Any):
         unknown = sorted(set(options) - set(self.option_names))
@@ -474,6 +480,12 @@ class Formulation:
 
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
+
+    def compiled_method_problem(self, method: str) -> str | None:
+        """Why this formulation of the model has no compiled ``method`` loop (None: it has one)."""
+        if method in self.compiled_methods:
+            return None
+        return f"the {self.name} formulation of this model has no compiled {method} loop"
 
     #: Whether the compiled loop can watch this model's contacts (``contact_run`` gives the
     #: stretches between events); False: a model with contacts steps in scipy.

@@ -34,10 +34,6 @@ from mbcomp.formulations.dae_compiled import row_tables
 
 _VOID, _INT, _DBL = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
 
-#: Relative pivot below which the compiled solve drops a row direction and the Python solve
-#: answers instead (the dae formulation's ``SINGULAR_TOLERANCE`` where it has one).
-DEFAULT_SINGULAR_TOLERANCE = 1e-4
-
 
 class CompiledSolve:
     """The compiled KKT solve of ``formulation`` (constraints, analysed) on ``kernel`` (its
@@ -63,7 +59,7 @@ class CompiledSolve:
         self.constraints, self.python_rows = constraints, python_positions(constraints)
         self.alpha, self.beta = (float(g) for g in gains)
         self.scale = float(formulation.schur_scale)
-        self.tol = float(getattr(formulation, "singular_tolerance", DEFAULT_SINGULAR_TOLERANCE))
+        self.tol = float(formulation.singular_tolerance)
         lib = kernel.compiled.functions.lib
         self.fn = lib.dae_evaluate
         self.fn.argtypes = [_INT] + [_VOID] * 3 + [_DBL] * 4 + [_VOID, _VOID, _DBL] + [_VOID] * 5

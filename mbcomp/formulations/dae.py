@@ -7,22 +7,15 @@ from contextlib import contextmanager
 import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.codegen.callbacks import raise_pending
 from mbcomp.formulations.base import Formulation, Workspace
 from mbcomp.formulations.dae_c import c_dae_accelerations
-from mbcomp.codegen.callbacks import raise_pending
 from mbcomp.formulations.dae_compiled import DaeRows, DaeRun
 from mbcomp.formulations.friction import has_friction
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
 #: 0.2 s time constant (see bench/constraints_drift.py for the drift/cost study).
 DEFAULT_BAUMGARTE = (5.0, 5.0)
-
-#: Relative size (square root of an eigenvalue of the Schur complement, against its largest:
-#: ``c/least_norm.h``) below which a constraint direction is dropped from the compiled
-#: least-norm acceleration solve in motion and from the projections: a transient singular
-#: position.  1e-4 passes the two-four-bar linkage through its singular
-#: crossings at rtol 1e-8 .. 1e-12 (smaller values stall the step size near the crossings).
-SINGULAR_TOLERANCE = 1e-4
 
 
 class DaeWorkspace(Workspace):
@@ -65,7 +58,6 @@ class DaeFormulation(Formulation):
             raise ModelError("formulation 'dae'", f"baumgarte gains must be finite and >= 0, got {gains!r}")
         self.baumgarte = (alpha, beta)
         self.projection = bool(options.get("projection", False))
-        self.singular_tolerance = SINGULAR_TOLERANCE
 
     @classmethod
     def c_source(cls, nv: int, ng: int) -> str:
@@ -74,8 +66,9 @@ class DaeFormulation(Formulation):
     def compiled_loop(self) -> str | None:
         if self.constraints is None and not self.compiled.contact_rows:
             return None
-        if self.projection:
-            return "projection=True steps in Python"
+        if self.projection and self.compiled.topology.state_map.quat_q.size:
+            return ("projection=True on quaternion coordinates (Ball, Free joints) steps in Python (the compiled "
+                    "loop's projection moves the coordinates additively)")
         if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
@@ -91,6 +84,20 @@ class DaeFormulation(Formulation):
         run = DaeRun(self, kernel, lib, q0, qd0, tau, t0=t0, contacts=contacts, offsets=offsets)
         return Stretch(CompiledRhsWorkspace(run.workspace, kernel, tau, method, run.friction_failure, z0), run.close,
                        compiled_jacobian(kernel, tau))
+
+    @property
+    def compiled_methods(self) -> tuple[str, ...]:
+        """The compiled loops: with ``projection=True`` only DOP853, whose loop moves the state
+        back onto the constraints after every accepted step (``dae_project``, c/dae.c: positions
+        by Newton to ``PROJECTION_RESIDUAL``, speeds mass-orthogonally; it does so whatever this
+        option, for models without quaternion coordinates); the fixed-step RK4 loop does not."""
+        return ("DOP853",) if self.projection else ("DOP853", "RK4")
+
+    def compiled_method_problem(self, method: str) -> str | None:
+        if self.projection and method not in self.compiled_methods:
+            return (f"projection=True: only the compiled DOP853 loop projects after each accepted step "
+                    f"(no compiled {method} loop with projection)")
+        return super().compiled_method_problem(method)
 
     @property
     def compiled_contacts(self) -> bool:

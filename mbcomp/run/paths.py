@@ -35,7 +35,7 @@ class IntegrationPath:
 def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
     """Why the compiled loop cannot run ``method`` on this model with these inputs (None when
     it can).  The formulation answers for its constraints and contacts through its hooks
-    (``compiled_loop()``, ``compiled_methods``, ``compiled_contacts``)."""
+    (``compiled_loop()``, ``compiled_method_problem()``, ``compiled_contacts``)."""
     if method not in COMPILED_METHODS:
         return f"scipy method {method!r} requested (compiled loops: {', '.join(COMPILED_METHODS)})"
     if kernel.backend != "c":
@@ -43,8 +43,9 @@ def why_not_compiled(kernel, formulation, method: Any, tau: Any) -> str | None:
     reason = formulation.compiled_loop()
     if reason is not None:
         return reason
-    if method not in formulation.compiled_methods:
-        return f"the {formulation.name} formulation of this model has no compiled {method} loop"
+    reason = formulation.compiled_method_problem(method)
+    if reason is not None:
+        return reason
     if kernel.topology.contacts and not formulation.compiled_contacts:
         return "the model has contacts"
     from mbcomp.formulations.friction_c import compiled_friction_problem

@@ -157,7 +157,10 @@ def test_compiled_loop_hook_says_why_not():
     from conftest import fourbar
     dae = fourbar().compile("dae")
     assert dae._formulation.compiled_loop() is None
-    assert "projection" in fourbar().compile("dae", projection=True)._formulation.compiled_loop()
+    # projection=True: the compiled DOP853 loop projects after every accepted step
+    projected = fourbar().compile("dae", projection=True)._formulation
+    assert projected.compiled_loop() is None and projected.compiled_methods == ("DOP853",)
+    assert "projection" in projected.compiled_method_problem("RK4")
     assert fourbar().compile("lagrange")._formulation.compiled_loop() is None
     # motors run compiled in both: speed motors, and positions given as Python callables
     # (their values called back from C, codegen/callbacks.py)
@@ -186,3 +189,20 @@ def test_analyse_returns_its_findings_and_changes_nothing():
         info.ndof = 2
     with pytest.raises(ValueError):
         info.nominal_rows[0] = 3
+
+
+def test_projection_on_quaternion_coordinates_steps_in_python_and_holds_the_contact():
+    """The compiled projection moves coordinates additively, which quaternions do not allow:
+    projection=True on a Free joint with a held contact steps in Python (and says so), and
+    its projection keeps the resting ball on the floor to the Newton level."""
+    m = mb.Model("resting_ball", gravity=(0, 0, -9.81))
+    ball = m.add(mb.Body("ball", mass=1.0, inertia=(0.004,) * 3))
+    m.add(mb.Free("free", m.ground, ball))
+    m.add(mb.Contact("floor", ball, (0, 0, 0), normal=(0, 0, 1), restitution=0.0, radius=0.1))
+    projected = m.compile("dae", projection=True)
+    path = projected.integration_path()
+    assert path.startswith("scipy") and "quaternion" in path
+    assert m.compile("dae").integration_path() == "compiled"
+    res = projected.simulate(0.5, [0, 0, 0.1, 1, 0, 0, 0], [0.0] * 6)
+    assert res.stats["integrator"] == "scipy"
+    np.testing.assert_allclose(res.q[:, 2], 0.1, atol=1e-9)

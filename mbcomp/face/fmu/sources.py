@@ -125,15 +125,15 @@ def tables_source(system, formulation, table: Table, guid: str, derived) -> str:
     y0 = [v.start for v in table.variables[:table.ny]]
     p0 = [v.start for v in table.variables[table.vr_par:table.vr_env]]
     spec, data, speed_p, programs = dae_rows(system, formulation)
-    alpha, beta = getattr(formulation, "baumgarte", (0.0, 0.0))
+    alpha, beta = formulation.baumgarte
     values = {"NY": table.ny, "NV": kernel.nv, "NP": len(p0), "NU": len(table.input_speeds),
               "NK": len(kernel.topology.contacts), "NR0": len(spec), "VR_STATE": 0, "VR_DER": table.vr_der,
               "VR_PAR": table.vr_par, "VR_IN": table.vr_in, "VR_RTOL": table.vr_settings,
               "VR_ATOL": table.vr_settings + 1, "VR_REST": table.vr_settings + 2,
               "VR_MAXSTEP": table.vr_settings + 3, "VR_ENV": table.vr_env, "NE": len(derived.env),
               "NX": len(derived.exported), "ND": len(derived.entries), "ALPHA": float(alpha), "BETA": float(beta),
-              "SCHUR_SCALE": float(getattr(formulation, "schur_scale", 0.0)),
-              "SINGULAR_TOL": float(getattr(formulation, "singular_tolerance", tolerances.RANK_TOLERANCE))}
+              "SCHUR_SCALE": float(formulation.schur_scale),
+              "SINGULAR_TOL": float(formulation.singular_tolerance)}
     text = [f"{_HIDDEN} const {ctype} fmu_{name} = {values[name]!r};\n" for ctype, name in SCALARS]
     arrays = {"fmu_y_start": y0, "fmu_p_start": p0, "fmu_input_speed": table.input_speeds,
               "fmu_restitution": restitution_indices(system), "fmu_spec0": spec.reshape(-1),

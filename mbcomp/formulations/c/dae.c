@@ -11,6 +11,7 @@
 #include "program.h"
 #include "brentq.h"
 #include "least_norm.h"
+#include "cholesky.h"
 #include "friction.h"
 /* defined below, or after this code by the recursive program (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
@@ -148,29 +149,9 @@ static int dae_cholesky_solve(double *A, const double *r, double *lam, int nr, d
     for (int j = 0; j < nr; ++j) if (A[j * DAE_NR + j] > amax) amax = A[j * DAE_NR + j];
     const double top = sqrt(amax) > scale ? sqrt(amax) : scale, floor_ = tol * top;
     const double zero = MB_EIGEN_ROUNDING * nr * DBL_EPSILON * amax;
-    for (int j = 0; j < nr; ++j) {
-        double s = A[j * DAE_NR + j];
-        for (int k = 0; k < j; ++k) s -= A[j * DAE_NR + k] * A[j * DAE_NR + k];
-        if (s != s) return -1;
-        if (!(s > floor_ * floor_ && s > zero)) return 1;
-        const double d = sqrt(s);
-        A[j * DAE_NR + j] = d;
-        for (int i = j + 1; i < nr; ++i) {
-            double t = A[i * DAE_NR + j];
-            for (int k = 0; k < j; ++k) t -= A[i * DAE_NR + k] * A[j * DAE_NR + k];
-            A[i * DAE_NR + j] = t / d;
-        }
-    }
-    for (int i = 0; i < nr; ++i) {
-        double s = r[i];
-        for (int k = 0; k < i; ++k) s -= A[i * DAE_NR + k] * lam[k];
-        lam[i] = s / A[i * DAE_NR + i];
-    }
-    for (int i = nr - 1; i >= 0; --i) {
-        double s = lam[i];
-        for (int k = i + 1; k < nr; ++k) s -= A[k * DAE_NR + i] * lam[k];
-        lam[i] = s / A[i * DAE_NR + i];
-    }
+    const int status = mb_cholesky(A, DAE_NR, nr, floor_ * floor_ > zero ? floor_ * floor_ : zero, 0);
+    if (status) return status < 0 ? -1 : 1;
+    mb_cholesky_solve(A, DAE_NR, nr, r, lam);
     return 0;
 }
 

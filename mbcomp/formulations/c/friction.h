@@ -36,6 +36,7 @@
    for the least-norm multipliers (numpy's lstsq in Python): lam = A^T y with
    (A A^T) y = b by a Cholesky factorisation that drops the directions below
    MB_FRICTION_RCOND (squared) of the largest pivot. */
+#include "cholesky.h"
 #define MB_FR_DATA 24
 #define MB_FR_OUT 21
 #define MB_FR_FEATURE 21
@@ -191,33 +192,8 @@ void mb_friction_rows_at(const double *q, const double *qd, const double *p, int
 static void mb_fr_psd_solve(double *G, const double *b, double *y, int m) {
     double gmax = 0.0;
     for (int j = 0; j < m; ++j) if (G[j * m + j] > gmax) gmax = G[j * m + j];
-    const double floor_ = MB_FRICTION_RCOND * MB_FRICTION_RCOND * gmax;
-    for (int j = 0; j < m; ++j) {
-        double s = G[j * m + j];
-        for (int k = 0; k < j; ++k) s -= G[j * m + k] * G[j * m + k];
-        if (!(s > floor_) || !(s > 0.0)) {
-            G[j * m + j] = 0.0;
-            for (int i = j + 1; i < m; ++i) G[i * m + j] = 0.0;
-            continue;
-        }
-        const double dd = sqrt(s);
-        G[j * m + j] = dd;
-        for (int i = j + 1; i < m; ++i) {
-            double t = G[i * m + j];
-            for (int k = 0; k < j; ++k) t -= G[i * m + k] * G[j * m + k];
-            G[i * m + j] = t / dd;
-        }
-    }
-    for (int i = 0; i < m; ++i) {
-        double s = b[i];
-        for (int k = 0; k < i; ++k) s -= G[i * m + k] * y[k];
-        y[i] = G[i * m + i] > 0.0 ? s / G[i * m + i] : 0.0;
-    }
-    for (int i = m - 1; i >= 0; --i) {
-        double s = y[i];
-        for (int k = i + 1; k < m; ++k) s -= G[k * m + i] * y[k];
-        y[i] = G[i * m + i] > 0.0 ? s / G[i * m + i] : 0.0;
-    }
+    mb_cholesky(G, m, m, MB_FRICTION_RCOND * MB_FRICTION_RCOND * gmax, 1);
+    mb_cholesky_solve(G, m, m, b, y);
 }
 
 /* The friction solve at the state (q, qd, time t): L the packed Cholesky factor of the mass

@@ -8,6 +8,7 @@
 #include "friction.h"
 #include "brentq.h"
 #include "least_norm.h"
+#include "cholesky.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -530,20 +531,9 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
         r[k] = s;
         if (fabs(Mr[k * ni + k]) > scale) scale = fabs(Mr[k * ni + k]);
     }
-    for (int j = 0; j < ni; ++j) {  /* Cholesky, with the tree solve's singularity threshold */
-        double s = Mr[j * ni + j];
-        for (int k = 0; k < j; ++k) s -= Mr[j * ni + k] * Mr[j * ni + k];
-        if (!(s > MB_PIVOT_TOLERANCE * scale)) return 1;
-        const double d = sqrt(s);
-        Mr[j * ni + j] = d;
-        for (int i = j + 1; i < ni; ++i) {
-            double v = Mr[i * ni + j];
-            for (int k = 0; k < j; ++k) v -= Mr[i * ni + k] * Mr[j * ni + k];
-            Mr[i * ni + j] = v / d;
-        }
-    }
-    for (int i = 0; i < ni; ++i) { double s = r[i]; for (int k = 0; k < i; ++k) s -= Mr[i * ni + k] * r[k]; r[i] = s / Mr[i * ni + i]; }
-    for (int i = ni - 1; i >= 0; --i) { double s = r[i]; for (int k = i + 1; k < ni; ++k) s -= Mr[k * ni + i] * r[k]; r[i] = s / Mr[i * ni + i]; }
+    /* Cholesky, with the tree solve's singularity threshold */
+    if (mb_cholesky(Mr, ni, ni, MB_PIVOT_TOLERANCE * scale, 0)) return 1;
+    mb_cholesky_solve(Mr, ni, ni, r, r);
 rates:
     if (MB_HAS_QUAT) {  /* x' of the independent chart coordinates */
         lag_chart_rate(lag_x, qd, lag_rate);
