@@ -139,6 +139,21 @@ class TestRuns:
         np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-10)
 
 
+def test_dae_projection_calls_the_position_back():
+    """dae with projection=True: the compiled loop's projection after each step evaluates the
+    motor row at the step's end through the same callback."""
+    s = linkage(law, "mc_fd_dae_projected").compile("dae", projection=True)
+    if s.backend != "c":
+        pytest.skip("no C compiler")
+    oracle = linkage(law, "mc_fd_dae_projected").compile("dae", projection=True, backend="python")
+    q, qd = start(s)
+    res = s.simulate(1.0, q, qd, t_eval=T, **TIGHT)
+    ref = oracle.simulate(1.0, q, qd, t_eval=T, **TIGHT)
+    assert s.integration_path() == "compiled" and res.stats["integrator"] == "compiled"
+    np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(res["A"], law(T), rtol=0, atol=1e-10)  # (projected onto the law)
+
+
 def _raising(t):
     if t > 0.3:
         raise ValueError("encoder lost")
