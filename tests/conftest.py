@@ -11,6 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+try:
+    import fcntl
+except ImportError:  # (not POSIX: each worker compiles its own)
+    fcntl = None
+
 import numpy as np
 import pytest
 
@@ -35,6 +40,20 @@ def _private_cache(tmp_path_factory):
         os.environ.pop("MBCOMP_CACHE_DIR", None)
     else:
         os.environ["MBCOMP_CACHE_DIR"] = old
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _no_speculative_output_builds():
+    """A compile starts its output functions' library (energies, body kinematics) in the
+    background when the machine has a core to spare (``compiler._build_outputs``); in the
+    test run two of three such libraries were never asked for, and a whole run compiled 193
+    of them (55 s of a core).  Here they are built on first use only, which the tests of
+    those calls exercise; tests/test_output_library.py turns the background build back on
+    for itself."""
+    from mbcomp.compiled import compiler
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(compiler, "spare_core", lambda: False)
+        yield
 
 
 def templates_cache(directory: Path, model, **options) -> Path:
@@ -63,6 +82,35 @@ def primed_cache(source: Path, target: Path) -> Path:
     directory 0700, the secret 0600)."""
     shutil.copytree(source, target)
     return target
+
+
+@pytest.fixture(scope="session")
+def tree_templates(tmp_path_factory) -> Path:
+    """A :func:`templates_cache` of the plain tree's kind (dense dynamics, no constraints,
+    contacts or drives: ``pendulum_chain``, ``arm_model`` and the other small trees of the
+    tests share its templates object), compiled once per test run by whichever worker asks
+    first (the others wait on a file lock) for the tests that need a cache of their own but
+    do not test the templates' compile: each template compile costs about 1.4 s of a core."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    directory, done = root / "tree-templates", root / "tree-templates.done"
+    with open(root / "tree-templates.lock", "a") as lock:
+        if fcntl is not None:
+            fcntl.flock(lock, fcntl.LOCK_EX)   # (released when the file closes)
+        if not done.exists():
+            shutil.rmtree(directory, ignore_errors=True)
+            templates_cache(directory, pendulum_chain(2))
+            done.touch()
+    return directory
+
+
+@pytest.fixture
+def primed_cache_dir(tmp_path, monkeypatch, tree_templates) -> Path:
+    """A cache of this test's own (``MBCOMP_CACHE_DIR``) holding the plain tree's compiled
+    templates object (:func:`tree_templates`) and the cache's secret."""
+    path = primed_cache(tree_templates, tmp_path / "primed-cache")
+    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(path))
+    return path
 
 
 #: The cyclic garbage collector's first threshold during the tests (Python's default: 700

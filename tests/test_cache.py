@@ -18,7 +18,7 @@ import pytest
 import mbcomp as mb
 from mbcomp.codegen import cache, printer as codegen
 from mbcomp.codegen.backend import c_compiler, compile_c
-from conftest import arm_model, assert_close
+from conftest import arm_model, assert_close, primed_cache
 
 needs_cc = pytest.mark.skipif(c_compiler() is None, reason="no C compiler")
 #: One worker: the module fixtures (the arm compiled in another process, its reference
@@ -53,11 +53,13 @@ def _fill_in_subprocess(directory: Path, backend: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def filled_c(tmp_path_factory):
-    """A cache directory holding the arm's compiled library, and its key."""
+def filled_c(tmp_path_factory, tree_templates):
+    """A cache directory holding the arm's compiled library, and its key (the templates
+    object linked from ``conftest.tree_templates``: the damage tests rebuild the model, not
+    the templates)."""
     if c_compiler() is None:
         pytest.skip("no C compiler")
-    directory = tmp_path_factory.mktemp("filled") / "cache"
+    directory = primed_cache(tree_templates, tmp_path_factory.mktemp("filled") / "cache")
     return directory, _fill_in_subprocess(directory, "c")
 
 

@@ -85,7 +85,7 @@ class TestBuilding:
 
 
 class TestOneBuildPerModel:
-    def test_threads_compiling_one_model_build_it_once(self, cache_dir):
+    def test_threads_compiling_one_model_build_it_once(self, primed_cache_dir):
         systems, errors = [], []
 
         def compile_one():
@@ -107,13 +107,13 @@ class TestOneBuildPerModel:
         for s in systems:
             np.testing.assert_allclose(s.accelerations(q, qd), [expected], rtol=1e-12)
 
-    def test_processes_compiling_one_model_at_once_build_it_once(self, cache_dir):
+    def test_processes_compiling_one_model_at_once_build_it_once(self, primed_cache_dir):
         code = ("import json, sys; sys.path.insert(0, 'tests'); from test_cache_lock import pendulum\n"
                 "import numpy as np\n"
                 "s = pendulum().compile()\n"
                 "print(json.dumps({'hit': s._compiled.cache_hit,"
                 " 'a': s.accelerations(np.array([1.1]), np.array([0.5])).tolist()}))\n")
-        env = {**os.environ, "MBCOMP_CACHE_DIR": str(cache_dir), "PYTHONPATH": str(ROOT)}
+        env = {**os.environ, "MBCOMP_CACHE_DIR": str(primed_cache_dir), "PYTHONPATH": str(ROOT)}
         children = [subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, text=True, env=env) for _ in range(2)]
         done = [(child, *child.communicate(timeout=120)) for child in children]

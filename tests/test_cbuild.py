@@ -128,11 +128,10 @@ class TestBuild:
 
 
 @needs_cc
-def test_the_cache_entry_records_both_flag_sets_and_cold_flags_change_the_key(tmp_path, monkeypatch):
+def test_the_cache_entry_records_both_flag_sets_and_cold_flags_change_the_key(primed_cache_dir, monkeypatch):
     from mbcomp.compiled import compiler
-    monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
     first = pendulum_chain(2).compile(backend="c")._compiled
-    manifest = json.loads((tmp_path / f"{first.key}.so.json").read_text())
+    manifest = json.loads((primed_cache_dir / f"{first.key}.so.json").read_text())
     assert manifest["inputs"]["flags"] == list(C_FLAGS) and manifest["inputs"]["cold_flags"] == list(COLD_FLAGS)
     monkeypatch.setattr(compiler, "COLD_FLAGS", ("-O1", "-fPIC", "-fno-math-errno"))
     second = pendulum_chain(2).compile(backend="c")._compiled
@@ -199,11 +198,11 @@ class TestSharedUnits:
             np.testing.assert_allclose(compiled.q[-1], stepped.q[-1], atol=1e-7)
             assert compiled.t.size > 5
 
-    def test_the_empty_functions_of_a_tree_share_one_unoptimised_run_with_the_sizes(self, tmp_path, monkeypatch):
+    def test_the_empty_functions_of_a_tree_share_one_unoptimised_run_with_the_sizes(self, primed_cache_dir,
+                                                                                     monkeypatch):
         """A chain has no constraints, contacts or drives: those empty functions join the cold
         unit (UnitStream.TINY_HOT), which also holds the model's sizes (one compiler run,
         none of them optimised); the output functions are not in the model's units at all."""
-        monkeypatch.setenv("MBCOMP_CACHE_DIR", str(tmp_path))
         units, real_add = [], CBuild.add
 
         def add(self, name, text, flags, *args, **kwargs):

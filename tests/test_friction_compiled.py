@@ -267,3 +267,24 @@ def assert_compiled_rhs_is_the_python_one(system, q0, qd0, closed) -> None:
             np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
     finally:
         stretch.close()
+
+
+def test_recursive_dae_with_a_loop_says_why_its_friction_steps_in_python():
+    """The dae formulation's hook (``compiled_friction_problem``): with the recursive dynamics
+    and a closed loop its KKT solve is the recursive program's, which has no friction rows,
+    so the run steps in Python and says why; the dense dynamics runs the same model
+    compiled, and both give the same motion."""
+    from conftest import fourbar
+    m = fourbar()
+    m.add(mb.Contact("floor", "coupler", (0.0, 0.0, 0.0), normal=(0, 1, 0), friction=0.4, radius=0.01,
+                     restitution=0.0))
+    recursive = m.compile("dae", dynamics="recursive")
+    dense = m.compile("dae", dynamics="dense")
+    path = recursive.integration_path()
+    assert path.startswith("scipy") and "recursive" in path and "no friction rows" in path
+    assert dense.integration_path() == "compiled"
+    q, qd = dense.assemble([1.0, -0.5, 1.5], [1.0, 0.0, 0.0])
+    a = recursive.simulate(0.3, q, qd, rtol=1e-10, atol=1e-12)
+    b = dense.simulate(0.3, q, qd, rtol=1e-10, atol=1e-12)
+    assert a.stats["integrator"] == "scipy" and b.stats["integrator"] == "compiled"
+    np.testing.assert_allclose(a.q[-1], b.q[-1], atol=1e-7)

@@ -19,7 +19,7 @@ import pytest
 from mbcomp.codegen import backend
 from mbcomp.compiled import compiler
 from mbcomp.codegen.backend import OUTPUT_FUNCTIONS, c_compiler
-from conftest import pendulum_chain, primed_cache, run_in_new_process, templates_cache
+from conftest import pendulum_chain, primed_cache, run_in_new_process
 
 pytestmark = [pytest.mark.skipif(c_compiler() is None, reason="no C compiler"),
               pytest.mark.xdist_group("output-library")]
@@ -35,9 +35,10 @@ def spare_core(monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def templates(tmp_path_factory):
-    """The chain's compiled templates object, shared by the tests' own caches."""
-    return templates_cache(tmp_path_factory.mktemp("templates") / "cache", pendulum_chain(N))
+def templates(tree_templates):
+    """The chain's compiled templates object (a tree's: ``conftest.tree_templates``), shared by
+    the tests' own caches."""
+    return tree_templates
 
 
 @pytest.fixture

@@ -473,7 +473,7 @@ class TestCache:
         return tmp_path
 
     @pytest.mark.parametrize("backend", ["python", "c"])
-    def test_second_compile_is_a_cache_hit_with_identical_results(self, cache, backend):
+    def test_second_compile_is_a_cache_hit_with_identical_results(self, primed_cache_dir, backend):
         first = arm_model().compile(backend=backend)
         assert not first._compiled.cache_hit
         second = arm_model().compile(backend=backend)
@@ -483,7 +483,7 @@ class TestCache:
         assert np.array_equal(a, b)
 
     @pytest.mark.parametrize("backend", ["python", "c"])
-    def test_other_parameter_values_share_the_cached_code(self, cache, backend):
+    def test_other_parameter_values_share_the_cached_code(self, primed_cache_dir, backend):
         arm_model().compile(backend=backend)
         m = arm_model()
         m["upper"].mass = 7.0
@@ -509,7 +509,7 @@ class TestCache:
         assert not other_axis.compile(backend="python")._compiled.cache_hit
 
     @pytest.mark.parametrize("backend", ["python", "c"])
-    def test_cache_false_does_not_hit(self, cache, backend):
+    def test_cache_false_does_not_hit(self, primed_cache_dir, backend):
         arm_model().compile(backend=backend)
         sys = arm_model().compile(backend=backend, cache=False)
         assert not sys._compiled.cache_hit

@@ -481,6 +481,11 @@ class Formulation:
     #: The compiled loops (``integrators.COMPILED_METHODS``) this formulation can step in.
     compiled_methods: tuple[str, ...] = ("DOP853", "RK4")
 
+    def compiled_friction_problem(self) -> str | None:
+        """Why this formulation's compiled solve cannot take the rows of contacts with
+        friction (None: it can; ``friction_c.compiled_friction_problem`` checks the contacts)."""
+        return None
+
     def compiled_method_problem(self, method: str) -> str | None:
         """Why this formulation of the model has no compiled ``method`` loop (None: it has one)."""
         if method in self.compiled_methods:

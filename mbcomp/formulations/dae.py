@@ -93,6 +93,14 @@ class DaeFormulation(Formulation):
         option, for models without quaternion coordinates); the fixed-step RK4 loop does not."""
         return ("DOP853",) if self.projection else ("DOP853", "RK4")
 
+    def compiled_friction_problem(self) -> str | None:
+        """With the recursive dynamics and geometric constraints the KKT solve is the recursive
+        program's (``build/c``), which has no friction rows."""
+        if self.compiled.dynamics == "recursive" and len(self.compiled.geometric_rows):
+            return ("contacts with friction step in Python in the dae formulation with the recursive dynamics and "
+                    "constraints (its compiled KKT solve has no friction rows); dynamics='dense' runs them compiled")
+        return None
+
     def compiled_method_problem(self, method: str) -> str | None:
         if self.projection and method not in self.compiled_methods:
             return (f"projection=True: only the compiled DOP853 loop projects after each accepted step "

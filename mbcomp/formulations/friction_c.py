@@ -40,8 +40,8 @@ def compiled_friction_problem(kernel, formulation=None) -> str | None:
     """Why this model's friction cannot run in the compiled loops (None when it can): every
     contact with friction must be a body point or sphere on a world plane (``Contact``) or a
     collision feature (``Collision``: its rows from ``codegen/c/collide.c``); and
-    the dae formulation's KKT solve must be the dense one (with the recursive dynamics and
-    geometric constraints it is the recursive program's, which has no friction rows)."""
+    ``formulation``'s compiled solve must take friction rows (its hook
+    ``Formulation.compiled_friction_problem``)."""
     topology = kernel.topology
     with_friction = [c for i, c in enumerate(topology.contacts) if friction_of(kernel, i) > 0.0]
     if not with_friction:
@@ -52,12 +52,7 @@ def compiled_friction_problem(kernel, formulation=None) -> str | None:
         if not hasattr(contact, "point") or not hasattr(contact, "normal"):
             return (f"contact {contact.name!r} has friction but is not a body point or sphere on a plane: its friction "
                     f"steps in Python")
-    compiled = kernel.compiled
-    if (getattr(formulation, "name", None) == "dae" and getattr(compiled, "dynamics", "dense") == "recursive"
-            and len(getattr(compiled, "geometric_rows", ()))):
-        return ("contacts with friction step in Python in the dae formulation with the recursive dynamics and "
-                "constraints (its compiled KKT solve has no friction rows); dynamics='dense' runs them compiled")
-    return None
+    return None if formulation is None else formulation.compiled_friction_problem()
 
 
 def scratch_size(cap: int, nv: int, kinematics: int) -> int:

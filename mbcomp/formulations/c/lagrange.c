@@ -691,20 +691,8 @@ static int lag_held_forces(double t, const double *y, const double *p, const dou
         for (int i = 0; i < n; ++i) v += Ja[i] * res[i];
         lam[a] = v;
     }
-    for (int j = 0; j < nr; ++j) {
-        double v = A[j * nr + j];
-        for (int k = 0; k < j; ++k) v -= A[j * nr + k] * A[j * nr + k];
-        if (!(v > 0.0)) return 1;
-        const double d = sqrt(v);
-        A[j * nr + j] = d;
-        for (int i = j + 1; i < nr; ++i) {
-            double w = A[i * nr + j];
-            for (int k = 0; k < j; ++k) w -= A[i * nr + k] * A[j * nr + k];
-            A[i * nr + j] = w / d;
-        }
-    }
-    for (int i = 0; i < nr; ++i) { double v = lam[i]; for (int k = 0; k < i; ++k) v -= A[i * nr + k] * lam[k]; lam[i] = v / A[i * nr + i]; }
-    for (int i = nr - 1; i >= 0; --i) { double v = lam[i]; for (int k = i + 1; k < nr; ++k) v -= A[k * nr + i] * lam[k]; lam[i] = v / A[i * nr + i]; }
+    if (mb_cholesky(A, nr, nr, 0.0, 0)) return 1;
+    mb_cholesky_solve(A, nr, nr, lam, lam);
     *lam_out = lam;
     return 0;
 }
