@@ -114,14 +114,22 @@ class ConstraintSet:
                 g[r] = np.nan  # a speed motor without a start value constrains qd only
                 g_t[r] = -speed
             else:
-                try:
-                    s, s1, s2 = _derivatives(eq.position, t, exact=self.exact_derivatives.get(r))
-                except Exception as exc:  # the user's callable failed
-                    raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
+                s, s1, s2 = self.position_derivatives(r, t)
                 g[r] = q[k] - s
                 g_t[r] = -s1
                 bias[r] = -s2
         return ConstraintValues(g, J, g_t, bias)
+
+    def position_derivatives(self, r: int, t: float) -> tuple[float, float, float]:
+        """``(s, s', s'')`` of the position motor of row ``r`` at ``t`` (s; m or rad, per s,
+        per s^2): exact where the position has ``diff()`` (``exact_derivatives``), else the
+        5-point stencils of ``_derivatives``.  The values both Python stepping and the
+        compiled loops' callback (``codegen/callbacks.py``) use; ``SimulationError`` naming
+        the motor and the time when the position raises or is not finite."""
+        try:
+            return _derivatives(self.equations[r].position, t, exact=self.exact_derivatives.get(r))
+        except Exception as exc:  # the user's callable failed
+            raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
 
     def residual_series(self, kernel, t: np.ndarray, q: np.ndarray, motor_offsets: dict | None = None) -> np.ndarray:
         """Residuals ``g`` at many samples, (m, nc): the geometric rows from one call of the
@@ -158,14 +166,7 @@ class ConstraintSet:
         finite at ``t`` (s): raise the ``SimulationError`` Python stepping raises there,
         naming the motor; ``rows``: the position motors' rows."""
         for r in rows:
-            eq = self.equations[r]
-            try:
-                for f in (eq.position, *self.exact_derivatives.get(r, ())):
-                    value = float(f(t))  # (an Expression raises saying why)
-                    if value != value or value in (float("inf"), float("-inf")):
-                        raise ArithmeticError(f"the value {value} is not finite")
-            except Exception as exc:  # as evaluate reports it
-                raise SimulationError(f"position({t:g}) failed: {exc}", self.groups_by_row(r)) from None
+            self.position_derivatives(r, t)  # (raises as evaluate does)
         raise SimulationError(f"a motor's prescribed position is not finite at t = {t:.6g} s in compiled code: "
                               f"motors {[self.owner[r] for r in rows]}")
 

@@ -10,11 +10,19 @@ values of callable drive signals (after the states in the drive input vector).  
 stage, dense-output stage and event-location evaluation of a compiled loop sees the values
 the Python path would compute at the same state.
 
+Motors whose position is a Python callable (``expressions_c.position_programs``: their
+programs read slots) have a second callback: whatever C code evaluates the motor rows at a
+new time (a right-hand side, a Newton solve, an event locator) calls it once with that
+time, and it writes ``s, s', s''`` of each such motor (``ConstraintSet.position_derivatives``,
+the values Python stepping uses: exact derivatives where the position has them, else the
+same finite differences) where the slots are read (``c/inputs.h``, ``mb_motor_slot``).
+
 An exception cannot cross the C loop: the callback keeps it, returns a failure status that
 stops the loop (``INPUT_FAILED``), and ``raise_pending`` re-raises it in Python with a note
 naming the callable and the time.  A callable returning a wrong number of values or a
 non-finite one raises the same ``SimulationError`` as on the Python path
-(``forces.checked_output``).
+(``forces.checked_output``); a callable motor's failure raises the ``SimulationError`` of
+``ConstraintSet.position_derivatives``, Python stepping's, naming the motor and the time.
 """
 from __future__ import annotations
 
@@ -26,6 +34,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from mbcomp.core.errors import describe
+from mbcomp.codegen.expressions_c import python_positions
 from mbcomp.spec.components.forces import checked_output
 
 #: The compiled loops' status when a callable failed (``MB_INPUT_FAILED`` of ``c/inputs.h``).
@@ -36,9 +45,11 @@ _local = threading.local()  # this thread's active InputHook
 
 
 def has_callables(kernel, tau: Any = None) -> bool:
-    """Whether a run of ``kernel`` with ``tau`` needs the callback: callable forces or
-    torques, callable drive signals, or a callable ``tau``."""
-    return bool(kernel.n_inputs or kernel.compiled.drives.callables or callable(tau))
+    """Whether a run of ``kernel`` with ``tau`` needs a callback: callable forces or
+    torques, callable drive signals, a callable ``tau``, or a motor whose position is a
+    Python callable."""
+    return bool(kernel.n_inputs or kernel.compiled.drives.callables or callable(tau)
+                or python_positions(kernel.compiled.constraint_set))
 
 
 class InputHook:
@@ -59,6 +70,12 @@ class InputHook:
         self.tau_values = np.zeros(max(self.nv, 1)) if self.tau is not None else None
         self.signals = tuple(drives.callables)
         self.du = np.zeros(drives.n_u) if self.signals else None
+        #: the callable motors (in slot order) and their values s, s', s'' (3 a motor)
+        self.constraints = kernel.compiled.constraint_set
+        self.motor_rows = python_positions(self.constraints)
+        self.motor_values = np.zeros(3 * len(self.motor_rows) + 1)
+        #: whether the model's other callables need the per-evaluation callback
+        self.inputs_on = bool(self.inputs or self.tau is not None or self.signals)
         self.error: BaseException | None = None
         self.where = ""  # which callable raised, at what time
         self.outer: "InputHook | None" = None
@@ -89,6 +106,21 @@ class InputHook:
             self.where = f"raised by the callable of {name} at t = {t:.6g} s, called from compiled code"
             return 1
 
+    def motors(self, t: float) -> int:
+        """The motor callback: ``s, s', s''`` of every callable motor at ``t`` (s) into
+        ``motor_values``; 0, or 1 when a position failed (its ``SimulationError`` kept)."""
+        if self.error is not None:
+            return 1
+        try:
+            values = self.motor_values
+            for j, r in enumerate(self.motor_rows):
+                values[3 * j:3 * j + 3] = self.constraints.position_derivatives(r, t)
+            return 0
+        except BaseException as exc:  # noqa: BLE001 - kept, re-raised by raise_pending
+            self.error = exc  # (names the motor and the time, as Python stepping's)
+            self.where = ""
+            return 1
+
     def pointers(self):
         """The arguments of ``set_input_hook`` after the callback: the buffers' addresses."""
         def address(a):
@@ -111,7 +143,14 @@ def _dispatch(t: float) -> int:
     return 1 if hook is None else hook(t)
 
 
+def _dispatch_motors(t: float) -> int:
+    """The motor callback: this thread's active ``InputHook``'s callable motors."""
+    hook = getattr(_local, "active", None)
+    return 1 if hook is None else hook.motors(t)
+
+
 _TRAMPOLINE = _HOOK_TYPE(_dispatch)
+_MOTOR_TRAMPOLINE = _HOOK_TYPE(_dispatch_motors)
 _NO_HOOK = _HOOK_TYPE()
 
 
@@ -123,11 +162,30 @@ def _setter(lib):
     return setter
 
 
+def _motor_setter(lib):
+    setter = getattr(lib, "set_motor_hook", None)
+    if setter is not None and setter.restype is not None:
+        setter.argtypes = [_HOOK_TYPE, ctypes.c_void_p]
+        setter.restype = None
+    return setter
+
+
 def _install(lib, hook: "InputHook | None") -> None:
+    motors = _motor_setter(lib)
     if hook is None:
         _setter(lib)(_NO_HOOK, None, None, None, None)
-    else:
+        if motors is not None:
+            motors(_NO_HOOK, None)
+        return
+    if hook.inputs_on:
         _setter(lib)(_TRAMPOLINE, *hook.pointers())
+    else:
+        _setter(lib)(_NO_HOOK, None, None, None, None)
+    if motors is not None:
+        if hook.motor_rows:
+            motors(_MOTOR_TRAMPOLINE, hook.motor_values.ctypes.data)
+        else:
+            motors(_NO_HOOK, None)
 
 
 @contextlib.contextmanager

@@ -28,6 +28,7 @@ import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.core.tolerances import REST_SPEED
+from mbcomp.codegen.expressions_c import fill_slots, python_positions
 from mbcomp.formulations.compiled_watch import pointer
 from mbcomp.formulations.dae_compiled import row_tables
 
@@ -54,6 +55,8 @@ class CompiledSolve:
                 self.speed_motors.append((k, int(r), kernel.topology.q_slice[joint].start, float(speed)))
                 offsets[int(r)] = 0.0
         self.spec, self.data, self.programs = row_tables(formulation, kernel, self.rows, offsets)
+        #: motors whose position is a Python callable: their values at each call's time
+        self.constraints, self.python_rows = constraints, python_positions(constraints)
         self.alpha, self.beta = (float(g) for g in gains)
         self.scale = float(formulation.schur_scale)
         self.tol = float(formulation.singular_tolerance)
@@ -68,7 +71,8 @@ class CompiledSolve:
     @classmethod
     def of(cls, formulation, kernel, gains: tuple[float, float]) -> "CompiledSolve | None":
         """The compiled solve, or None where there is none: no constraints, a model compiled
-        without a C compiler, not analysed, a motor whose position is a Python callable."""
+        without a C compiler, not analysed (a motor whose position is a Python callable is
+        evaluated in Python at each call's time, its values passed as numbers)."""
         if formulation.constraints is None or kernel.backend != "c" or formulation.nominal_rows is None:
             return None
         if not hasattr(kernel.compiled.functions.lib, "dae_evaluate"):
@@ -91,10 +95,14 @@ class CompiledSolve:
             data = data.copy()  # (this call's start values: calls from threads do not share them)
             for k, r, i, speed in self.speed_motors:
                 data[k, 1] = offsets[r] if offsets and r in offsets else q[i] - speed * t
+        programs = self.programs
+        if self.python_rows:  # (the callable motors' s, s', s'' at t, as Python stepping's: its errors)
+            values = [v for r in self.python_rows for v in self.constraints.position_derivatives(r, float(t))]
+            programs = fill_slots(programs, values)
         qdd = np.empty(len(qd))
         lam_rows = np.empty(max(len(self.rows), 1))
         work = np.empty(self.work_size)
-        status = self.fn(len(self.rows), pointer(self.spec), pointer(data), pointer(self.programs), self.alpha,
+        status = self.fn(len(self.rows), pointer(self.spec), pointer(data), pointer(programs), self.alpha,
                          self.beta, self.scale, self.tol, pointer(self.kernel.p), None if tau is None else pointer(tau),
                          float(t), pointer(q), pointer(qd), pointer(qdd), pointer(lam_rows), pointer(work))
         moving = float(np.max(np.abs(qd), initial=0.0)) > REST_SPEED

@@ -7,9 +7,10 @@ from contextlib import contextmanager
 import numpy as np
 
 from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.codegen.callbacks import raise_pending
 from mbcomp.formulations.base import Formulation, Workspace
 from mbcomp.formulations.dae_c import c_dae_accelerations
-from mbcomp.formulations.dae_compiled import DaeRows, DaeRun, motor_programs
+from mbcomp.formulations.dae_compiled import DaeRows, DaeRun
 from mbcomp.formulations.friction import has_friction
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
@@ -68,10 +69,6 @@ class DaeFormulation(Formulation):
         if self.projection and self.compiled.topology.state_map.quat_q.size:
             return ("projection=True on quaternion coordinates (Ball, Free joints) steps in Python (the compiled "
                     "loop's projection moves the coordinates additively)")
-        for r, program in motor_programs(self).items():
-            if program is None:
-                return (f"motor {self.constraints.owner[r]!r} prescribes its position by a Python callable, "
-                        f"which is evaluated in Python")
         if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
@@ -128,6 +125,7 @@ class DaeFormulation(Formulation):
         failure.argtypes, failure.restype = [], ctypes.c_double
         t = float(failure())
         if t == t:
+            raise_pending()  # (a callable motor's own error, kept by the motor callback)
             rows = [r for r in self.constraints.coordinate_rows if self.constraints.equations[r].speed is None]
             self.constraints.explain_position_failure(rows, t)
 

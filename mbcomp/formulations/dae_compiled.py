@@ -1,8 +1,9 @@
 """The Python side of the dae formulation's compiled loop (``dae_c.py``).
 
 ``DaeRows`` configures the KKT rows the compiled solve uses on this thread: geometric rows,
-motor rows (speed motors; position motors whose position is a file expression, run as
-postfix programs, ``expressions_c``) and the gaps of contacts held closed.
+motor rows (speed motors; position motors, run as postfix programs, ``expressions_c``: a
+file expression's own, a Python callable's read from the motor callback of
+``codegen/callbacks.py``) and the gaps of contacts held closed.
 
 ``DaeRun`` is one compiled stretch of a run with contacts (``Formulation.contact_run``,
 stepped by ``run/stepping.CompiledStepping``): the loop steps the full state ``[q, v, z]`` (q:
@@ -22,9 +23,9 @@ import ctypes
 
 import numpy as np
 
-from mbcomp.core.errors import ModelError, SimulationError
+from mbcomp.core.errors import SimulationError
 from mbcomp.codegen.callbacks import constant_tau
-from mbcomp.codegen.expressions_c import compile_position
+from mbcomp.codegen.expressions_c import position_programs
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
 from mbcomp.formulations.friction import has_friction
@@ -45,27 +46,23 @@ def _bind_configure(lib):
 
 
 def motor_programs(formulation) -> dict[int, np.ndarray | None]:
-    """Per motor row with a position function: its programs (value, first and second
-    derivative, ``expressions_c.compile_position``), or None for a Python callable."""
+    """Per motor row with a position function: its own programs (value, first and second
+    derivative, ``expressions_c.position_programs``), or None for a position Python
+    evaluates (a Python callable: the compiled loops read it through the motor callback,
+    code that cannot call Python, an FMU, cannot run it)."""
     constraints = formulation.constraints
-    out = {}
     if constraints is None:
-        return out
-    for r in constraints.coordinate_rows:
-        eq = constraints.equations[r]
-        if eq.speed is None:
-            try:
-                out[r] = compile_position(eq.position)
-            except ModelError:
-                out[r] = None
-    return out
+        return {}
+    programs, python_rows = position_programs(constraints)
+    return {r: None if r in python_rows else program for r, program in programs.items()}
 
 
 def row_tables(formulation, kernel, rows, offsets: dict | None, contacts: tuple = ()):
     """``(spec, data, programs)``: the arrays ``dae_configure_rows`` (and ``dae_evaluate``)
     read for the KKT rows ``rows`` (equation indices of the formulation's constraints; ``nc``
     and on: the held ``contacts``, in order); ``offsets``: the speed motors' start values.
-    ``ModelError`` for a motor whose position is a Python callable."""
+    A motor whose position is a Python callable runs ``SLOT`` programs: its values come from
+    the motor callback of ``codegen/callbacks.py`` (``expressions_c.position_programs``)."""
     constraints = formulation.constraints
     topology = kernel.topology
     nc = 0 if constraints is None else constraints.nc
@@ -74,7 +71,7 @@ def row_tables(formulation, kernel, rows, offsets: dict | None, contacts: tuple 
     data = np.zeros((len(rows), DATA_DOUBLES))
     programs: list[np.ndarray] = []
     start = 0
-    compiled = motor_programs(formulation)
+    compiled = position_programs(constraints)[0] if constraints is not None else {}
     for k, r in enumerate(rows):
         spec[k, 4] = -1
         if r >= nc:
@@ -92,10 +89,7 @@ def row_tables(formulation, kernel, rows, offsets: dict | None, contacts: tuple 
                 raise SimulationError(f"motor {constraints.owner[r]!r}: no start value for its coordinate")
             data[k] = (speed, offsets[r])
             continue
-        program = compiled.get(r)
-        if program is None:
-            raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
-                                                           "evaluated in compiled code")
+        program = compiled[r]
         spec[k, 4] = start
         programs.append(program)
         start += len(program)

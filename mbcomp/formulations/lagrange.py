@@ -236,13 +236,6 @@ class LagrangeFormulation(Formulation):
     def compiled_loop(self) -> str | None:
         if self.constraints is None:
             return None
-        topology = self.compiled.topology
-        from mbcomp.codegen.expressions_c import NotCompilable
-        from mbcomp.formulations.lagrange_compiled import motor_programs
-        try:
-            motor_programs(self.constraints)  # positions given as expressions of t run in C
-        except NotCompilable as exc:
-            return str(exc)
         if not self.compiled.reduced_loop:
             return "the compiled library has no reduced loop for this model"
         if self.nominal_rows is None:

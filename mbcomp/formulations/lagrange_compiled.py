@@ -24,7 +24,8 @@ integrate: ``prescribed`` evaluates the motion at the output times in C.
 Motors that prescribe their position by an expression of t (``expressions.Expression``, as
 model files give it) run in C as postfix programs (``expressions_c.py``: the expression and its
 exact first and second derivatives, ``motor_programs``); a position given as a Python
-callable keeps the run in Python stepping (``LagrangeFormulation.compiled_loop`` says so).
+callable runs too, its values ``s, s', s''`` called back from C once per evaluated time
+(``codegen/callbacks.py``, the values Python stepping uses).
 """
 from __future__ import annotations
 
@@ -34,8 +35,8 @@ import numpy as np
 
 from mbcomp.core.errors import SimulationError
 from mbcomp.core.statemap import Chart
-from mbcomp.codegen.expressions_c import NotCompilable, programs as compile_programs
-from mbcomp.codegen.callbacks import constant_tau
+from mbcomp.codegen.expressions_c import position_programs
+from mbcomp.codegen.callbacks import constant_tau, raise_pending
 from mbcomp.codegen.integrators import PAUSED, TRIAL_FAILED, bind_reduced
 from mbcomp.formulations.compiled_watch import ContactWatching, EventStepFunctions, pointer
 from mbcomp.formulations.friction import has_friction
@@ -54,28 +55,14 @@ def motor_programs(constraints) -> tuple[np.ndarray, np.ndarray] | None:
     """The programs (``expressions_c``) of the motors that prescribe their position (None when
     there are none): ``(prog, programs)``, motor row r's programs start at ``programs[prog[r]]``
     (nc entries, -1 for other rows): the position s (m or rad), s' (per s) and s'' (per s^2)
-    one after the other, the exact derivatives Python stepping uses (``ConstraintSet``).
-    ``NotCompilable`` (naming the motor) for a position given as a Python callable or an
-    expression the C evaluator cannot run."""
+    one after the other, the exact derivatives Python stepping uses (``ConstraintSet``); a
+    position given as a Python callable runs ``SLOT`` programs, whose values the motor
+    callback (``codegen/callbacks.py``) fills with what Python stepping uses
+    (``expressions_c.position_programs``)."""
     prog = np.full(constraints.nc, -1, dtype=np.int64)
     parts: list[np.ndarray] = []
     size = 0
-    for r in constraints.coordinate_rows:
-        eq = constraints.equations[r]
-        if eq.speed is not None:
-            continue
-        name = constraints.owner[r]
-        exact = constraints.exact_derivatives.get(r)
-        nodes = [getattr(f, "node", None) for f in (eq.position, *(exact or ()))]
-        if exact is None or any(node is None for node in nodes):
-            raise NotCompilable(f"Motor {name!r}", "prescribes its position by a Python callable, which is evaluated in "
-                                "Python (a position given as an expression of t, as model files write it, runs "
-                                "compiled)")
-        try:
-            part = compile_programs(nodes, "")
-        except NotCompilable as exc:
-            raise NotCompilable(f"Motor {name!r}", f"its position expression is evaluated in Python "
-                                f"({exc})") from None
+    for r, part in sorted(position_programs(constraints)[0].items()):
         prog[r] = size
         parts.append(part)
         size += part.size
@@ -199,6 +186,7 @@ class ReducedRun(ContactWatching):
         t = float(self.info[1])
         if t != t or self.programs is None:
             return
+        raise_pending()  # (a callable motor's own error, kept by the motor callback)
         self.formulation.constraints.explain_position_failure(np.flatnonzero(self.programs[0] >= 0), t)
 
     def failure_hint(self, status: int) -> str | None:

@@ -3,8 +3,8 @@ compiled right-hand side, and why.
 
 The compiled loop is the product path: every model whose forces, drives and motors are
 expressions runs there in either formulation, and so does a model with Python callables
-(callable forces or torques, drive signals, a callable ``tau``), which the loop calls back
-(``codegen/callbacks.py``).  A run leaves it only for a reason this module names
+(callable forces or torques, drive signals, a callable ``tau``, a motor's callable
+position), which the loop calls back (``codegen/callbacks.py``).  A run leaves it only for a reason this module names
 (``IntegrationPath.reason``): a scipy method asked for, a formulation option that steps in
 Python (``Formulation.compiled_loop``), a model compiled without a C compiler.  ``System.integration_path`` reports the choice.
 """

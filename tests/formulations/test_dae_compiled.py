@@ -122,20 +122,21 @@ def test_motor_program_rejects_what_it_cannot_run():
         node = ("+", ("t",), node)  # STACK + 1 entries on the stack
     with pytest.raises(mb.ModelError, match="stack"):
         compile_program(node)
-    assert compile_position(lambda t: t) is None  # a Python callable stays in Python
+    assert compile_position(lambda t: t) is None  # a Python callable: no program of its own
 
 
-def test_python_callable_motor_steps_in_python():
-    """A position given as a Python callable is evaluated in Python: scipy stepping, which
-    the compiled run of the same motion as a file expression reproduces."""
+def test_python_callable_motor_runs_compiled():
+    """A position given as a Python callable runs compiled, its values called back from C
+    (codegen/callbacks.py): the compiled run of the same motion as a file expression
+    reproduces it."""
     from conftest import fourbar
     crank = lambda t: 1.0 + 0.8 * np.sin(3 * t)
     system = fourbar(motor=mb.Motor("drive", "A", position=crank)).compile("dae")
-    assert "Python callable" in system.integration_path()
+    assert system.integration_path() == "compiled"
     q, qd = system.assemble([1.0, -0.5, 1.5])
     t = np.linspace(0.0, 1.0, 11)
     stepped = system.simulate(1.0, q, qd, t_eval=t, rtol=1e-10, atol=1e-12)
-    assert stepped.stats["integrator"] == "scipy"
+    assert stepped.stats["integrator"] == "compiled"
     text = "1.0 + 0.8*sin(3*t)"
     expression = Expression(text, parse_expression(text, {}, allow_t=True))
     compiled = fourbar(motor=mb.Motor("drive", "A", position=expression)).compile("dae")

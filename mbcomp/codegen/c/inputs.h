@@ -18,9 +18,41 @@ void set_input_hook(input_hook_t hook, double *state, double *u, double *tau, do
     mb_in_hook = hook; mb_in_state = state; mb_in_u = u; mb_in_tau = tau; mb_in_du = du;
 }
 
+/* Motors whose position is a Python callable: their programs read slots (MB_OP_SLOT of
+   program.h) of mb_mo_values, which a second callback fills with s, s', s'' of every such
+   motor at a time t (3 values a motor), called once per new time whatever C code evaluates
+   the motor rows (the loops' right-hand sides, Newton solves, event locators).  A failed
+   callback gives NaN (which the rows' code treats as a failed evaluation) and makes every
+   later mb_inputs fail, so the loop stops with MB_INPUT_FAILED. */
+static __thread input_hook_t mb_mo_hook = 0;
+static __thread double *mb_mo_values = 0;
+static __thread double mb_mo_time = NAN;   /* the time of the values in mb_mo_values */
+static __thread int mb_mo_failed = 0;
+
+void set_motor_hook(input_hook_t hook, double *values) {
+    mb_mo_hook = hook; mb_mo_values = values; mb_mo_time = NAN; mb_mo_failed = 0;
+}
+
+/* Slot k of the callable motors' values at time t (NaN without a callback or after a failure). */
+static __attribute__((unused)) double mb_motor_slot(long k, double t) {
+    if (!mb_mo_hook || mb_mo_failed) return NAN;
+    if (t != mb_mo_time) {
+        if (mb_mo_hook(t)) {
+            mb_mo_failed = 1;
+            return NAN;
+        }
+        mb_mo_time = t;
+    }
+    return mb_mo_values[k];
+}
+
+/* Whether a right-hand side must call mb_inputs: callables to evaluate, or a failed motor callback. */
+#define MB_CALLBACKS (mb_in_hook || mb_mo_failed)
+
 /* The callables at (t, q, qd, z) (z: NULL keeps the last drive states): 0, or
-   MB_INPUT_FAILED when the callback failed. */
+   MB_INPUT_FAILED when the callback failed (or a callable motor's did). */
 static int mb_inputs(double t, const double *q, const double *qd, const double *z) {
+    if (mb_mo_failed) return MB_INPUT_FAILED;
     if (!mb_in_hook) return 0;
     for (int i = 0; i < NCOORD; ++i) mb_in_state[i] = q[i];
     for (int i = 0; i < NV; ++i) mb_in_state[NCOORD + i] = qd[i];

@@ -73,14 +73,17 @@ static int drive_rhs(double t, const double *y, double *f, const double *p, cons
    (inlined at every call: one call per evaluation, as before HAS_DRIVES was read at run time). */
 static inline __attribute__((always_inline)) int rhs(double t, const double *y, double *f, const double *p,
                                                      const double *tau, double *work) {
-    if (mb_in_hook) {  /* Python callables (inputs.h): evaluated once, at this state */
-        const int status = mb_inputs(t, y, y + NCOORD, y + NMECH);
+    int status;
+    if (MB_CALLBACKS) {  /* Python callables (inputs.h): evaluated once, at this state */
+        status = mb_inputs(t, y, y + NCOORD, y + NMECH);
         if (status) return status;
         double buf[NV + 1];
         const double *all = mb_input_tau(tau, buf);
-        return HAS_DRIVES ? drive_rhs(t, y, f, p, all, work) : mech_rhs(t, y, f, p, all, work);
+        status = HAS_DRIVES ? drive_rhs(t, y, f, p, all, work) : mech_rhs(t, y, f, p, all, work);
+    } else {
+        status = HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
     }
-    return HAS_DRIVES ? drive_rhs(t, y, f, p, tau, work) : mech_rhs(t, y, f, p, tau, work);
+    return mb_mo_failed ? MB_INPUT_FAILED : status;  /* (a callable motor's callback failed: inputs.h) */
 }
 /* The step hook: called with the simulated time about every `hook_interval` s of processor
    time (checked every 16 steps); a nonzero return stops the run (status -6).  Python sets it

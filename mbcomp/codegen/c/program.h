@@ -11,6 +11,7 @@ static __attribute__((unused)) double mb_program(const double **prog, double t) 
         switch (op) {
         case MB_OP_NUM: st[++sp] = pc[2 + 2 * k]; break;
         case MB_OP_TIME: st[++sp] = t; break;
+        case MB_OP_SLOT: st[++sp] = mb_motor_slot((long)pc[2 + 2 * k], t); break;  /* (inputs.h) */
         case MB_OP_NEG: st[sp] = -st[sp]; break;
         case MB_OP_SIN: st[sp] = sin(st[sp]); break;
         case MB_OP_COS: st[sp] = cos(st[sp]); break;

@@ -469,10 +469,11 @@ int lagrange_rhs(double t, const double *y, double *f, const double *p, const do
     const int nr = lag_nr, ni = lag_ni, nqi = lag_nqi, n = NQ;
     double *q = lag_q, *qd = lag_qd;
     int status = lagrange_full(t, y, q, qd, p);
+    if (mb_mo_failed) return MB_INPUT_FAILED;  /* a callable motor's callback failed (inputs.h) */
     if (status) return status;
     if (lag_values(t, q, qd, p)) return LAG_TRIAL;  /* the bias at these speeds (J, and J_d's factors, unchanged) */
     double tau_buf[NQ + 1];
-    if (mb_in_hook) {  /* Python callables (inputs.h) at this full state */
+    if (MB_CALLBACKS) {  /* Python callables (inputs.h) at this full state */
         if (mb_inputs(t, q, qd, lag_drives ? y + nqi + ni : 0)) return MB_INPUT_FAILED;
         tau = mb_input_tau(tau, tau_buf);
     }
