@@ -11,8 +11,8 @@ import numpy as np
 from mbcomp.core import c_text, tolerances
 from mbcomp.core.errors import ModelError
 from mbcomp.face.fmu.variables import SETTINGS, Table
-from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, ROW_GEOMETRIC, ROW_MOTOR, SPEC_LONGS
-from mbcomp.formulations.dae_compiled import motor_programs
+from mbcomp.formulations.dae_c import DATA_DOUBLES, ROW_CONTACT, SPEC_LONGS
+from mbcomp.formulations.dae_compiled import motor_programs, row_tables
 from mbcomp.formulations.impact import GAP_TOLERANCE
 
 _INCLUDE = re.compile(r'^#include "fmi2_decl\.h"$', re.M)
@@ -30,42 +30,23 @@ def _table(ctype: str, name: str, values) -> str:
 
 def dae_rows(system, formulation) -> tuple[np.ndarray, np.ndarray, list[int], np.ndarray]:
     """The KKT rows of the model's constraints as the dae formulation configures them
-    (``dae_compiled.DaeRows``): ``(spec, data, motor speed parameter, programs)``; the speed
+    (``dae_compiled.row_tables``): ``(spec, data, motor speed parameter, programs)``; the speed
     motor's entry is its speed's index in ``p`` (-1: fixed, -2: not a speed motor); its
-    offset (its coordinate at the start) is set when the FMU is initialised."""
+    offset (its coordinate at the start) is 0 here and set when the FMU is initialised.
+    ``ModelError`` for a motor whose position is a Python callable, which an FMU cannot call."""
     kernel = system.kernel
-    topology, layout = kernel.topology, kernel.compiled.layout
+    entries = kernel.compiled.layout.entries
     constraints = formulation.constraints
     rows = [] if constraints is None or formulation.nominal_rows is None else [int(r) for r in formulation.nominal_rows]
-    spec = np.zeros((len(rows), SPEC_LONGS), dtype=np.int64)
-    data = np.zeros((len(rows), DATA_DOUBLES))
-    speed_p: list[int] = []
-    programs: list[np.ndarray] = []
-    compiled = motor_programs(formulation) if rows else {}
-    start = 0
-    for k, r in enumerate(rows):
-        spec[k, 4] = -1
-        speed_p.append(-2)
-        if r not in constraints.coordinate_rows:
-            spec[k, :2] = (ROW_GEOMETRIC, constraints.geometric_rows.index(r))
-            continue
-        eq = constraints.equations[r]
-        joint = eq.joint if isinstance(eq.joint, str) else eq.joint.name
-        spec[k, :4] = (ROW_MOTOR, r, topology.q_slice[joint].start, topology.v_slice[joint].start)
-        speed = constraints.motor_speed(kernel, r)
-        if speed is not None:
-            data[k] = (speed, 0.0)
-            key = f"{constraints.owner[r]}.speed"
-            speed_p[-1] = layout.entries[key][0] if key in layout.entries else -1
-            continue
-        program = compiled.get(r)
-        if program is None:
+    callables = {r for r, program in motor_programs(formulation).items() if program is None}
+    for r in rows:
+        if r in callables:
             raise ModelError(constraints.groups_by_row(r), "its position is a Python callable: it cannot be "
                                                            "exported into an FMU (give it as an expression of t)")
-        spec[k, 4] = start
-        programs.append(np.asarray(program, dtype=float))
-        start += len(program)
-    return spec, data, speed_p, (np.concatenate(programs) if programs else np.zeros(0))
+    speeds = {r: constraints.motor_speed(kernel, r) for r in rows if r in constraints.coordinate_rows}
+    speed_p = [-2 if speeds.get(r) is None else entries.get(f"{constraints.owner[r]}.speed", (-1,))[0] for r in rows]
+    spec, data, programs = row_tables(formulation, kernel, rows, {r: 0.0 for r, v in speeds.items() if v is not None})
+    return spec, data, speed_p, programs if (spec[:, 4] >= 0).any() else np.zeros(0)  # (row_tables pads with 0)
 
 
 def restitution_indices(system) -> list[int]:
