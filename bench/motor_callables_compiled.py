@@ -21,7 +21,6 @@ import sys
 
 import numpy as np
 
-import mbcomp as mb
 from mbcomp.core.run_options import RunOptions
 from mbcomp.run.paths import IntegrationPath
 from mbcomp.run.simulate import run_steps
@@ -29,45 +28,11 @@ from mbcomp.run.stats import Counts
 from mbcomp.run.stepping import ScipyStepping
 
 sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), os.pardir, "tests"))
 from models import interleaved_medians  # noqa: E402
+from test_motor_callables_compiled import A1, W, ExactLaw, law, linkage  # noqa: E402  (the tests' linkage and laws)
 
 T_END = 5.0
-G = 9.81
-A0, A1, W = 1.0, 0.5, 2.0  # the crank's law A0 + A1 sin(W t)
-
-
-def law(t):
-    return A0 + A1 * np.sin(W * t)
-
-
-class ExactLaw:
-    """``law`` with exact derivatives (``diff()``)."""
-
-    def __init__(self, order: int = 0):
-        self.order = order
-
-    def __call__(self, t):
-        return (A0 + A1 * np.sin(W * t), A1 * W * np.cos(W * t), -A1 * W * W * np.sin(W * t))[self.order]
-
-    def diff(self):
-        return ExactLaw(self.order + 1)
-
-
-def bar(name: str, length: float) -> mb.Body:
-    return mb.Body(name, mass=1.0, com=(length / 2, 0, 0), inertia=(1e-4, length ** 2 / 12, length ** 2 / 12))
-
-
-def linkage(position, name: str) -> mb.Model:
-    m = mb.Model(name, gravity=(0, -G, 0))
-    crank, coupler, rocker = (m.add(bar(n, L)) for n, L in (("crank", 0.3), ("coupler", 0.8), ("rocker", 0.6)))
-    bob = m.add(bar("bob", 0.4))
-    m.add(mb.Revolute("A", m.ground, crank, axis="z"))
-    m.add(mb.Revolute("B", crank, coupler, axis="z", parent_point=(0.3, 0, 0)))
-    m.add(mb.Revolute("D", m.ground, rocker, axis="z", parent_point=(0.7, 0, 0)))
-    m.add(mb.Revolute("C", coupler, rocker, axis="z", parent_point=(0.8, 0, 0), child_point=(0.6, 0, 0)))
-    m.add(mb.Revolute("E", coupler, bob, axis="z", parent_point=(0.4, 0, 0)))
-    m.add(mb.Motor("drive", "A", position=position))
-    return m
 
 
 def old_path(system, q0, qd0):
