@@ -287,3 +287,7 @@ def test_auto_choice_for_constrained_models():
     assert recursive.choose("auto", topology, formulation="dae") == "recursive"
     small = structure(chain_on_rail(3))
     assert recursive.choose("auto", small, formulation="dae") == "dense"
+    # with contacts the dense KKT solve, which takes their friction rows in the compiled loop
+    touching = chain_on_rail(recursive.DAE_CROSSOVER_NV)
+    touching.add(mb.Contact("floor", "link0", (0, 0, -0.5), normal=(0, 0, 1), friction=0.3, radius=0.05))
+    assert recursive.choose("auto", structure(touching), formulation="dae") == "dense"

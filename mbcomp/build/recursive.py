@@ -64,8 +64,10 @@ def choose(dynamics: str, topology, owner: str = "compile", formulation: str | N
     ``"auto"`` picks the recursive program for trees without constraints (closed loops,
     sliders, motors) with at least ``CROSSOVER_NV`` speeds, and for constrained models under
     the ``"dae"`` formulation with at least ``DAE_CROSSOVER_NV`` speeds (its compiled KKT solve
-    then applies ``M^-1`` by the recursion).  ``lagrange`` with constraints works on the dense
-    mass matrix: there the recursive program would only add compile time.
+    then applies ``M^-1`` by the recursion) and no contacts: the recursive KKT solve has no
+    friction rows, so a contact's friction (a parameter, which a run may turn on) would step
+    in Python.  ``lagrange`` with constraints works on the dense mass matrix: there the
+    recursive program would only add compile time.
     """
     if dynamics not in DYNAMICS:
         raise ModelError(owner, f"dynamics must be one of {', '.join(map(repr, DYNAMICS))}, got {dynamics!r}")
@@ -73,7 +75,8 @@ def choose(dynamics: str, topology, owner: str = "compile", formulation: str | N
         return dynamics
     if not topology.cut_joints and not topology.constraints:
         return "recursive" if topology.nv >= CROSSOVER_NV else "dense"
-    return "recursive" if formulation == "dae" and topology.nv >= DAE_CROSSOVER_NV else "dense"
+    return "recursive" if formulation == "dae" and topology.nv >= DAE_CROSSOVER_NV and not topology.contacts \
+        else "dense"
 
 
 #: Compile the dense ``dynamics`` function without optimisation when the recursive program
