@@ -396,10 +396,11 @@ class System:
 
     def _compiled_contact_solution(self, t: float, q: np.ndarray, qd: np.ndarray, applied, offsets: dict | None,
                                    contacts: tuple):
-        """``(qdd, lam, tangential)`` from the compiled KKT solve with the held ``contacts``
+        """``(qdd, lam, tangential, basis)`` from the compiled KKT solve with the held ``contacts``
         (and their friction modes: ``Formulation.compiled_solve``), or None where the Python
         solve answers (as ``_compiled_solution``; Painleve's paradox, a singular set of held
-        contacts).  One solver per set of contacts and modes, kept for the next call."""
+        contacts); ``basis``: the contacts' world bases, or None (``CompiledSolve.basis``).
+        One solver per set of contacts and modes, kept for the next call."""
         solvers = self.__dict__.get("_contact_solvers")
         if solvers is None:
             solvers = {}
@@ -411,7 +412,8 @@ class System:
             if len(solvers) >= 64:  # (a long run's sets: the oldest go)
                 solvers.pop(next(iter(solvers)))
             solver = solvers[key] = self._formulation.compiled_solve(self._kernel, contacts, q, qd)
-        return None if solver is None else solver.solution(t, q, qd, applied, offsets, contacts)
+        solved = None if solver is None else solver.solution(t, q, qd, applied, offsets, contacts)
+        return None if solved is None else (*solved, solver.basis)
 
     def contact_forces(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                        contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
@@ -426,7 +428,7 @@ class System:
         applied = self._applied(tau, t, q, qd, states)
         solved = self._compiled_contact_solution(t, q, qd, applied, offsets, closed) if closed else None
         if solved is not None:
-            return self._formulation.contact_forces_of(self._kernel, q, qd, solved[1], solved[2], closed)
+            return self._formulation.contact_forces_of(self._kernel, q, qd, solved[1], solved[2], closed, solved[3])
         return self._formulation.contact_forces(self._kernel, t, q, qd, applied, offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:

@@ -342,14 +342,19 @@ class Formulation:
             lam, tangential = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1], {}
         return self.contact_forces_of(kernel, q, qd, lam, tangential, contacts)
 
-    def contact_forces_of(self, kernel, q, qd, lam: np.ndarray, tangential: dict, contacts) -> dict[str, np.ndarray]:
+    def contact_forces_of(self, kernel, q, qd, lam: np.ndarray, tangential: dict, contacts,
+                          basis: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """``contact_forces`` from a solve's multipliers ``lam`` (the model's equations, then
         the held ``contacts``' normal rows) and its friction forces ``tangential`` (per
         contact with a mode, N in its tangent coordinates): each held contact's force on its
-        body (N, world), ``lam_n n + T^T lam_t``."""
-        from mbcomp.formulations.friction import plane_contact_rows, world_forces
+        body (N, world), ``lam_n n + T^T lam_t``.  ``basis``: the contacts' world bases
+        (k, 3, 3: rows n, t1, t2, as ``friction.plane_contact_rows`` gives them) when the
+        caller has them (a plane's is fixed)."""
+        from mbcomp.formulations.friction import ContactRows, plane_contact_rows, world_forces
         normal = lam[len(lam) - len(contacts):]
-        forces = world_forces(plane_contact_rows(kernel, q, qd, contacts), normal, tangential, list(contacts))
+        rows = plane_contact_rows(kernel, q, qd, contacts) if basis is None else \
+            ContactRows(None, None, None, basis, None, None)
+        forces = world_forces(rows, normal, tangential, list(contacts))
         names = [c.name for c in kernel.topology.contacts]
         return {names[i]: forces[r] for r, i in enumerate(contacts)}
 

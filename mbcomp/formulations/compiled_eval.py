@@ -31,7 +31,7 @@ from mbcomp.core.tolerances import REST_SPEED
 from mbcomp.codegen.expressions_c import fill_slots, python_positions
 from mbcomp.formulations.compiled_watch import pointer
 from mbcomp.formulations.dae_compiled import row_tables
-from mbcomp.formulations.friction import has_friction
+from mbcomp.formulations.friction import has_friction, plane_contact_rows
 from mbcomp.formulations.friction_c import FrictionRows, compiled_friction_problem
 
 _VOID, _INT, _DBL = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
@@ -77,6 +77,12 @@ class CompiledSolve:
         size = lib.rhs_work_size
         size.argtypes, size.restype = [], ctypes.c_long
         self.work_size = max(int(size()), 1)
+        #: the held contacts' world bases (rows n, t1, t2): fixed for points on world planes
+        #: (None where another source gives contact rows, mb.Collision's: per call)
+        self.basis = None
+        if self.contacts and q is not None and getattr(kernel, "tangent_rows", None) is None:
+            self.basis = plane_contact_rows(kernel, np.asarray(q, dtype=float), np.asarray(qd, dtype=float),
+                                            self.contacts, normal_rows=False).basis
         self.friction_rows = None
         if self.friction:  # the held contacts' friction modes (friction.h), passed with each call
             self.friction_rows = FrictionRows(kernel, lib, contacts, {i: self.nc + r for r, i in enumerate(self.contacts)},
