@@ -377,8 +377,9 @@ class System:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
-        and the normal force (N) of each contact in ``contacts`` held closed.  Without held
-        contacts the multipliers come from the compiled KKT solve, as in ``accelerations``."""
+        and the normal force (N) of each contact in ``contacts`` held closed.  The multipliers
+        come from the compiled KKT solve, as in ``accelerations`` (with held contacts their
+        rows and friction modes too: ``contact_forces``)."""
         if tau is None and states is None and offsets is None and not contacts and \
                 (self._fast or self._bind_fast())[1].check(q, qd):
             return {}  # a tree without drive elements and no contact held closed: no reactions
