@@ -28,6 +28,7 @@ static __thread double dae_time = 0.0;            /* the time of the state being
 static __thread int dae_has_geo, dae_has_contacts, dae_has_collisions;
 static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
 static __thread int dae_dropped = 0;              /* the last Gram solve dropped a direction */
+static __thread int dae_quat_project = 0;         /* dae_project on quaternion coordinates (per run) */
 
 /* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
 double dae_motor_failure(void) {
@@ -54,7 +55,36 @@ int dae_configure_rows(int nr, const long *spec, const double *data, const doubl
     dae_bad_time = NAN;
     dae_alpha = alpha; dae_beta = beta; dae_scale = scale; dae_tol = tol;
     if (nr >= 0) dae_scan();
+    else dae_quat_project = 0;  /* (switched off with the rows) */
     return 0;
+}
+
+/* Whether the compiled DOP853 loop projects a model with quaternion coordinates after each
+   accepted step (on: 1; the run's projection=True, set by Python after configuring the
+   rows, switched off with them).  Models without quaternions are projected whatever this. */
+void dae_quaternion_projection(int on) {
+    dae_quat_project = on != 0;
+}
+
+/* q moved by the step dv in speed space (NQ), as core/statemap.py StateMap.integrate: screw
+   coordinates by q + dv; each quaternion by q exp(phi / 2), phi the rotation vector of its
+   three speeds (rotated frame: the angular velocity's convention, q' = q (0, w) / 2), composed
+   on the right and normalised. */
+void dae_quaternion_step(double *q, const double *dv) {
+    for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] += dv[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) {
+        double *a = q + QUAT_Q[k];
+        const double *phi = dv + QUAT_V[k];
+        const double angle = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
+        const double s = angle < 1e-4 ? 0.5 - angle * angle / 48 : sin(angle / 2) / angle;
+        const double bw = cos(angle / 2), bx = s * phi[0], by = s * phi[1], bz = s * phi[2];
+        const double r0 = a[0] * bw - a[1] * bx - a[2] * by - a[3] * bz;
+        const double r1 = a[0] * bx + bw * a[1] + a[2] * bz - a[3] * by;
+        const double r2 = a[0] * by + bw * a[2] + a[3] * bx - a[1] * bz;
+        const double r3 = a[0] * bz + bw * a[3] + a[1] * by - a[2] * bx;
+        const double n = sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3);
+        a[0] = r0 / n; a[1] = r1 / n; a[2] = r2 / n; a[3] = r3 / n;
+    }
 }
 
 /* Geometric rows only (models without motors): rows are indices of the generated constraints. */
@@ -281,13 +311,14 @@ int dae_evaluate(int nr, const long *spec, const double *data, const double *pro
     return status;
 }
 
-/* Move y = [q, qd] back onto the constraints after an accepted step at dae_time: positions
-   by Newton (minimum-norm steps on the configured rows), speeds by the mass-orthogonal
-   projection onto J qd + g_t = 0.  Returns 1 when y changed (the caller re-evaluates its
-   derivative). */
+/* Move y = [q (NCOORD), qd (NQ)] back onto the constraints after an accepted step at
+   dae_time: positions by Newton (minimum-norm steps -J^T (J J^T)^-1 g on the configured rows,
+   in speed space; with quaternions applied by dae_quaternion_step), speeds by the
+   mass-orthogonal projection onto J qd + g_t = 0.  Returns 1 when y changed (the caller
+   re-evaluates its derivative). */
 int dae_project(double *y, const double *p, const double *u, double *work) {
     const int n = NQ, nr = dae_nr;
-    double *q = y, *qd = y + NQ;
+    double *q = y, *qd = y + NCOORD;
     double *L = work + DYNAMICS_MASS_MATRIX_OFF;
     const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ;
     double *Y = work + DAE_SOLVE_OFF, *A = Y + n * DAE_NR;
@@ -308,10 +339,19 @@ int dae_project(double *y, const double *p, const double *u, double *work) {
             }
         for (int k = 0; k < nr; ++k) r[k] = g[k];
         if (dae_gram_solve(A, r, lam, nr, 0.0) < 0) return changed;
-        for (int i = 0; i < n; ++i) {
-            double s = 0.0;
-            for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
-            q[i] -= s;
+        if (MB_HAS_QUAT) {
+            for (int i = 0; i < n; ++i) {
+                double s = 0.0;
+                for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
+                dq[i] = -s;
+            }
+            dae_quaternion_step(q, dq);
+        } else {
+            for (int i = 0; i < n; ++i) {
+                double s = 0.0;
+                for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
+                q[i] -= s;
+            }
         }
         changed = 1;
     }
