@@ -12,6 +12,7 @@
 #include "brentq.h"
 #include "least_norm.h"
 #include "cholesky.h"
+#include "quaternion.h"
 #include "friction.h"
 /* defined below, or after this code by the recursive program (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
@@ -73,17 +74,9 @@ void dae_quaternion_projection(int on) {
 void dae_quaternion_step(double *q, const double *dv) {
     for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] += dv[SCREW_V[i]];
     for (int k = 0; k < NQUAT; ++k) {
-        double *a = q + QUAT_Q[k];
-        const double *phi = dv + QUAT_V[k];
-        const double angle = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
-        const double s = angle < 1e-4 ? 0.5 - angle * angle / 48 : sin(angle / 2) / angle;
-        const double bw = cos(angle / 2), bx = s * phi[0], by = s * phi[1], bz = s * phi[2];
-        const double r0 = a[0] * bw - a[1] * bx - a[2] * by - a[3] * bz;
-        const double r1 = a[0] * bx + bw * a[1] + a[2] * bz - a[3] * by;
-        const double r2 = a[0] * by + bw * a[2] + a[3] * bx - a[1] * bz;
-        const double r3 = a[0] * bz + bw * a[3] + a[1] * by - a[2] * bx;
-        const double n = sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3);
-        a[0] = r0 / n; a[1] = r1 / n; a[2] = r2 / n; a[3] = r3 / n;
+        double r[4];
+        mb_qstep(q + QUAT_Q[k], dv + QUAT_V[k], r);
+        for (int i = 0; i < 4; ++i) q[QUAT_Q[k] + i] = r[i];
     }
 }
 
