@@ -8,28 +8,14 @@ import ctypes
 import numpy as np
 import pytest
 
-import mbcomp as mb
+from components.test_ball_free import rssr
 
 _DBL_P = ctypes.POINTER(ctypes.c_double)
 
 
-def _rssr(**options) -> mb.System:
-    """A spatial four-bar (tests/components/test_ball_free.py): crank (revolute about z) -
-    coupler on a Ball - rocker (revolute about x), closed on the rocker by a second Ball."""
-    m = mb.Model("rssr", gravity=(0, 0, -9.81))
-    crank = m.add(mb.Body("crank", mass=0.5, com=(0.05, 0, 0), inertia=(1e-4, 4e-4, 4e-4)))
-    coupler = m.add(mb.Body("coupler", mass=0.8, com=(0.15, 0.1, 0.1), inertia=(3e-3, 3e-3, 1e-3)))
-    rocker = m.add(mb.Body("rocker", mass=0.6, com=(0, 0, 0.1), inertia=(2e-3, 2e-3, 1e-4)))
-    m.add(mb.Revolute("crank_pivot", m.ground, crank, axis="z"))
-    m.add(mb.Ball("crank_ball", crank, coupler, parent_point=(0.1, 0, 0)))
-    m.add(mb.Revolute("rocker_pivot", m.ground, rocker, axis="x", parent_point=(0.3, 0.2, 0.0)))
-    m.add(mb.Ball("rocker_ball", coupler, rocker, parent_point=(0.3, 0.2, 0.2), child_point=(0, 0, 0.2)))
-    return m.compile(formulation="dae", **options)
-
-
 @pytest.fixture(scope="module")
 def systems():
-    projected, plain = _rssr(projection=True), _rssr()
+    projected, plain = rssr("dae", projection=True), rssr("dae")
     q0 = projected.state_vector({"crank_pivot": 0.0, "rocker_pivot": 0.0})
     v0 = np.zeros(projected.nv)
     v0[0] = 2.0
