@@ -10,7 +10,7 @@ from mbcomp.core.errors import ModelError, SimulationError
 from mbcomp.codegen.callbacks import raise_pending
 from mbcomp.formulations.base import Formulation, Workspace
 from mbcomp.formulations.dae_c import c_dae_accelerations
-from mbcomp.formulations.dae_compiled import DaeRows, DaeRun
+from mbcomp.formulations.dae_compiled import DaeRows, DaeRun, set_quaternion_projection
 from mbcomp.formulations.friction import has_friction
 
 #: Default Baumgarte gains (alpha, beta) in 1/s: critically damped constraint error with a
@@ -66,9 +66,6 @@ class DaeFormulation(Formulation):
     def compiled_loop(self) -> str | None:
         if self.constraints is None and not self.compiled.contact_rows:
             return None
-        if self.projection and self.compiled.topology.state_map.quat_q.size:
-            return ("projection=True on quaternion coordinates (Ball, Free joints) steps in Python (the compiled "
-                    "loop's projection moves the coordinates additively)")
         if self.constraints is not None and self.nominal_rows is None:
             return "no consistent configuration was found at compile time"
         return None
@@ -90,7 +87,9 @@ class DaeFormulation(Formulation):
         """The compiled loops: with ``projection=True`` only DOP853, whose loop moves the state
         back onto the constraints after every accepted step (``dae_project``, c/dae.c: positions
         by Newton to ``PROJECTION_RESIDUAL``, speeds mass-orthogonally; it does so whatever this
-        option, for models without quaternion coordinates); the fixed-step RK4 loop does not."""
+        option for models without quaternion coordinates, and on quaternion coordinates (each
+        rotated by the exp-map of its step, as ``StateMap.integrate``) only with it); the
+        fixed-step RK4 loop does not."""
         return ("DOP853",) if self.projection else ("DOP853", "RK4")
 
     def compiled_friction_problem(self) -> str | None:
@@ -152,6 +151,7 @@ class DaeFormulation(Formulation):
         alpha, beta = self.baumgarte
         configure(len(rows), rows.ctypes.data, alpha, beta, self.schur_scale,
                   self.singular_tolerance)
+        set_quaternion_projection(lib, self)
         try:
             yield
         finally:

@@ -97,6 +97,17 @@ def row_tables(formulation, kernel, rows, offsets: dict | None, contacts: tuple 
             np.ascontiguousarray(np.concatenate(programs) if programs else np.zeros(1)))
 
 
+def set_quaternion_projection(lib, formulation) -> None:
+    """Tell this thread's compiled dae code whether its DOP853 loop projects a model with
+    quaternion coordinates after each accepted step (``dae_quaternion_projection``, c/dae.c):
+    on only with the run's ``projection=True`` (models without quaternions are projected
+    whatever this).  Call after configuring the rows: switching them off switches it off."""
+    on = bool(formulation.projection) and formulation.compiled.topology.state_map.quat_q.size > 0
+    switch = lib.dae_quaternion_projection
+    switch.argtypes, switch.restype = [_INT], None
+    switch(int(on))
+
+
 class DaeRows:
     """The configured KKT rows of one compiled dae run: ``rows`` are equation indices of
     the formulation's constraints (``nc`` and on: the held contacts, in ``contacts`` order).
@@ -111,6 +122,7 @@ class DaeRows:
         if configure(self.nr, _ptr(self.spec), _ptr(self.data), _ptr(self.programs), alpha, beta,
                      float(formulation.schur_scale), float(formulation.singular_tolerance)):
             raise SimulationError(f"the compiled dae solve has room for fewer rows than {self.nr}")
+        set_quaternion_projection(lib, formulation)
 
     def close(self) -> None:
         self.lib.dae_configure_rows(-1, None, None, None, 0.0, 0.0, 0.0, 0.0)

@@ -138,7 +138,7 @@ def test_free_body_torque_free_dzhanibekov_flip(integrator):
     np.testing.assert_allclose(result["float_z"], 0.3 - 0.2 * result.t, atol=1e-9)
 
 
-def _rssr(formulation: str) -> mb.System:
+def rssr(formulation: str, **options) -> mb.System:
     """A spatial four-bar: crank (revolute about z) - coupler on a Ball - rocker (revolute
     about x), the coupler closing the loop on the rocker through a second Ball."""
     m = mb.Model("rssr", gravity=(0, 0, -9.81))
@@ -149,11 +149,11 @@ def _rssr(formulation: str) -> mb.System:
     m.add(mb.Ball("crank_ball", crank, coupler, parent_point=(0.1, 0, 0)))
     m.add(mb.Revolute("rocker_pivot", m.ground, rocker, axis="x", parent_point=(0.3, 0.2, 0.0)))
     m.add(mb.Ball("rocker_ball", coupler, rocker, parent_point=(0.3, 0.2, 0.2), child_point=(0, 0, 0.2)))
-    return m.compile(formulation=formulation)
+    return m.compile(formulation=formulation, **options)
 
 
 def test_both_formulations_agree_on_a_loop_through_balls():
-    lag, dae = _rssr("lagrange"), _rssr("dae")
+    lag, dae = rssr("lagrange"), rssr("dae")
     assert lag.ndof == dae.ndof == 2  # the crank angle and the coupler's spin about its axis
     q0 = lag.state_vector({"crank_pivot": 0.0, "rocker_pivot": 0.0})
     v0 = np.zeros(lag.nv)

@@ -206,8 +206,8 @@ int @RUN@(const double *p, const double *tau, double *state, double *y, double *
         mb_copy(y, y_new, sizeof(double) * LOOP_NY);
         mb_copy(f, K + 12 * LOOP_NY, sizeof(double) * LOOP_NY);
 #endif
-#if defined(DAE_LOOP) && !LOOP_REDUCED  /* (the projection steps q additively: not for quaternions, which Baumgarte alone holds) */
-        if (!MB_HAS_QUAT && dae_nr > 0 && (dae_time = t, dae_project(y, p, mb_input_u(), work))) {  /* back onto the constraints */
+#if defined(DAE_LOOP) && !LOOP_REDUCED  /* (quaternion coordinates: only when the run asked projection=True) */
+        if ((!MB_HAS_QUAT || dae_quat_project) && dae_nr > 0 && (dae_time = t, dae_project(y, p, mb_input_u(), work))) {  /* back onto the constraints */
             RHS_OR_FAIL(LOOP_RHS(t, y, f));
             counts[0] += 1;
         }

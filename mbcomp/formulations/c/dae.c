@@ -12,6 +12,7 @@
 #include "brentq.h"
 #include "least_norm.h"
 #include "cholesky.h"
+#include "quaternion.h"
 #include "friction.h"
 /* defined below, or after this code by the recursive program (recursive.c_dae) */
 int dae_accelerations(const double *q, const double *qd, const double *p, const double *u,
@@ -28,6 +29,7 @@ static __thread double dae_time = 0.0;            /* the time of the state being
 static __thread int dae_has_geo, dae_has_contacts, dae_has_collisions;
 static __thread double dae_bad_time = NAN;        /* first time a motor program was not finite */
 static __thread int dae_dropped = 0;              /* the last Gram solve dropped a direction */
+static __thread int dae_quat_project = 0;         /* dae_project on quaternion coordinates (per run) */
 
 /* The time a position motor's program first gave a non-finite value since configuring (NaN: never). */
 double dae_motor_failure(void) {
@@ -54,7 +56,28 @@ int dae_configure_rows(int nr, const long *spec, const double *data, const doubl
     dae_bad_time = NAN;
     dae_alpha = alpha; dae_beta = beta; dae_scale = scale; dae_tol = tol;
     if (nr >= 0) dae_scan();
+    else dae_quat_project = 0;  /* (switched off with the rows) */
     return 0;
+}
+
+/* Whether the compiled DOP853 loop projects a model with quaternion coordinates after each
+   accepted step (on: 1; the run's projection=True, set by Python after configuring the
+   rows, switched off with them).  Models without quaternions are projected whatever this. */
+void dae_quaternion_projection(int on) {
+    dae_quat_project = on != 0;
+}
+
+/* q moved by the step dv in speed space (NQ), as core/statemap.py StateMap.integrate: screw
+   coordinates by q + dv; each quaternion by q exp(phi / 2), phi the rotation vector of its
+   three speeds (rotated frame: the angular velocity's convention, q' = q (0, w) / 2), composed
+   on the right and normalised. */
+void dae_quaternion_step(double *q, const double *dv) {
+    for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] += dv[SCREW_V[i]];
+    for (int k = 0; k < NQUAT; ++k) {
+        double r[4];
+        mb_qstep(q + QUAT_Q[k], dv + QUAT_V[k], r);
+        for (int i = 0; i < 4; ++i) q[QUAT_Q[k] + i] = r[i];
+    }
 }
 
 /* Geometric rows only (models without motors): rows are indices of the generated constraints. */
@@ -306,13 +329,14 @@ int dae_evaluate_friction(int nf, int cap, const double *fdata, double *fout, do
                              p, tau, t, q, qd, qdd, lam, work);
 }
 
-/* Move y = [q, qd] back onto the constraints after an accepted step at dae_time: positions
-   by Newton (minimum-norm steps on the configured rows), speeds by the mass-orthogonal
-   projection onto J qd + g_t = 0.  Returns 1 when y changed (the caller re-evaluates its
-   derivative). */
+/* Move y = [q (NCOORD), qd (NQ)] back onto the constraints after an accepted step at
+   dae_time: positions by Newton (minimum-norm steps -J^T (J J^T)^-1 g on the configured rows,
+   in speed space; with quaternions applied by dae_quaternion_step), speeds by the
+   mass-orthogonal projection onto J qd + g_t = 0.  Returns 1 when y changed (the caller
+   re-evaluates its derivative). */
 int dae_project(double *y, const double *p, const double *u, double *work) {
     const int n = NQ, nr = dae_nr;
-    double *q = y, *qd = y + NQ;
+    double *q = y, *qd = y + NCOORD;
     double *L = work + DYNAMICS_MASS_MATRIX_OFF;
     const double *g = work + DAE_ROWS_OFF, *J = g + DAE_NR, *gt = J + DAE_NR * NQ;
     double *Y = work + DAE_SOLVE_OFF, *A = Y + n * DAE_NR;
@@ -333,10 +357,19 @@ int dae_project(double *y, const double *p, const double *u, double *work) {
             }
         for (int k = 0; k < nr; ++k) r[k] = g[k];
         if (dae_gram_solve(A, r, lam, nr, 0.0) < 0) return changed;
-        for (int i = 0; i < n; ++i) {
-            double s = 0.0;
-            for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
-            q[i] -= s;
+        if (MB_HAS_QUAT) {
+            for (int i = 0; i < n; ++i) {
+                double s = 0.0;
+                for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
+                dq[i] = -s;
+            }
+            dae_quaternion_step(q, dq);
+        } else {
+            for (int i = 0; i < n; ++i) {
+                double s = 0.0;
+                for (int k = 0; k < nr; ++k) s += J[k * NQ + i] * lam[k];
+                q[i] -= s;
+            }
         }
         changed = 1;
     }

@@ -9,6 +9,7 @@
 #include "brentq.h"
 #include "least_norm.h"
 #include "cholesky.h"
+#include "quaternion.h"
 static __thread int lag_on = 0, lag_nc, lag_nr, lag_ni;
 static __thread const long *lag_geo, *lag_mq, *lag_mv, *lag_rows, *lag_dep, *lag_ind;
 /* the coordinates' partition: Newton on the position rows lag_prows (npr) for the dependent
@@ -45,28 +46,10 @@ int lagrange_chart(const double *base, double limit) {
     return 0;
 }
 
-/* Hamilton product out = a b (out may not alias a or b). */
-static void lag_qmul(const double *a, const double *b, double *out) {
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
-    out[1] = a[0] * b[1] + b[0] * a[1] + a[2] * b[3] - a[3] * b[2];
-    out[2] = a[0] * b[2] + b[0] * a[2] + a[3] * b[1] - a[1] * b[3];
-    out[3] = a[0] * b[3] + b[0] * a[3] + a[1] * b[2] - a[2] * b[1];
-}
-
-/* out = a exp(phi / 2), normalised (statemap.StateMap.integrate on one quaternion). */
-static void lag_qstep(const double *a, const double *phi, double *out) {
-    const double angle = sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]);
-    const double k = angle < 1e-4 ? 0.5 - angle * angle / 48 : sin(angle / 2) / angle;
-    const double step[4] = {cos(angle / 2), k * phi[0], k * phi[1], k * phi[2]};
-    lag_qmul(a, step, out);
-    const double n = sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3]);
-    for (int i = 0; i < 4; ++i) out[i] /= n;
-}
-
 /* q (NCOORD) of the chart coordinates x (NV). */
 static void lag_to_q(const double *x, double *q) {
     for (int i = 0; i < NSCREW; ++i) q[SCREW_Q[i]] = x[SCREW_V[i]];
-    for (int k = 0; k < NQUAT; ++k) lag_qstep(lag_base + QUAT_Q[k], x + QUAT_V[k], q + QUAT_Q[k]);
+    for (int k = 0; k < NQUAT; ++k) mb_qstep(lag_base + QUAT_Q[k], x + QUAT_V[k], q + QUAT_Q[k]);
 }
 
 /* The chart coordinates x (NV) of q (NCOORD): the rotation vector of base^-1 q (the
@@ -80,7 +63,7 @@ static void lag_to_x(const double *q, double *x) {
         const double ac[4] = {a[0] / na, -a[1] / na, -a[2] / na, -a[3] / na};
         const double bn[4] = {b[0] / nb, b[1] / nb, b[2] / nb, b[3] / nb};
         double r[4];
-        lag_qmul(ac, bn, r);
+        mb_qmul(ac, bn, r);
         if (r[0] < 0) for (int i = 0; i < 4; ++i) r[i] = -r[i];
         const double n = sqrt(r[1] * r[1] + r[2] * r[2] + r[3] * r[3]);
         const double scale = n < 1e-12 ? 2.0 / (r[0] > 1e-300 ? r[0] : 1e-300) : 2.0 * atan2(n, r[0]) / n;
@@ -355,7 +338,7 @@ int lagrange_full(double t, const double *y, double *q, double *qd, const double
         for (int k = 0; k < NQUAT; ++k) {
             double phi[3];
             for (int i = 0; i < 3; ++i) phi[i] = v0[QUAT_V[k] + i] * dt;
-            lag_qstep(q0 + QUAT_Q[k], phi, q + QUAT_Q[k]);
+            mb_qstep(q0 + QUAT_Q[k], phi, q + QUAT_Q[k]);
         }
         lag_to_x(q, x);
         for (int k = 0; k < nqi; ++k) x[lag_qind[k]] = y[k];
