@@ -206,3 +206,20 @@ def test_painleve_raises_the_python_solves_error_and_a_dependent_set_is_the_pyth
     assert solver.solution(0.0, q, qd, None) is None  # (the C refuses the dependent pair at rest)
     expected = ball._formulation.contact_forces(ball.kernel, 0.0, q, qd, None, None, (0, 0))
     assert_relative(ball.contact_forces(q, qd, contacts=(0, 0))["floor"], expected["floor"], 1e-12, "floor")
+
+
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_a_joint_limit_held_against_its_stop(formulation):
+    """A rod pushed by gravity against a hinge's upper stop at 0.3 rad: the stop's reaction
+    is the gravity torque m g l cos(0.3) (N m) in C as in the Python solve; its contact force
+    is zero (a joint limit has no point)."""
+    m = mb.Model("rod_stop", gravity=(0, G, 0))
+    rod = m.add(mb.Body("rod", mass=1.0, com=(0, 0, -0.5), inertia=(0.0, 0.0, 0.0)))
+    joint = m.add(mb.Revolute("hinge", m.ground, rod, axis="x", coords="th"))
+    m.add(mb.JointLimit("stop", joint, upper=0.3))
+    system = m.compile(formulation)
+    q, qd = np.array([0.3]), np.zeros(1)
+    held = ([c.name for c in system.topology.contacts].index("stop.upper"),)
+    assert_same_as_python(system, q, qd, 0.0, held)
+    assert system.reactions(q, qd, contacts=held)["stop.upper"] == pytest.approx(G * 0.5 * np.cos(0.3), rel=1e-12)
+    assert np.all(system.contact_forces(q, qd, contacts=held)["stop.upper"] == 0.0)
