@@ -377,8 +377,9 @@ class System:
         """``{constraint name: reaction}``: a motor's torque (N m) or force (N) along its
         coordinate; a slider's force (N) on the body along the line's two normals; a
         loop-closing joint's force on its child (N, world x y z) then its torques (N m);
-        and the normal force (N) of each contact in ``contacts`` held closed.  Without held
-        contacts the multipliers come from the compiled KKT solve, as in ``accelerations``."""
+        and the normal force (N) of each contact in ``contacts`` held closed.  The multipliers
+        come from the compiled KKT solve, as in ``accelerations`` (with held contacts their
+        rows and friction modes too: ``contact_forces``)."""
         if tau is None and states is None and offsets is None and not contacts and \
                 (self._fast or self._bind_fast())[1].check(q, qd):
             return {}  # a tree without drive elements and no contact held closed: no reactions
@@ -388,20 +389,48 @@ class System:
             isinstance(i, (int, np.integer)) for i in contacts) \
             else tuple(contact_indices(self._kernel, contacts)) if contacts else ()
         applied = self._applied(tau, t, q, qd, states)
-        solved = None if closed else self._compiled_solution(t, q, qd, applied, offsets)
+        solved = self._compiled_contact_solution(t, q, qd, applied, offsets, closed) if closed \
+            else self._compiled_solution(t, q, qd, applied, offsets)
         if solved is not None:
-            return self._formulation.reactions_of(self._kernel, q, solved[1])
+            return self._formulation.reactions_of(self._kernel, q, solved[1], closed)
         return self._formulation.reactions(self._kernel, t, q, qd, applied, offsets, closed)
+
+    def _compiled_contact_solution(self, t: float, q: np.ndarray, qd: np.ndarray, applied, offsets: dict | None,
+                                   contacts: tuple):
+        """``(qdd, lam, tangential, basis)`` from the compiled KKT solve with the held ``contacts``
+        (and their friction modes: ``Formulation.compiled_solve``), or None where the Python
+        solve answers (as ``_compiled_solution``; Painleve's paradox, a singular set of held
+        contacts); ``basis``: the contacts' world bases, or None (``CompiledSolve.basis``).
+        One solver per set of contacts and modes, kept for the next call."""
+        solvers = self.__dict__.get("_contact_solvers")
+        if solvers is None:
+            solvers = {}
+            object.__setattr__(self, "_contact_solvers", solvers)
+        key = (tuple(int(i) for i in contacts), tuple(sorted(getattr(contacts, "stick", ()))),
+               tuple(sorted(getattr(contacts, "slip", {}))))
+        solver = solvers.get(key, False)
+        if solver is False:
+            if len(solvers) >= 64:  # (a long run's sets: the oldest go)
+                solvers.pop(next(iter(solvers)))
+            solver = solvers[key] = self._formulation.compiled_solve(self._kernel, contacts, q, qd)
+        solved = None if solver is None else solver.solution(t, q, qd, applied, offsets, contacts)
+        return None if solved is None else (*solved, solver.basis)
 
     def contact_forces(self, q: Any, qd: Any, t: float = 0.0, tau: Any = None, offsets: dict | None = None,
                        contacts: Any = (), states: Any = None) -> dict[str, np.ndarray]:
         """``{contact name: (3,) N}``: the force (world frame, on the body: normal plus
         friction) of each contact in ``contacts`` held closed (indices, or a run's closed set
-        with its friction modes, as ``Result.closed_contacts`` records them)."""
+        with its friction modes, as ``Result.closed_contacts`` records them).  The compiled
+        KKT solve with the contacts' rows and friction answers (``dae_evaluate_friction``),
+        the Python solve where there is no C and where it explains a failure (Painleve's
+        paradox, a singular set of held contacts)."""
         q, qd = self.state_vector(q), self._velocity(qd)
         closed = contacts if contacts and all(isinstance(i, (int, np.integer)) for i in contacts) else ()
-        return self._formulation.contact_forces(self._kernel, t, q, qd, self._applied(tau, t, q, qd, states), offsets,
-                                                closed)
+        applied = self._applied(tau, t, q, qd, states)
+        solved = self._compiled_contact_solution(t, q, qd, applied, offsets, closed) if closed else None
+        if solved is not None:
+            return self._formulation.contact_forces_of(self._kernel, q, qd, solved[1], solved[2], closed, solved[3])
+        return self._formulation.contact_forces(self._kernel, t, q, qd, applied, offsets, closed)
 
     def holding_forces(self, q: Any, t: float = 0.0) -> np.ndarray:
         """(nv,) generalised forces that, applied, hold the system at rest at ``q``

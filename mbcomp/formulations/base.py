@@ -316,12 +316,14 @@ class Formulation:
         (``solve``, ``compiled_solve``): none here, the exact constraint accelerations."""
         return (0.0, 0.0)
 
-    def compiled_solve(self, kernel):
+    def compiled_solve(self, kernel, contacts=(), q=None, qd=None):
         """The compiled KKT solve the evaluation calls use on ``kernel`` (``System.accelerations``,
-        ``reactions``: ``compiled_eval.CompiledSolve``, the same numbers as ``solve`` from the C
-        the compiled loops run), or None where there is none (no constraints, no C)."""
+        ``reactions``, ``contact_forces``: ``compiled_eval.CompiledSolve``, the same numbers as
+        ``solve`` from the C the compiled loops run), or None where there is none (no
+        constraints, no C).  ``contacts``: held contacts (indices, or a ``friction.Closed``
+        with friction modes; ``q, qd`` a state of the call, for its friction rows)."""
         from mbcomp.formulations.compiled_eval import CompiledSolve
-        return CompiledSolve.of(self, kernel, self.evaluation_gains())
+        return CompiledSolve.of(self, kernel, self.evaluation_gains(), contacts, q, qd)
 
     def solve(self, kernel, t, q, qd, tau, offsets=None, contacts=()):
         """``(qdd, lam)`` at a state; subclasses define how constraints enter."""
@@ -330,7 +332,7 @@ class Formulation:
     def contact_forces(self, kernel, t, q, qd, tau, offsets=None, contacts=()) -> dict[str, np.ndarray]:
         """``{contact name: (3,) N, world}``: the force each closed contact in ``contacts``
         applies to its body, normal plus friction (a joint limit's is zero: it has no point)."""
-        from mbcomp.formulations.friction import has_friction, plane_contact_rows, world_forces
+        from mbcomp.formulations.friction import has_friction
         if not contacts:
             return {}
         if has_friction(contacts):
@@ -338,8 +340,21 @@ class Formulation:
             lam, tangential = solution.lam, solution.tangential
         else:
             lam, tangential = self.solve(kernel, t, q, qd, tau, offsets, contacts=contacts)[1], {}
+        return self.contact_forces_of(kernel, q, qd, lam, tangential, contacts)
+
+    def contact_forces_of(self, kernel, q, qd, lam: np.ndarray, tangential: dict, contacts,
+                          basis: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """``contact_forces`` from a solve's multipliers ``lam`` (the model's equations, then
+        the held ``contacts``' normal rows) and its friction forces ``tangential`` (per
+        contact with a mode, N in its tangent coordinates): each held contact's force on its
+        body (N, world), ``lam_n n + T^T lam_t``.  ``basis``: the contacts' world bases
+        (k, 3, 3: rows n, t1, t2, as ``friction.plane_contact_rows`` gives them) when the
+        caller has them (a plane's is fixed)."""
+        from mbcomp.formulations.friction import ContactRows, plane_contact_rows, world_forces
         normal = lam[len(lam) - len(contacts):]
-        forces = world_forces(plane_contact_rows(kernel, q, qd, contacts), normal, tangential, list(contacts))
+        rows = plane_contact_rows(kernel, q, qd, contacts) if basis is None else \
+            ContactRows(None, None, None, basis, None, None)
+        forces = world_forces(rows, normal, tangential, list(contacts))
         names = [c.name for c in kernel.topology.contacts]
         return {names[i]: forces[r] for r, i in enumerate(contacts)}
 

@@ -66,9 +66,11 @@ class FrictionRows:
     ``contacts``: the held set (a ``friction.Closed``); ``normal_row``: each held contact's
     row in the solve's rows (``None``: not held there); ``nr``: how many rows the solve has.
     The arrays the C code reads and writes live as long as this object; ``close()``
-    switches friction off."""
+    switches friction off.  ``configure=False``: not configured on the thread (the
+    evaluation calls pass the arrays to ``dae_evaluate_friction`` for one solve)."""
 
-    def __init__(self, kernel, lib, contacts: Closed, normal_row: dict, nr: int, q: np.ndarray, qd: np.ndarray):
+    def __init__(self, kernel, lib, contacts: Closed, normal_row: dict, nr: int, q: np.ndarray, qd: np.ndarray,
+                 configure: bool = True):
         self.kernel, self.lib = kernel, lib
         self.contacts = contacts
         topology = kernel.topology
@@ -107,11 +109,12 @@ class FrictionRows:
         layout = kernel.layout
         self.scratch = np.zeros(scratch_size(self.cap, nv, layout.size("kinematics")))
         kernel.compiled.functions.ensure("kinematics")  # (a late function: its library loaded once)
-        configure = lib.mb_friction_configure
-        configure.argtypes = [_INT, _INT, _VOID, _VOID, _VOID, _VOID]
-        configure.restype = ctypes.c_int
-        configure(len(moded), self.cap, pointer(self.data), pointer(self.out), pointer(self.scratch),
-                  pointer(self.fail))
+        bind = lib.mb_friction_configure
+        bind.argtypes = [_INT, _INT, _VOID, _VOID, _VOID, _VOID]
+        bind.restype = ctypes.c_int
+        if configure:  # (else the caller passes the arrays for one call: dae_evaluate_friction)
+            bind(len(moded), self.cap, pointer(self.data), pointer(self.out), pointer(self.scratch),
+                 pointer(self.fail))
 
     def tangent_coordinates(self, j: int, direction) -> tuple[float, float]:
         """A world ``direction`` (3,) as the ``(e0, e1)`` of friction contact ``j`` (its

@@ -273,14 +273,18 @@ int dae_accelerations(const double *q, const double *qd, const double *p, const 
 /* The KKT solve at one state, for the evaluation calls (System.accelerations, reactions and
    the analyses through them: formulations/compiled_eval.py): the rows, gains and tolerances
    given here (as dae_configure_rows takes them), at time t; the configuration of a run on
-   this thread is left as it was (and a friction configuration is not used).  qdd (NQ) and
+   this thread is left as it was (and no friction: dae_evaluate_friction below).  qdd (NQ) and
    lam (nr: the multiplier of each given row, the sign of the KKT system's J^T lam).
    Returns 0; 1 when M is not positive definite; 2 when a direction of the rows was dropped
    (a singular position: the caller falls back to the Python solve); -4 too many rows. */
-int dae_evaluate(int nr, const long *spec, const double *data, const double *programs, double alpha, double beta,
-                 double scale, double tol, const double *p, const double *tau, double t, const double *q,
-                 const double *qd, double *qdd, double *lam, double *work) {
+static int dae_evaluate_with(int nf, int cap, const double *fdata, double *fout, double *fscratch, double *ffail,
+                             int nr, const long *spec, const double *data, const double *programs, double alpha,
+                             double beta, double scale, double tol, const double *p, const double *tau, double t,
+                             const double *q, const double *qd, double *qdd, double *lam, double *work) {
     if (nr > DAE_NR || nr < 0) return -4;
+    const int fcap0 = mb_fr_cap;
+    const double *fdata0 = mb_fr_data;
+    double *fout0 = mb_fr_out, *fscratch0 = mb_fr_scratch, *ffail0 = mb_fr_fail;
     const int nr0 = dae_nr, geo0 = dae_has_geo, contacts0 = dae_has_contacts, collisions0 = dae_has_collisions;
     const long *spec0 = dae_spec;
     const double *data0 = dae_data, *programs0 = dae_programs;
@@ -290,7 +294,7 @@ int dae_evaluate(int nr, const long *spec, const double *data, const double *pro
     double lam0[DAE_NR + 1], u[1] = {0.0};
     for (int k = 0; k < DAE_NR; ++k) lam0[k] = dae_lam[k];
     dae_configure_rows(nr, spec, data, programs, alpha, beta, scale, tol);
-    mb_fr_n = 0;
+    mb_friction_configure(nf, cap, fdata, fout, fscratch, ffail);
     dae_time = t;
     dae_dropped = 0;
     int status = dae_accelerations(q, qd, p, u, tau, qdd, work);
@@ -299,9 +303,30 @@ int dae_evaluate(int nr, const long *spec, const double *data, const double *pro
     dae_nr = nr0; dae_spec = spec0; dae_data = data0; dae_programs = programs0;
     dae_alpha = alpha0; dae_beta = beta0; dae_scale = scale0; dae_tol = tol0; dae_time = time0;
     dae_has_geo = geo0; dae_has_contacts = contacts0; dae_has_collisions = collisions0; dae_bad_time = bad0;
-    mb_fr_n = fr0;
+    mb_friction_configure(fr0, fcap0, fdata0, fout0, fscratch0, ffail0);
     for (int k = 0; k < DAE_NR; ++k) dae_lam[k] = lam0[k];
     return status;
+}
+
+int dae_evaluate(int nr, const long *spec, const double *data, const double *programs, double alpha, double beta,
+                 double scale, double tol, const double *p, const double *tau, double t, const double *q,
+                 const double *qd, double *qdd, double *lam, double *work) {
+    return dae_evaluate_with(0, 0, 0, 0, 0, 0, nr, spec, data, programs, alpha, beta, scale, tol, p, tau, t, q, qd,
+                             qdd, lam, work);
+}
+
+/* dae_evaluate with friction on held contacts (the evaluation calls' contact forces:
+   formulations/compiled_eval.py): nf contacts with friction modes configured as
+   mb_friction_configure takes them (friction_c.FrictionRows' arrays; cap its row capacity)
+   for this call only; the thread's friction configuration is left as it was.  Each
+   contact's out row holds its forces of this solve (friction.h).  Returns as dae_evaluate,
+   or MB_FR_PAINLEVE / MB_FR_INCONSISTENT when the friction solve failed (fail says where). */
+int dae_evaluate_friction(int nf, int cap, const double *fdata, double *fout, double *fscratch, double *ffail, int nr,
+                          const long *spec, const double *data, const double *programs, double alpha, double beta,
+                          double scale, double tol, const double *p, const double *tau, double t, const double *q,
+                          const double *qd, double *qdd, double *lam, double *work) {
+    return dae_evaluate_with(nf, cap, fdata, fout, fscratch, ffail, nr, spec, data, programs, alpha, beta, scale, tol,
+                             p, tau, t, q, qd, qdd, lam, work);
 }
 
 /* Move y = [q (NCOORD), qd (NQ)] back onto the constraints after an accepted step at
