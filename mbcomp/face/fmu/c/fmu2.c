@@ -546,7 +546,7 @@ FMI2_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     fmu_rows(I);
     fmu_configure(I, 0);
 #if FMU_ROWS
-    if (FMU_NR0 > 0 && !MB_HAS_QUAT) {
+    if (FMU_NR0 > 0) {  /* (quaternion coordinates stepped by the exp map: dae_quaternion_step) */
         dae_time = I->t;
         for (int it = 0; it < 3; ++it) dae_project(I->y, I->p, fmu_no_input, I->work);
     }
